@@ -1,0 +1,71 @@
+"""Rotor allocation: rotor speeds squared ↔ collective thrust and body torques.
+
+Paper Eq. (allocation): [J ω̇ + ω × J ω ; m |a - g|] = A n², here ordered
+``[T, τ_x, τ_y, τ_z]`` (collective thrust first). Rotor drag is neglected, as in the
+paper: thrust acts along z_B at r_i, so the torque of rotor i is r_i × (0, 0, c_T n_i²)
+= c_T n_i² (y_i, -x_i, 0) plus its reaction moment -ε_i c_M n_i² about z_B.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vehicle.config import VehicleConfig
+
+__all__ = ["allocation_matrix", "allocation_pinv", "rotor_speeds_squared"]
+
+
+def allocation_matrix(config: VehicleConfig, theta: np.ndarray | None = None) -> np.ndarray:
+    """Allocation matrix A, shape (4, k): ``[T, τ_x, τ_y, τ_z] = A n²``.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        Rotor geometry and directions.
+    theta : ndarray, shape (6,), optional
+        Parameters [c_T, c_D, c_M, j_x, j_y, j_z]; the config's nominal θ by default.
+
+    Returns
+    -------
+    ndarray, shape (4, k)
+        Rows: collective thrust (N), roll, pitch and yaw torque (N·m), per n² ((rad/s)²).
+    """
+    theta = config.theta if theta is None else np.asarray(theta, dtype=float)
+    c_T, c_M = theta[0], theta[2]
+    r = config.rotor_positions
+    eps = config.rotor_directions
+    return np.vstack(
+        [
+            np.full(config.rotor_count, c_T),
+            c_T * r[:, 1],
+            -c_T * r[:, 0],
+            -eps * c_M,
+        ]
+    )
+
+
+def allocation_pinv(config: VehicleConfig, theta: np.ndarray | None = None) -> np.ndarray:
+    """Minimum-norm right inverse A⁺ of the allocation matrix, shape (k, 4).
+
+    For 4 rotors this is the exact inverse; for more it gives the n² of least norm.
+    """
+    return np.linalg.pinv(allocation_matrix(config, theta))
+
+
+def rotor_speeds_squared(
+    wrench: np.ndarray, config: VehicleConfig, theta: np.ndarray | None = None
+) -> np.ndarray:
+    """n² that produce a thrust and torque, shape (..., 4) → (..., k).
+
+    Parameters
+    ----------
+    wrench : ndarray, shape (..., 4)
+        ``[T, τ_x, τ_y, τ_z]`` in N and N·m.
+
+    Returns
+    -------
+    ndarray, shape (..., k)
+        Rotor speeds squared, (rad/s)². Entries may be negative or exceed the limit when
+        the wrench is not achievable; callers check feasibility.
+    """
+    return np.asarray(wrench, dtype=float) @ allocation_pinv(config, theta).T

@@ -1,0 +1,536 @@
+"""The pose log ``pose.csv`` and the other files of a flight directory ``logs/<flight>/``.
+
+A pose log (DESIGN.md, "Pose log") is CSV text: a header row, then one row per sample
+with ``t`` (s, strictly increasing), ``x, y, z`` (m, world ENU), ``qw, qx, qy, qz``
+(Hamilton quaternion [w, x, y, z], body → world), ``n1 … nk`` (rad/s, actual rotor
+speeds in the vehicle config's rotor order) and optionally more columns, which readers
+keep as extras. Readers find columns by header name, so their order is free.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import math
+import os
+import re
+import tempfile
+import time
+import warnings
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vehicle.errors import InputError, LogFormatError
+
+__all__ = [
+    "POSE_COLUMNS", "PoseLog", "PoseLogWriter", "TruncatedLogWarning", "new_flight_dir",
+    "read_meta", "read_pose_log", "rotor_columns", "write_meta", "write_pose_log",
+]
+
+#: Required leading columns of a pose log, in the order the writer emits them.
+POSE_COLUMNS: tuple[str, ...] = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
+
+# Beyond this a quaternion is not a rotation that lost digits but a wrong column or unit.
+_QUAT_TOL = 1e-3
+# Fixed point per column group, finer than any sensor: t 1e-6 s, position 1e-7 m,
+# quaternion 1e-9, rotor speed 1e-4 rad/s. Extras have unknown units: 10 significant digits.
+_FMT_T, _FMT_POS, _FMT_QUAT, _FMT_ROTOR, _FMT_EXTRA = "%.6f", "%.7f", "%.9f", "%.4f", "%.10g"
+_CHUNK_ROWS = 20_000
+_ROTOR_RE = re.compile(r"n([1-9][0-9]*)")
+_BAD_NAME_RE = re.compile(r"[\s,\"']")
+
+
+class TruncatedLogWarning(UserWarning):
+    """The last row of a pose log was incomplete (writer killed mid-row) and was dropped."""
+
+
+def rotor_columns(k: int) -> tuple[str, ...]:
+    """Names of the rotor-speed columns of a ``k``-rotor vehicle: ``("n1", …, "nk")``."""
+    return tuple(f"n{i}" for i in range(1, k + 1))
+
+
+def _frozen(a: Any, shape: tuple[int | None, ...], name: str, want: str) -> np.ndarray:
+    """A read-only float copy of ``a``; ``None`` in ``shape`` matches any length."""
+    arr = np.array(a, dtype=np.float64)  # a copy: freezing must not touch the caller's array
+    if arr.ndim != len(shape) or any(
+        s not in (None, m) for s, m in zip(shape, arr.shape, strict=True)
+    ):
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class PoseLog:
+    """A recorded flight: pose and rotor speeds at N sample times (arrays are read-only copies).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s, strictly increasing.
+    position : ndarray, shape (N, 3)
+        Body origin in the world frame, m, ENU.
+    quaternion : ndarray, shape (N, 4)
+        Unit Hamilton quaternion [w, x, y, z] rotating body → world.
+    rotor_speeds : ndarray, shape (N, k)
+        Actual rotor speeds, rad/s, in the vehicle config's rotor order.
+    extra : dict of str to ndarray of shape (N,)
+        Further columns of the file (setpoints, velocities, …), in file order.
+    path : Path or None
+        The file the log was read from.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    rotor_speeds: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    path: Path | None = None
+
+    def __post_init__(self) -> None:
+        t = _frozen(self.t, (None,), "t", "(N,)")
+        n = t.shape[0]
+        if n > 1 and not (np.diff(t) > 0.0).all():  # slice_time relies on it
+            raise ValueError("t must be strictly increasing")
+        values = {
+            "t": t,
+            "position": _frozen(self.position, (n, 3), "position", f"(N, 3), N = {n}"),
+            "quaternion": _frozen(self.quaternion, (n, 4), "quaternion", f"(N, 4), N = {n}"),
+            "rotor_speeds": _frozen(self.rotor_speeds, (n, None), "rotor_speeds",
+                                    f"(N, k), N = {n}"),
+            "extra": {str(c): _frozen(v, (n,), f"extra[{c!r}]", f"(N,), N = {n}")
+                      for c, v in self.extra.items()},
+            "path": None if self.path is None else Path(self.path),
+        }
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def rotor_count(self) -> int:
+        """Number of rotors k."""
+        return int(self.rotor_speeds.shape[1])
+
+    @property
+    def duration(self) -> float:
+        """Time from the first to the last sample, s (0.0 for fewer than two samples)."""
+        return float(self.t[-1] - self.t[0]) if len(self) > 1 else 0.0
+
+    def slice_time(self, t0: float, t1: float) -> PoseLog:
+        """The samples with ``t0 <= t <= t1`` (s) as a new `PoseLog`, possibly empty."""
+        if not t1 >= t0:
+            raise ValueError(f"slice_time needs t0 <= t1, got t0={t0}, t1={t1}")
+        i, j = np.searchsorted(self.t, t0, "left"), np.searchsorted(self.t, t1, "right")
+        return PoseLog(self.t[i:j], self.position[i:j], self.quaternion[i:j],
+                       self.rotor_speeds[i:j], {c: v[i:j] for c, v in self.extra.items()},
+                       self.path)
+
+
+def _check_count(value: Any, name: str, allow_none: bool = False) -> None:
+    ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
+    if not (ok or (allow_none and value is None)):
+        raise ValueError(f"{name} must be a positive int, got {value!r}")
+
+
+class PoseLogWriter:
+    """Writer of a pose log whose every row reaches the OS as soon as it is written.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to create, with any missing parent directories.
+    rotor_count : int
+        Number of rotors k (columns ``n1 … nk``).
+    extra_columns : iterable of str
+        Further columns, written after the rotor speeds.
+    overwrite : bool, keyword-only
+        Replace an existing file; otherwise that is an `InputError`, so that a new
+        recording never destroys a flown one.
+
+    Rows are flushed as written, to survive a crash of this process; `close` also
+    ``fsync``s. Each row is checked first (shapes, finite values, unit quaternion, ``t``
+    increasing by at least the written 1e-6 s; else ``ValueError``), so the file always
+    reads back. Attributes: ``path``, ``columns`` (the header), ``rows_written``.
+    """
+
+    def __init__(self, path: str | Path, rotor_count: int, extra_columns: Iterable[str] = (),
+                 *, overwrite: bool = False) -> None:
+        _check_count(rotor_count, "rotor_count")
+        extras = tuple(extra_columns)
+        taken = set(POSE_COLUMNS)
+        for c in extras:
+            if not isinstance(c, str) or not c or _BAD_NAME_RE.search(c):
+                raise ValueError(f"extra column name {c!r} must be non-empty text without "
+                                 "whitespace, commas or quotes")
+            if c in taken or _ROTOR_RE.fullmatch(c):
+                raise ValueError(f"extra column name {c!r} is reserved or repeated")
+            taken.add(c)
+        self.path, self.rotor_count, self.extra_columns = Path(path), rotor_count, extras
+        self.columns = POSE_COLUMNS + rotor_columns(rotor_count) + extras
+        fmts = [_FMT_T, *[_FMT_POS] * 3, *[_FMT_QUAT] * 4, *[_FMT_ROTOR] * rotor_count]
+        self._fmt = ",".join(fmts + [_FMT_EXTRA] * len(extras)) + "\n"
+        self.rows_written = 0
+        self._last_t = -math.inf  # as written, i.e. rounded to 1e-6 s
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._file = open(  # noqa: SIM115 - closed by close()
+                self.path, "w" if overwrite else "x", encoding="utf-8", newline="\n")
+        except FileExistsError:
+            raise InputError(f"{self.path}: pose log already exists; "
+                             "refusing to overwrite it") from None
+        self._emit(",".join(self.columns) + "\n", 0, self._last_t)
+
+    @property
+    def closed(self) -> bool:
+        """Whether `close` has been called."""
+        return self._file.closed
+
+    def write(self, t: float, position: Any, quaternion: Any, rotor_speeds: Any,
+              extra: Mapping[str, float] | None = None) -> None:
+        """Write one sample: t (s), position (3,) m, quaternion (4,) [w,x,y,z], speeds (k,) rad/s.
+
+        ``extra`` maps every name of ``extra_columns`` to a float.
+        """
+        self._check_open()
+        pos, quat, rot = (np.asarray(v, dtype=np.float64)
+                          for v in (position, quaternion, rotor_speeds))
+        ex = {} if extra is None else extra
+        if (np.ndim(t) == 0 and pos.shape == (3,) and quat.shape == (4,)
+                and rot.shape == (self.rotor_count,) and ex.keys() == set(self.extra_columns)
+                and all(isinstance(v, float | int) or np.ndim(v) == 0 for v in ex.values())):
+            # Fast path on plain floats: a recorder calls this at every sample.
+            values = [float(t), *pos.tolist(), *quat.tolist(), *rot.tolist(),
+                      *(float(ex[c]) for c in self.extra_columns)]
+            t_out = round(values[0], 6)
+            if (all(map(math.isfinite, values)) and t_out > self._last_t
+                    and abs(math.hypot(*values[4:8]) - 1.0) <= _QUAT_TOL):
+                self._emit(self._fmt % tuple(values), 1, t_out)
+                return
+        if np.ndim(t) != 0:
+            raise ValueError(f"t must be a scalar, got shape {np.shape(t)}")
+        for name, arr, size in (("position", pos, 3), ("quaternion", quat, 4),
+                                ("rotor_speeds", rot, self.rotor_count)):
+            if arr.shape != (size,):
+                raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
+        # The block validator says what is wrong; should it find nothing, the row is written.
+        self.write_rows(np.reshape(np.asarray(t, dtype=np.float64), (1,)), pos[None],
+                        quat[None], rot[None], {c: np.ravel(v) for c, v in ex.items()})
+
+    def write_rows(self, t: Any, position: Any, quaternion: Any, rotor_speeds: Any,
+                   extra: Mapping[str, Any] | None = None) -> None:
+        """Write N samples: t (N,) s, position (N, 3) m, quaternion (N, 4), speeds (N, k) rad/s.
+
+        ``extra`` maps every name of ``extra_columns`` to an array of shape (N,).
+        """
+        self._check_open()
+        t = np.asarray(t, dtype=np.float64)
+        if t.ndim != 1:
+            raise ValueError(f"t must have shape (N,), got {t.shape}")
+        n, k = t.shape[0], self.rotor_count
+        cols = [t[:, None]]
+        for name, value, shape in (("position", position, (n, 3)),
+                                   ("quaternion", quaternion, (n, 4)),
+                                   ("rotor_speeds", rotor_speeds, (n, k))):
+            cols.append(np.asarray(value, dtype=np.float64))
+            if cols[-1].shape != shape:
+                raise ValueError(f"{name} must have shape {shape} for {n} sample(s) of a "
+                                 f"{k}-rotor log, got {cols[-1].shape}")
+        extra = extra or {}
+        if extra.keys() != set(self.extra_columns):
+            raise ValueError(f"extra values must be exactly {list(self.extra_columns)}, "
+                             f"got {sorted(extra)}")
+        for c in self.extra_columns:
+            cols.append(np.asarray(extra[c], dtype=np.float64).reshape(-1, 1))
+            if cols[-1].shape != (n, 1):
+                raise ValueError(f"extra[{c!r}] must have shape ({n},), got {np.shape(extra[c])}")
+        block = np.hstack(cols)
+        if n == 0:
+            return
+        bad = ~np.isfinite(block)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise ValueError(f"{self.columns[j]} of sample {i} is {block[i, j]}; "
+                             "a pose log holds finite values only")
+        norm_err = np.abs(np.linalg.norm(cols[2], axis=1) - 1.0)
+        if norm_err.max() > _QUAT_TOL:
+            i = int(np.argmax(norm_err))
+            raise ValueError(f"quaternion of sample {i} has norm {1 + norm_err[i]:.6g}, not 1")
+        # Compare t as written: samples closer than 1e-6 s would read back as repeated.
+        step = np.diff(np.concatenate(([self._last_t], np.round(t, 6)))) <= 0.0
+        if step.any():
+            i = int(np.argmax(step))
+            before = self._last_t if i == 0 else float(t[i - 1])
+            raise ValueError(f"t must increase by at least 1e-6 s: sample {i} has "
+                             f"t = {float(t[i])!r} after {before!r}")
+        # One %-format per chunk runs in C with no Python loop per row; chunks bound memory.
+        for i in range(0, n, _CHUNK_ROWS):
+            part = block[i:i + _CHUNK_ROWS]
+            self._file.write((self._fmt * len(part)) % tuple(part.ravel().tolist()))
+        self._emit("", n, float(np.round(t[-1], 6)))
+
+    def _check_open(self) -> None:
+        if self._file.closed:
+            raise ValueError(f"{self.path}: pose log writer is closed")
+
+    def _emit(self, text: str, rows: int, last_t: float) -> None:
+        self._file.write(text)
+        self._file.flush()
+        self.rows_written += rows
+        self._last_t = last_t
+
+    def close(self) -> None:
+        """Flush, ``fsync`` and close the file. Closing twice is harmless."""
+        if not self._file.closed:
+            try:
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            finally:
+                self._file.close()
+
+    def __enter__(self) -> PoseLogWriter:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def write_pose_log(path: str | Path, log: PoseLog, *, overwrite: bool = False) -> Path:
+    """Write a whole `PoseLog` to ``path`` with a `PoseLogWriter`; return the path."""
+    with PoseLogWriter(path, log.rotor_count, log.extra, overwrite=overwrite) as w:
+        w.write_rows(log.t, log.position, log.quaternion, log.rotor_speeds, log.extra)
+    return w.path
+
+
+def _read_text(path: Path, encoding: str) -> str:
+    """The text of a file; anything unreadable is a one-line `LogFormatError`."""
+    try:
+        return path.read_bytes().decode(encoding)
+    except OSError as e:
+        raise LogFormatError(f"{path}: cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise LogFormatError(f"{path}: not a text file (byte {e.start} is not UTF-8)") from None
+
+
+def _is_number(text: str) -> bool:
+    """Whether a CSV field is a number, as numpy's loadtxt parses it."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return "_" not in text  # float() accepts digit separators, loadtxt does not
+
+
+def _field(body: list[str], i: int, j: int) -> str:
+    """Field j of data row i, fit for a one-line message."""
+    text = body[i].split(",")[j].strip()
+    return repr(text if len(text) <= 24 else text[:24] + "…")
+
+
+def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
+    """Read and fully check a pose log.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``pose.csv`` file (UTF-8, LF or CRLF line ends).
+    rotor_count : int, optional
+        The vehicle config's rotor count k: the file must have exactly the rotor columns
+        ``n1 … nk``. If None, all ``n<i>`` columns are taken; they must be ``n1 … nm``.
+
+    Returns
+    -------
+    PoseLog
+        Quaternions renormalised (norm errors up to 1e-3 are accepted).
+
+    Raises
+    ------
+    LogFormatError
+        One line naming the file, and the line number and column where they apply.
+
+    Warns
+    -----
+    TruncatedLogWarning
+        The last line lacks its newline and is incomplete (field count, or a field not
+        a number), as a writer killed mid-row leaves it: it is dropped.
+    """
+    _check_count(rotor_count, "rotor_count", allow_none=True)
+    path = Path(path)
+    text = _read_text(path, "utf-8-sig")
+    text = text.replace("\r\n", "\n") if "\r" in text else text
+    lines = text.split("\n")
+    newline_at_end = lines[-1] == ""
+    if newline_at_end:
+        lines.pop()
+    if not lines or not lines[0].strip():
+        raise LogFormatError(f"{path}: " + ("line 1 is empty, expected the header row"
+                                            if text.strip() else "empty file, no header row"))
+    names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    cols = _locate_columns(path, names, rotor_count)
+    body, ncol = lines[1:], len(names)
+
+    # A writer killed mid-row leaves a last line without newline that is short or cut
+    # inside a number. Anything else wrong is an error at its line.
+    if body and not newline_at_end:
+        fields = body[-1].split(",")
+        if len(fields) != ncol or not all(map(_is_number, fields)):
+            body.pop()
+            if not body:
+                raise LogFormatError(f"{path}: no samples (the only data row is incomplete)")
+            warnings.warn(f"{path}: line {len(body) + 2} is incomplete (truncated write?) and "
+                          f"was dropped; kept the {len(body)} complete rows",
+                          TruncatedLogWarning, stacklevel=2)
+    if not body:
+        raise LogFormatError(f"{path}: no samples, only a header row")
+    if any(line.count(",") != ncol - 1 for line in body):
+        i = next(i for i, line in enumerate(body) if line.count(",") != ncol - 1)
+        found = "is empty" if not body[i].strip() else f"has {body[i].count(',') + 1} fields"
+        raise LogFormatError(f"{path}: line {i + 2} {found}, the header has {ncol}")
+    data = _parse_body(path, body, names)
+
+    bad = ~np.isfinite(data)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise LogFormatError(f"{path}: line {i + 2}, column {names[j]!r}: "
+                             f"{_field(body, i, j)} is not finite")
+    t = data[:, cols["t"]]
+    step = np.diff(t) <= 0.0
+    if step.any():
+        i = int(np.argmax(step)) + 1
+        raise LogFormatError(f"{path}: line {i + 2}: t = {_field(body, i, cols['t'])} does not "
+                             f"increase (previous t = {_field(body, i - 1, cols['t'])})")
+    q = data[:, [cols[c] for c in POSE_COLUMNS[4:]]]
+    norm = np.linalg.norm(q, axis=1)
+    off = np.abs(norm - 1.0) > _QUAT_TOL
+    if off.any():
+        i = int(np.argmax(off))
+        raise LogFormatError(f"{path}: line {i + 2}: quaternion (qw, qx, qy, qz) has norm "
+                             f"{norm[i]:.6g}, not 1 within {_QUAT_TOL:g}")
+    known = set(cols.values())
+    return PoseLog(
+        t=t,
+        position=data[:, [cols[c] for c in POSE_COLUMNS[1:4]]],
+        quaternion=q / norm[:, None],
+        rotor_speeds=data[:, [cols[c] for c in cols if c not in POSE_COLUMNS]],
+        extra={names[j]: data[:, j] for j in range(ncol) if j not in known},
+        path=path,
+    )
+
+
+def _locate_columns(path: Path, names: list[str], rotor_count: int | None) -> dict[str, int]:
+    """Index in the header of each pose column, then of n1 … nk."""
+    seen: set[str] = set()
+    for j, c in enumerate(names):
+        if not c or c in seen:
+            what = "has no name" if not c else f"repeats the name {c!r}"
+            raise LogFormatError(f"{path}: header column {j + 1} {what}")
+        seen.add(c)
+    missing = [c for c in POSE_COLUMNS if c not in seen]
+    if missing:
+        raise LogFormatError(f"{path}: missing required column(s) {', '.join(missing)}")
+    found = sorted(int(m.group(1)) for c in names if (m := _ROTOR_RE.fullmatch(c)))
+    shown = ", ".join(f"n{i}" for i in found) or "none"
+    if rotor_count is not None and found != list(range(1, rotor_count + 1)):
+        raise LogFormatError(f"{path}: expected {rotor_count} rotor speed columns "
+                             f"n1..n{rotor_count} from the vehicle config, found {len(found)} "
+                             f"({shown})")
+    if not found:
+        raise LogFormatError(f"{path}: no rotor speed columns n1..nk")
+    if found != list(range(1, len(found) + 1)):
+        raise LogFormatError(f"{path}: rotor speed columns must be n1..nk without gaps, "
+                             f"found {shown}")
+    return {c: names.index(c) for c in POSE_COLUMNS + rotor_columns(len(found))}
+
+
+def _parse_body(path: Path, body: list[str], names: list[str]) -> np.ndarray:
+    """Parse data rows, all with the header's field count, into an (N, columns) array."""
+    with warnings.catch_warnings(), contextlib.suppress(ValueError, UserWarning):
+        warnings.simplefilter("error")
+        data = np.loadtxt(body, delimiter=",", dtype=np.float64, comments=None, ndmin=2)
+        if data.shape == (len(body), len(names)):
+            return data
+    # The fast parser's message lacks the line and column name: find the field ourselves.
+    for i, line in enumerate(body):
+        for j, text in enumerate(line.split(",")):
+            if not _is_number(text):
+                raise LogFormatError(f"{path}: line {i + 2}, column {names[j]!r}: "
+                                     f"{_field(body, i, j)} is not a number")
+    raise LogFormatError(f"{path}: the samples could not be parsed as numbers")
+
+
+def write_meta(path: str | Path, meta: Mapping[str, Any]) -> None:
+    """Write ``meta.json`` atomically: a reader sees the old file or the new one, never half.
+
+    numpy scalars and arrays are stored as numbers and lists, paths as strings. Values
+    JSON cannot hold (NaN and infinity included) raise before the disk is touched.
+    """
+    path = Path(path)
+    text = json.dumps(dict(meta), indent=2, allow_nan=False, default=_json_default) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"meta value {value!r} of type {type(value).__name__} is not JSON")
+
+
+def read_meta(path: str | Path) -> dict[str, Any]:
+    """Read ``meta.json``; a missing or malformed file is a one-line `LogFormatError`."""
+    path = Path(path)
+    try:
+        meta = json.loads(_read_text(path, "utf-8"))
+    except json.JSONDecodeError as e:
+        raise LogFormatError(f"{path}: line {e.lineno}, column {e.colno}: invalid JSON: "
+                             f"{e.msg}") from None
+    if not isinstance(meta, dict):
+        raise LogFormatError(f"{path}: metadata must be a JSON object, "
+                             f"found {type(meta).__name__}")
+    return meta
+
+
+def _timestamp() -> str:
+    return time.strftime("%Y%m%d-%H%M%S")
+
+
+def new_flight_dir(root: str | Path = "logs", name: str | None = None) -> Path:
+    """Create and return a new, empty flight directory ``root/<name>``.
+
+    ``name`` defaults to the local time ``%Y%m%d-%H%M%S``, suffixed ``-2``, ``-3``, … if
+    taken; an explicit ``name`` that exists is an `InputError`. ``root`` is created if
+    missing. Creation is atomic, so concurrent callers never share a directory.
+    """
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    if name is not None:
+        if name in ("", ".", "..") or Path(name).name != name or "\\" in name:
+            raise InputError(f"flight name {name!r} must be a plain directory name")
+        try:
+            (root / name).mkdir()
+        except FileExistsError:
+            raise InputError(f"flight directory {root / name} already exists") from None
+        return root / name
+    stamp = _timestamp()
+    for i in range(1, 10_000):
+        with contextlib.suppress(FileExistsError):
+            (path := root / (stamp if i == 1 else f"{stamp}-{i}")).mkdir()
+            return path
+    raise InputError(f"too many flight directories named {stamp}-* in {root}")

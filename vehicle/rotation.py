@@ -1,0 +1,112 @@
+"""Quaternion and rotation helpers in mavsysid's conventions.
+
+Quaternions are Hamilton, stored scalar first ``[w, x, y, z]``, and rotate body → world.
+All functions broadcast over leading dimensions. scipy's `Rotation` is scalar-last;
+the conversion happens here and nowhere else.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "matrix_to_quat",
+    "quat_conjugate",
+    "quat_exp",
+    "quat_log",
+    "quat_multiply",
+    "quat_normalize",
+    "quat_to_matrix",
+    "skew",
+]
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix [v]×, shape (..., 3, 3), such that [v]× u = v × u."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros((*v.shape[:-1], 3, 3))
+    out[..., 0, 1] = -v[..., 2]
+    out[..., 0, 2] = v[..., 1]
+    out[..., 1, 0] = v[..., 2]
+    out[..., 1, 2] = -v[..., 0]
+    out[..., 2, 0] = -v[..., 1]
+    out[..., 2, 1] = v[..., 0]
+    return out
+
+
+def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Hamilton product p ⊗ q of quaternions ``[w, x, y, z]``, shape (..., 4)."""
+    p = np.asarray(p, dtype=float)
+    q = np.asarray(q, dtype=float)
+    pw, pv = p[..., :1], p[..., 1:]
+    qw, qv = q[..., :1], q[..., 1:]
+    w = pw * qw - np.sum(pv * qv, axis=-1, keepdims=True)
+    v = pw * qv + qw * pv + np.cross(pv, qv)
+    return np.concatenate([w, v], axis=-1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """Conjugate (the inverse of a unit quaternion), shape (..., 4)."""
+    q = np.asarray(q, dtype=float)
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_normalize(q: np.ndarray) -> np.ndarray:
+    """Unit quaternion with non-negative scalar part, shape (..., 4)."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., :1] < 0.0, -q, q)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix R(q), body → world, shape (..., 3, 3). q need not be normalised."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = (q[..., i] for i in range(4))
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Quaternion ``[w, x, y, z]`` (w ≥ 0) of rotation matrices, shape (..., 3, 3) → (..., 4)."""
+    R = np.asarray(R, dtype=float)
+    flat = R.reshape(-1, 3, 3)
+    q = Rotation.from_matrix(flat).as_quat(scalar_first=True)
+    return quat_normalize(q).reshape(*R.shape[:-2], 4)
+
+
+def quat_exp(rotvec: np.ndarray) -> np.ndarray:
+    """Exp: rotation vector (rad, shape (..., 3)) → unit quaternion, shape (..., 4)."""
+    rotvec = np.asarray(rotvec, dtype=float)
+    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    # sin(θ/2)/θ with its Taylor series near zero, where the quotient loses precision.
+    small = angle < 1e-4
+    safe = np.where(small, 1.0, angle)
+    sinc = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / safe)
+    return np.concatenate([np.cos(half), sinc * rotvec], axis=-1)
+
+
+def quat_log(q: np.ndarray) -> np.ndarray:
+    """Log: unit quaternion (shape (..., 4)) → rotation vector in rad, shape (..., 3).
+
+    The shorter of the two equivalent rotations is returned (angle ≤ π).
+    """
+    q = np.asarray(q, dtype=float)
+    q = np.where(q[..., :1] < 0.0, -q, q)
+    w = q[..., :1]
+    v = q[..., 1:]
+    vnorm = np.linalg.norm(v, axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(vnorm, w)
+    small = vnorm < 1e-8
+    safe = np.where(small, 1.0, vnorm)
+    # θ / sin(θ/2) → 2 / w (1 + …) near zero; 2/w is exact to O(|v|²).
+    scale = np.where(small, 2.0 / w, angle / safe)
+    return scale * v
