@@ -1,10 +1,12 @@
 """The built-in excitation trajectory: a smooth 3-D Lissajous figure with yaw oscillation.
 
-Each axis follows c + A cos(ω τ) and yaw Ψ sin(ω_ψ τ), with frequencies that are whole
-multiples of 2π over the oscillating window, so the figure closes on itself and the
-ramps into and out of hover are mirror images. The figure is stored as the paper's
-polynomial segments (position N = 10, yaw N = 6, Hermite-matched up to snap and yaw
-acceleration at each knot), so it can be exported and streamed like a planned one.
+Each axis follows c + A cos(ω τ) and yaw Ψ sin(ω_ψ τ). The frequencies are rounded
+down to whole numbers of periods over the oscillating window, so the figure closes on
+itself and the ramps into and out of hover are mirror images; a longer or shorter flight
+keeps the same frequencies (and so the same aggressiveness) with more or fewer periods.
+The figure is stored as the paper's polynomial segments (position N = 10, yaw N = 6,
+Hermite-matched up to snap and yaw acceleration at each knot), so it can be exported and
+streamed like a planned one.
 """
 
 from __future__ import annotations
@@ -33,12 +35,12 @@ class ExcitationSpec:
         Centre of the figure, m, world ENU.
     amplitude : tuple of 3 float
         Half-extent per axis, m.
-    cycles : tuple of 3 int
-        Whole periods per axis over the oscillating window.
+    frequency : tuple of 3 float
+        Target angular frequency per axis, rad/s (rounded down to whole periods).
     yaw_amplitude : float
         Yaw half-extent, rad.
-    yaw_cycles : int
-        Whole yaw periods over the oscillating window.
+    yaw_frequency : float
+        Target yaw angular frequency, rad/s (rounded down to whole periods).
     knot_spacing : float
         Target segment duration inside the figure, s.
     """
@@ -47,9 +49,9 @@ class ExcitationSpec:
     ramp: float = 3.0
     center: tuple[float, float, float] = (0.0, 0.0, 1.5)
     amplitude: tuple[float, float, float] = (1.3, 1.0, 0.4)
-    cycles: tuple[int, int, int] = (6, 7, 5)
+    frequency: tuple[float, float, float] = (1.571, 1.833, 1.309)
     yaw_amplitude: float = 0.7
-    yaw_cycles: int = 4
+    yaw_frequency: float = 1.047
     knot_spacing: float = 1.0
 
 
@@ -67,10 +69,10 @@ def excitation_trajectory(spec: ExcitationSpec | None = None) -> PiecewisePolyno
         raise ValueError("duration must exceed twice the ramp time")
     n_seg = max(1, round(window / spec.knot_spacing))
     tau = np.linspace(0.0, window, n_seg + 1)
-    omega = 2.0 * math.pi * np.asarray(spec.cycles, dtype=float) / window
+    omega = _whole_periods(np.asarray(spec.frequency, dtype=float), window)
     amp = np.asarray(spec.amplitude, dtype=float)
     center = np.asarray(spec.center, dtype=float)
-    w_psi = 2.0 * math.pi * spec.yaw_cycles / window
+    w_psi = float(_whole_periods(np.array([spec.yaw_frequency]), window)[0])
 
     # d^m/dτ^m cos(ωτ) = ω^m cos(ωτ + mπ/2); likewise for sin.
     pos = np.empty((tau.size, 5, 3))
@@ -90,3 +92,12 @@ def excitation_trajectory(spec: ExcitationSpec | None = None) -> PiecewisePolyno
         np.concatenate([rest_pos, pos, rest_pos]),
         np.concatenate([rest_yaw, yaw, rest_yaw]),
     )
+
+
+def _whole_periods(omega: np.ndarray, window: float) -> np.ndarray:
+    """The highest angular frequencies ≤ ``omega`` with a whole number of periods (≥ 1).
+
+    Rounding down keeps a shorter figure from becoming more aggressive than the target.
+    """
+    cycles = np.maximum(1, np.floor(omega * window / (2.0 * math.pi) + 1e-9))
+    return 2.0 * math.pi * cycles / window

@@ -25,10 +25,12 @@ from vehicle.config import VehicleConfig
 from vehicle.dynamics import ATT, POS, STATE_DIM, derivative_kernel
 from vehicle.errors import InputError
 from vehicle.flatness import flat_to_state
-from vehicle.rotation import quat_exp, quat_multiply
+from vehicle.rotation import quat_exp
 from vehicle.trajectory import Trajectory
 
 __all__ = ["SimulationResult", "SimulationSettings", "Simulator"]
+
+_REFERENCE_BLOCK_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -208,8 +210,8 @@ class Simulator:
         k = cfg.rotor_count
         dt = 1.0 / s.physics_rate
         n_control = round(trajectory.duration * s.control_rate)
-        t_control = np.arange(n_control + 1) / s.control_rate
-        reference = reference_samples(trajectory, t_control, cfg)
+        # References are computed in blocks so that long flights need little memory.
+        block = max(per_log, round(_REFERENCE_BLOCK_S * s.control_rate) // per_log * per_log)
         start = flat_to_state(trajectory.flat_outputs(np.array([0.0])), cfg, self.true_theta)
 
         y = np.concatenate([start.states()[0], start.rotor_speeds[0]])
@@ -222,7 +224,7 @@ class Simulator:
         for effect in self.effects:
             effect.reset()
         zero = np.zeros(3)
-        rng = np.random.default_rng(s.seed)
+        noise = _SensorNoise(cfg, s.seed, enabled=s.sensor_noise)
         n_log = n_control // per_log + 1
         log = _LogBuffers(n_log, k)
         recorder = None
@@ -234,17 +236,21 @@ class Simulator:
         wall0 = time.perf_counter()
         try:
             for i in range(n_control + 1):
-                t = t_control[i]
+                t = i / s.control_rate
+                if i % block == 0:
+                    ticks = np.arange(i, min(i + block, n_control + 1)) / s.control_rate
+                    reference = reference_samples(trajectory, ticks, cfg)
+                ref = reference[i % block]
                 if i % per_log == 0:
                     row = i // per_log
-                    log.store(row, t, y, n_cmd, reference[i, 0:3])
+                    log.store(row, t, y, n_cmd, ref[0:3])
                     if recorder is not None:
-                        self._record(recorder, rng, t, y, n_cmd, reference[i])
+                        self._record(recorder, noise, t, y, n_cmd, ref)
                     if progress is not None and row % int(s.log_rate) == 0:
                         progress(t, trajectory.duration)
                 if i == n_control:
                     break
-                saturated += self.controller.command(y[:STATE_DIM], reference[i], n_cmd)
+                saturated += self.controller.command(y[:STATE_DIM], ref, n_cmd)
                 if not wrench_effects:
                     _advance(y, n_cmd, dt, per_control, tau, *args, zero, zero)
                     continue
@@ -281,11 +287,10 @@ class Simulator:
         return force, torque
 
     def _record(
-        self, recorder: FlightRecorder, rng: np.random.Generator, t: float, y: np.ndarray,
+        self, recorder: FlightRecorder, noise: _SensorNoise, t: float, y: np.ndarray,
         n_cmd: np.ndarray, reference: np.ndarray,
     ) -> None:
         """Write what the sensors would report, and the truth, at one log time."""
-        cfg, s = self.config, self.settings
         x = y[:STATE_DIM]
         n = y[STATE_DIM:]
         position, quaternion = x[POS].copy(), x[ATT].copy()
@@ -293,11 +298,7 @@ class Simulator:
         for effect in self.effects:
             position, quaternion = effect.measure_pose(t, position, quaternion)
             logged_n = effect.logged_rotor_speeds(t, logged_n, n_cmd)
-        if s.sensor_noise:
-            nz = cfg.noise
-            position = position + rng.normal(0.0, nz.position_sigma, 3)
-            quaternion = quat_multiply(quaternion, quat_exp(rng.normal(0.0, nz.attitude_sigma, 3)))
-            logged_n = logged_n + rng.normal(0.0, nz.rotor_speed_sigma, n.size)
+        position, quaternion, logged_n = noise.apply(position, quaternion, logged_n)
         recorder.record(t, position, quaternion, logged_n, reference, x, n, n_cmd)
 
     def _metadata(self, trajectory: Trajectory, description: dict | None) -> dict:
@@ -335,3 +336,48 @@ class _LogBuffers:
         self.n[row] = y[STATE_DIM:]
         self.n_cmd[row] = n_cmd
         self.ref[row] = ref
+
+
+class _SensorNoise:
+    """Motion-capture and rotor-speed noise, drawn in vectorised blocks from one seed.
+
+    Position gets N(0, σ_p² I), attitude q ⊗ Exp(φ) with φ ~ N(0, σ_φ² I) (body frame),
+    rotor speeds N(0, σ_n² I).
+    """
+
+    _BLOCK = 1000
+
+    def __init__(self, config: VehicleConfig, seed: int, enabled: bool) -> None:
+        self._rng = np.random.default_rng(seed)
+        self._noise = config.noise
+        self._k = config.rotor_count
+        self._enabled = enabled
+        self._next = self._BLOCK
+
+    def _draw(self) -> None:
+        nz, b = self._noise, self._BLOCK
+        self._dp = self._rng.normal(0.0, nz.position_sigma, (b, 3))
+        self._dq = quat_exp(self._rng.normal(0.0, nz.attitude_sigma, (b, 3))).tolist()
+        self._dn = self._rng.normal(0.0, nz.rotor_speed_sigma, (b, self._k))
+        self._next = 0
+
+    def apply(
+        self, position: np.ndarray, quaternion: np.ndarray, rotor_speeds: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Noisy copies of a true pose and rotor speeds."""
+        if not self._enabled:
+            return position, quaternion, rotor_speeds
+        if self._next == self._BLOCK:
+            self._draw()
+        i = self._next
+        self._next += 1
+        # One Hamilton product on plain floats: numpy's per-call overhead would dominate.
+        aw, ax, ay, az = quaternion.tolist()
+        bw, bx, by, bz = self._dq[i]
+        q = np.array([
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ])
+        return position + self._dp[i], q, rotor_speeds + self._dn[i]

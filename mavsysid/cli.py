@@ -1,0 +1,94 @@
+"""The ``mavsysid`` console script: argument parsing, dispatch and exit codes.
+
+Exit codes (DESIGN.md): 0 success, 2 bad input or usage (one line, no traceback), 3 the
+job could not be done, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+from mavsysid import __version__, offline
+from vehicle.errors import MavsysidError
+
+__all__ = ["build_parser", "main"]
+
+EXIT_INTERRUPTED = 130
+
+#: Subcommands still to come, with the one-line summary shown in --help.
+_PLANNED = {
+    "plan": "plan a maximally informative calibration flight",
+    "sim": "run a simulated MAVLink vehicle endpoint",
+    "stream": "stream a trajectory to a vehicle over MAVLink and record the flight",
+    "estimate": "estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a flight log",
+    "diagnose": "find, name and fit what the model still gets wrong",
+    "evaluate": "run the paper's repeatability experiment",
+}
+
+
+def _not_implemented(command: str) -> Callable[[argparse.Namespace], int]:
+    def run(args: argparse.Namespace) -> int:
+        print(f"mavsysid {command}: not implemented yet", file=sys.stderr)
+        return 2
+
+    run.accepts_any_arguments = True  # type: ignore[attr-defined]
+    return run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the console script."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-v", "--verbose", dest="verbosity", action="count",
+                        default=argparse.SUPPRESS, help="print more detail")
+    common.add_argument("-q", "--quiet", dest="quiet", action="store_true",
+                        default=argparse.SUPPRESS, help="print only the essential result")
+
+    parser = argparse.ArgumentParser(
+        prog="mavsysid", parents=[common],
+        description="Plan, fly, estimate and diagnose multirotor system-identification flights.",
+    )
+    parser.add_argument("--version", action="version", version=f"mavsysid {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    demo = sub.add_parser(
+        "demo", parents=[common], help="the whole experiment on the simulated vehicle",
+        description="Run the demonstration on the simulated reference vehicle. For now: "
+        "simulate it flying the built-in excitation trajectory and write a pose log.",
+    )
+    offline.add_arguments(demo)
+    demo.set_defaults(run=offline.main)
+
+    simulate = sub.add_parser(
+        "simulate", parents=[common], help="fly the offline simulator and write a pose log",
+        description="Simulate a vehicle flying the built-in excitation trajectory "
+        "(physics ≥ 500 Hz, geometric controller, motor lag, motion-capture noise) and "
+        "write pose.csv, truth.csv and meta.json into a new flight directory.",
+    )
+    offline.add_arguments(simulate)
+    simulate.set_defaults(run=offline.main)
+
+    for command, summary in _PLANNED.items():
+        p = sub.add_parser(command, parents=[common], help=f"{summary} (not implemented yet)",
+                           description=f"{summary[0].upper()}{summary[1:]}. Not implemented yet.")
+        p.set_defaults(run=_not_implemented(command))
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``mavsysid`` console script; returns the exit code."""
+    parser = build_parser()
+    args, unknown = parser.parse_known_args(argv)
+    if unknown and not getattr(args.run, "accepts_any_arguments", False):
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    verbosity = getattr(args, "verbosity", 0)
+    args.verbosity = -1 if getattr(args, "quiet", False) else verbosity
+    try:
+        return args.run(args)
+    except MavsysidError as error:
+        print(f"mavsysid {args.command}: error: {error}", file=sys.stderr)
+        return error.exit_code
+    except KeyboardInterrupt:
+        print(f"mavsysid {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
