@@ -1,0 +1,1 @@
+"""Post-flight estimation: log readers and the parameter EKF."""

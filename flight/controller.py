@@ -22,6 +22,7 @@ import numpy as np
 
 from vehicle.allocation import allocation_pinv
 from vehicle.config import GRAVITY, VehicleConfig
+from vehicle.dynamics import rotation_kernel
 from vehicle.flatness import flat_to_state
 from vehicle.trajectory import Trajectory
 
@@ -60,19 +61,7 @@ def reference_samples(
 def _control_kernel(x, ref, mass, J, c_D, gains, pinv, n2_min, n2_max, out):
     """Rotor-speed command into ``out`` (k,); returns True if any rotor was clipped."""
     kp, kv, kR, kw, max_tilt, drag_comp = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
-    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
-    inv = 1.0 / np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    qw, qx, qy, qz = qw * inv, qx * inv, qy * inv, qz * inv
-    R = np.empty((3, 3))
-    R[0, 0] = 1 - 2 * (qy * qy + qz * qz)
-    R[0, 1] = 2 * (qx * qy - qw * qz)
-    R[0, 2] = 2 * (qx * qz + qw * qy)
-    R[1, 0] = 2 * (qx * qy + qw * qz)
-    R[1, 1] = 1 - 2 * (qx * qx + qz * qz)
-    R[1, 2] = 2 * (qy * qz - qw * qx)
-    R[2, 0] = 2 * (qx * qz - qw * qy)
-    R[2, 1] = 2 * (qy * qz + qw * qx)
-    R[2, 2] = 1 - 2 * (qx * qx + qy * qy)
+    R = rotation_kernel(x[6:10])
     vB = x[3:6]
     w = x[10:13]
     vW = R @ vB

@@ -16,7 +16,8 @@ import numpy as np
 
 from vehicle.config import VehicleConfig, vehicle_to_toml
 from vehicle.dynamics import ATT, POS, RATE, VEL
-from vehicle.poselog import PoseLogWriter, write_meta
+from vehicle.flight_dir import write_meta
+from vehicle.poselog_writer import PoseLogWriter
 
 __all__ = ["FlightRecorder", "software_version"]
 

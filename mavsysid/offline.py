@@ -16,7 +16,7 @@ from flight.simulator import SimulationResult, SimulationSettings, Simulator
 from vehicle.config import VehicleConfig, load_vehicle
 from vehicle.errors import InputError, JobFailedError
 from vehicle.flatness import flat_to_state
-from vehicle.poselog import new_flight_dir
+from vehicle.flight_dir import new_flight_dir
 from vehicle.trajectory import Trajectory
 
 __all__ = ["OfflineFlight", "add_arguments", "format_summary", "main", "run_offline_flight"]

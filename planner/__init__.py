@@ -1,0 +1,1 @@
+"""The information-gathering planner (paper Sections "Motion Planning" to "Pruning")."""

@@ -35,6 +35,7 @@ __all__ = [
     "VEL",
     "derivative_kernel",
     "hover_state",
+    "rotation_kernel",
     "state_derivative",
 ]
 
@@ -43,6 +44,24 @@ POS = slice(0, 3)
 VEL = slice(3, 6)
 ATT = slice(6, 10)
 RATE = slice(10, 13)
+
+
+@numba.njit(cache=True)
+def rotation_kernel(q):
+    """R(q), body → world, as a (3, 3) array, for numba code; q (4,) need not be unit."""
+    inv = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    w, x, y, z = q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv
+    R = np.empty((3, 3))
+    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[0, 1] = 2.0 * (x * y - w * z)
+    R[0, 2] = 2.0 * (x * z + w * y)
+    R[1, 0] = 2.0 * (x * y + w * z)
+    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[1, 2] = 2.0 * (y * z - w * x)
+    R[2, 0] = 2.0 * (x * z - w * y)
+    R[2, 1] = 2.0 * (y * z + w * x)
+    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
 
 
 @numba.njit(cache=True, fastmath=False)

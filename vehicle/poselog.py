@@ -1,48 +1,40 @@
-"""The pose log ``pose.csv`` and the other files of a flight directory ``logs/<flight>/``.
+"""The pose log ``pose.csv``: its format, the `PoseLog` it holds, and its reader.
 
 A pose log (DESIGN.md, "Pose log") is CSV text: a header row, then one row per sample
 with ``t`` (s, strictly increasing), ``x, y, z`` (m, world ENU), ``qw, qx, qy, qz``
 (Hamilton quaternion [w, x, y, z], body → world), ``n1 … nk`` (rad/s, actual rotor
 speeds in the vehicle config's rotor order) and optionally more columns, which readers
-keep as extras. Readers find columns by header name, so their order is free.
+keep as extras. Readers find columns by header name, so their order is free. The writer
+is `vehicle.poselog_writer.PoseLogWriter`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import csv
-import json
-import math
-import os
 import re
-import tempfile
-import time
 import warnings
-from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vehicle.errors import InputError, LogFormatError
+from vehicle.errors import LogFormatError
 
 __all__ = [
-    "POSE_COLUMNS", "PoseLog", "PoseLogWriter", "TruncatedLogWarning", "new_flight_dir",
-    "read_meta", "read_pose_log", "rotor_columns", "write_meta", "write_pose_log",
+    "POSE_COLUMNS", "QUATERNION_TOLERANCE", "ROTOR_COLUMN", "PoseLog", "TruncatedLogWarning",
+    "read_pose_log", "read_text_file", "rotor_columns",
 ]
 
 #: Required leading columns of a pose log, in the order the writer emits them.
 POSE_COLUMNS: tuple[str, ...] = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
 
-# Beyond this a quaternion is not a rotation that lost digits but a wrong column or unit.
-_QUAT_TOL = 1e-3
-# Fixed point per column group, finer than any sensor: t 1e-6 s, position 1e-7 m,
-# quaternion 1e-9, rotor speed 1e-4 rad/s. Extras have unknown units: 10 significant digits.
-_FMT_T, _FMT_POS, _FMT_QUAT, _FMT_ROTOR, _FMT_EXTRA = "%.6f", "%.7f", "%.9f", "%.4f", "%.10g"
-_CHUNK_ROWS = 20_000
-_ROTOR_RE = re.compile(r"n([1-9][0-9]*)")
-_BAD_NAME_RE = re.compile(r"[\s,\"']")
+#: Beyond this a quaternion is not a rotation that lost digits but a wrong column or unit.
+QUATERNION_TOLERANCE = 1e-3
+
+#: Names of rotor-speed columns: n1, n2, … (no leading zero).
+ROTOR_COLUMN = re.compile(r"n([1-9][0-9]*)")
 
 
 class TruncatedLogWarning(UserWarning):
@@ -63,6 +55,12 @@ def _frozen(a: Any, shape: tuple[int | None, ...], name: str, want: str) -> np.n
         raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
     arr.setflags(write=False)
     return arr
+
+
+def _check_count(value: Any, name: str, allow_none: bool = False) -> None:
+    ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
+    if not (ok or (allow_none and value is None)):
+        raise ValueError(f"{name} must be a positive int, got {value!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,182 +131,7 @@ class PoseLog:
                        self.path)
 
 
-def _check_count(value: Any, name: str, allow_none: bool = False) -> None:
-    ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
-    if not (ok or (allow_none and value is None)):
-        raise ValueError(f"{name} must be a positive int, got {value!r}")
-
-
-class PoseLogWriter:
-    """Writer of a pose log whose every row reaches the OS as soon as it is written.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file to create, with any missing parent directories.
-    rotor_count : int
-        Number of rotors k (columns ``n1 … nk``).
-    extra_columns : iterable of str
-        Further columns, written after the rotor speeds.
-    overwrite : bool, keyword-only
-        Replace an existing file; otherwise that is an `InputError`, so that a new
-        recording never destroys a flown one.
-
-    Rows are flushed as written, to survive a crash of this process; `close` also
-    ``fsync``s. Each row is checked first (shapes, finite values, unit quaternion, ``t``
-    increasing by at least the written 1e-6 s; else ``ValueError``), so the file always
-    reads back. Attributes: ``path``, ``columns`` (the header), ``rows_written``.
-    """
-
-    def __init__(self, path: str | Path, rotor_count: int, extra_columns: Iterable[str] = (),
-                 *, overwrite: bool = False) -> None:
-        _check_count(rotor_count, "rotor_count")
-        extras = tuple(extra_columns)
-        taken = set(POSE_COLUMNS)
-        for c in extras:
-            if not isinstance(c, str) or not c or _BAD_NAME_RE.search(c):
-                raise ValueError(f"extra column name {c!r} must be non-empty text without "
-                                 "whitespace, commas or quotes")
-            if c in taken or _ROTOR_RE.fullmatch(c):
-                raise ValueError(f"extra column name {c!r} is reserved or repeated")
-            taken.add(c)
-        self.path, self.rotor_count, self.extra_columns = Path(path), rotor_count, extras
-        self.columns = POSE_COLUMNS + rotor_columns(rotor_count) + extras
-        fmts = [_FMT_T, *[_FMT_POS] * 3, *[_FMT_QUAT] * 4, *[_FMT_ROTOR] * rotor_count]
-        self._fmt = ",".join(fmts + [_FMT_EXTRA] * len(extras)) + "\n"
-        self.rows_written = 0
-        self._last_t = -math.inf  # as written, i.e. rounded to 1e-6 s
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            self._file = open(  # noqa: SIM115 - closed by close()
-                self.path, "w" if overwrite else "x", encoding="utf-8", newline="\n")
-        except FileExistsError:
-            raise InputError(f"{self.path}: pose log already exists; "
-                             "refusing to overwrite it") from None
-        self._emit(",".join(self.columns) + "\n", 0, self._last_t)
-
-    @property
-    def closed(self) -> bool:
-        """Whether `close` has been called."""
-        return self._file.closed
-
-    def write(self, t: float, position: Any, quaternion: Any, rotor_speeds: Any,
-              extra: Mapping[str, float] | None = None) -> None:
-        """Write one sample: t (s), position (3,) m, quaternion (4,) [w,x,y,z], speeds (k,) rad/s.
-
-        ``extra`` maps every name of ``extra_columns`` to a float.
-        """
-        self._check_open()
-        pos, quat, rot = (np.asarray(v, dtype=np.float64)
-                          for v in (position, quaternion, rotor_speeds))
-        ex = {} if extra is None else extra
-        if (np.ndim(t) == 0 and pos.shape == (3,) and quat.shape == (4,)
-                and rot.shape == (self.rotor_count,) and ex.keys() == set(self.extra_columns)
-                and all(isinstance(v, float | int) or np.ndim(v) == 0 for v in ex.values())):
-            # Fast path on plain floats: a recorder calls this at every sample.
-            values = [float(t), *pos.tolist(), *quat.tolist(), *rot.tolist(),
-                      *(float(ex[c]) for c in self.extra_columns)]
-            t_out = round(values[0], 6)
-            if (all(map(math.isfinite, values)) and t_out > self._last_t
-                    and abs(math.hypot(*values[4:8]) - 1.0) <= _QUAT_TOL):
-                self._emit(self._fmt % tuple(values), 1, t_out)
-                return
-        if np.ndim(t) != 0:
-            raise ValueError(f"t must be a scalar, got shape {np.shape(t)}")
-        for name, arr, size in (("position", pos, 3), ("quaternion", quat, 4),
-                                ("rotor_speeds", rot, self.rotor_count)):
-            if arr.shape != (size,):
-                raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
-        # The block validator says what is wrong; should it find nothing, the row is written.
-        self.write_rows(np.reshape(np.asarray(t, dtype=np.float64), (1,)), pos[None],
-                        quat[None], rot[None], {c: np.ravel(v) for c, v in ex.items()})
-
-    def write_rows(self, t: Any, position: Any, quaternion: Any, rotor_speeds: Any,
-                   extra: Mapping[str, Any] | None = None) -> None:
-        """Write N samples: t (N,) s, position (N, 3) m, quaternion (N, 4), speeds (N, k) rad/s.
-
-        ``extra`` maps every name of ``extra_columns`` to an array of shape (N,).
-        """
-        self._check_open()
-        t = np.asarray(t, dtype=np.float64)
-        if t.ndim != 1:
-            raise ValueError(f"t must have shape (N,), got {t.shape}")
-        n, k = t.shape[0], self.rotor_count
-        cols = [t[:, None]]
-        for name, value, shape in (("position", position, (n, 3)),
-                                   ("quaternion", quaternion, (n, 4)),
-                                   ("rotor_speeds", rotor_speeds, (n, k))):
-            cols.append(np.asarray(value, dtype=np.float64))
-            if cols[-1].shape != shape:
-                raise ValueError(f"{name} must have shape {shape} for {n} sample(s) of a "
-                                 f"{k}-rotor log, got {cols[-1].shape}")
-        extra = extra or {}
-        if extra.keys() != set(self.extra_columns):
-            raise ValueError(f"extra values must be exactly {list(self.extra_columns)}, "
-                             f"got {sorted(extra)}")
-        for c in self.extra_columns:
-            cols.append(np.asarray(extra[c], dtype=np.float64).reshape(-1, 1))
-            if cols[-1].shape != (n, 1):
-                raise ValueError(f"extra[{c!r}] must have shape ({n},), got {np.shape(extra[c])}")
-        block = np.hstack(cols)
-        if n == 0:
-            return
-        bad = ~np.isfinite(block)
-        if bad.any():
-            i, j = np.argwhere(bad)[0]
-            raise ValueError(f"{self.columns[j]} of sample {i} is {block[i, j]}; "
-                             "a pose log holds finite values only")
-        norm_err = np.abs(np.linalg.norm(cols[2], axis=1) - 1.0)
-        if norm_err.max() > _QUAT_TOL:
-            i = int(np.argmax(norm_err))
-            raise ValueError(f"quaternion of sample {i} has norm {1 + norm_err[i]:.6g}, not 1")
-        # Compare t as written: samples closer than 1e-6 s would read back as repeated.
-        step = np.diff(np.concatenate(([self._last_t], np.round(t, 6)))) <= 0.0
-        if step.any():
-            i = int(np.argmax(step))
-            before = self._last_t if i == 0 else float(t[i - 1])
-            raise ValueError(f"t must increase by at least 1e-6 s: sample {i} has "
-                             f"t = {float(t[i])!r} after {before!r}")
-        # One %-format per chunk runs in C with no Python loop per row; chunks bound memory.
-        for i in range(0, n, _CHUNK_ROWS):
-            part = block[i:i + _CHUNK_ROWS]
-            self._file.write((self._fmt * len(part)) % tuple(part.ravel().tolist()))
-        self._emit("", n, float(np.round(t[-1], 6)))
-
-    def _check_open(self) -> None:
-        if self._file.closed:
-            raise ValueError(f"{self.path}: pose log writer is closed")
-
-    def _emit(self, text: str, rows: int, last_t: float) -> None:
-        self._file.write(text)
-        self._file.flush()
-        self.rows_written += rows
-        self._last_t = last_t
-
-    def close(self) -> None:
-        """Flush, ``fsync`` and close the file. Closing twice is harmless."""
-        if not self._file.closed:
-            try:
-                self._file.flush()
-                os.fsync(self._file.fileno())
-            finally:
-                self._file.close()
-
-    def __enter__(self) -> PoseLogWriter:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
-
-def write_pose_log(path: str | Path, log: PoseLog, *, overwrite: bool = False) -> Path:
-    """Write a whole `PoseLog` to ``path`` with a `PoseLogWriter`; return the path."""
-    with PoseLogWriter(path, log.rotor_count, log.extra, overwrite=overwrite) as w:
-        w.write_rows(log.t, log.position, log.quaternion, log.rotor_speeds, log.extra)
-    return w.path
-
-
-def _read_text(path: Path, encoding: str) -> str:
+def read_text_file(path: Path, encoding: str = "utf-8") -> str:
     """The text of a file; anything unreadable is a one-line `LogFormatError`."""
     try:
         return path.read_bytes().decode(encoding)
@@ -362,7 +185,7 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
     """
     _check_count(rotor_count, "rotor_count", allow_none=True)
     path = Path(path)
-    text = _read_text(path, "utf-8-sig")
+    text = read_text_file(path, "utf-8-sig")
     text = text.replace("\r\n", "\n") if "\r" in text else text
     lines = text.split("\n")
     newline_at_end = lines[-1] == ""
@@ -407,11 +230,11 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
                              f"increase (previous t = {_field(body, i - 1, cols['t'])})")
     q = data[:, [cols[c] for c in POSE_COLUMNS[4:]]]
     norm = np.linalg.norm(q, axis=1)
-    off = np.abs(norm - 1.0) > _QUAT_TOL
+    off = np.abs(norm - 1.0) > QUATERNION_TOLERANCE
     if off.any():
         i = int(np.argmax(off))
         raise LogFormatError(f"{path}: line {i + 2}: quaternion (qw, qx, qy, qz) has norm "
-                             f"{norm[i]:.6g}, not 1 within {_QUAT_TOL:g}")
+                             f"{norm[i]:.6g}, not 1 within {QUATERNION_TOLERANCE:g}")
     known = set(cols.values())
     return PoseLog(
         t=t,
@@ -434,7 +257,7 @@ def _locate_columns(path: Path, names: list[str], rotor_count: int | None) -> di
     missing = [c for c in POSE_COLUMNS if c not in seen]
     if missing:
         raise LogFormatError(f"{path}: missing required column(s) {', '.join(missing)}")
-    found = sorted(int(m.group(1)) for c in names if (m := _ROTOR_RE.fullmatch(c)))
+    found = sorted(int(m.group(1)) for c in names if (m := ROTOR_COLUMN.fullmatch(c)))
     shown = ", ".join(f"n{i}" for i in found) or "none"
     if rotor_count is not None and found != list(range(1, rotor_count + 1)):
         raise LogFormatError(f"{path}: expected {rotor_count} rotor speed columns "
@@ -462,75 +285,3 @@ def _parse_body(path: Path, body: list[str], names: list[str]) -> np.ndarray:
                 raise LogFormatError(f"{path}: line {i + 2}, column {names[j]!r}: "
                                      f"{_field(body, i, j)} is not a number")
     raise LogFormatError(f"{path}: the samples could not be parsed as numbers")
-
-
-def write_meta(path: str | Path, meta: Mapping[str, Any]) -> None:
-    """Write ``meta.json`` atomically: a reader sees the old file or the new one, never half.
-
-    numpy scalars and arrays are stored as numbers and lists, paths as strings. Values
-    JSON cannot hold (NaN and infinity included) raise before the disk is touched.
-    """
-    path = Path(path)
-    text = json.dumps(dict(meta), indent=2, allow_nan=False, default=_json_default) + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.ndarray | np.generic):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"meta value {value!r} of type {type(value).__name__} is not JSON")
-
-
-def read_meta(path: str | Path) -> dict[str, Any]:
-    """Read ``meta.json``; a missing or malformed file is a one-line `LogFormatError`."""
-    path = Path(path)
-    try:
-        meta = json.loads(_read_text(path, "utf-8"))
-    except json.JSONDecodeError as e:
-        raise LogFormatError(f"{path}: line {e.lineno}, column {e.colno}: invalid JSON: "
-                             f"{e.msg}") from None
-    if not isinstance(meta, dict):
-        raise LogFormatError(f"{path}: metadata must be a JSON object, "
-                             f"found {type(meta).__name__}")
-    return meta
-
-
-def _timestamp() -> str:
-    return time.strftime("%Y%m%d-%H%M%S")
-
-
-def new_flight_dir(root: str | Path = "logs", name: str | None = None) -> Path:
-    """Create and return a new, empty flight directory ``root/<name>``.
-
-    ``name`` defaults to the local time ``%Y%m%d-%H%M%S``, suffixed ``-2``, ``-3``, … if
-    taken; an explicit ``name`` that exists is an `InputError`. ``root`` is created if
-    missing. Creation is atomic, so concurrent callers never share a directory.
-    """
-    root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
-    if name is not None:
-        if name in ("", ".", "..") or Path(name).name != name or "\\" in name:
-            raise InputError(f"flight name {name!r} must be a plain directory name")
-        try:
-            (root / name).mkdir()
-        except FileExistsError:
-            raise InputError(f"flight directory {root / name} already exists") from None
-        return root / name
-    stamp = _timestamp()
-    for i in range(1, 10_000):
-        with contextlib.suppress(FileExistsError):
-            (path := root / (stamp if i == 1 else f"{stamp}-{i}")).mkdir()
-            return path
-    raise InputError(f"too many flight directories named {stamp}-* in {root}")

@@ -11,7 +11,8 @@ from flight.excitation import ExcitationSpec, excitation_trajectory
 from flight.simulator import SimulationSettings, Simulator
 from vehicle.dynamics import ATT, POS
 from vehicle.errors import InputError
-from vehicle.poselog import read_meta, read_pose_log
+from vehicle.flight_dir import read_meta
+from vehicle.poselog import read_pose_log
 from vehicle.rotation import quat_conjugate, quat_log, quat_multiply
 from vehicle.trajectory import PiecewisePolynomial
 

@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from mavsysid.cli import main
-from vehicle.poselog import read_meta, read_pose_log
+from vehicle.flight_dir import read_meta
+from vehicle.poselog import read_pose_log
 
 HERE = Path(__file__).parent
 BAD_VEHICLES = HERE.parent / "data" / "bad_vehicles"
