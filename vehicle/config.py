@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from vehicle.config_schema import check_vehicle, validate_document
+from vehicle.constants import GRAVITY
 from vehicle.errors import ConfigError
 
 __all__ = [
@@ -35,8 +36,6 @@ __all__ = [
     "vehicle_to_toml",
 ]
 
-#: Standard gravity, m/s². The world frame is ENU, so gravity is [0, 0, -GRAVITY].
-GRAVITY = 9.81
 
 #: Order of the parameter vector θ everywhere in mavsysid.
 PARAMETER_NAMES: tuple[str, ...] = ("c_T", "c_D", "c_M", "j_x", "j_y", "j_z")

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
+from vehicle.constants import GRAVITY
 from vehicle.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -27,9 +28,6 @@ __all__ = ["MIN_ROTORS", "check_vehicle", "validate_document"]
 
 #: Fewer rotors than this cannot control thrust, roll, pitch and yaw independently.
 MIN_ROTORS = 4
-
-# Standard gravity, m/s²; duplicated from vehicle.config to avoid an import cycle.
-_GRAVITY = 9.81
 
 # (key, unit, sign) per optional/required key of each table; sign is "positive" or
 # "nonnegative". Units go into messages so a user sees what scale is expected.
@@ -313,11 +311,10 @@ def _rank_ok(rows: np.ndarray) -> bool:
 
 def _check_allocation(file: str, config: VehicleConfig) -> None:
     """Check the 4×k allocation [c_T; c_T y; -c_T x; -ε c_M] has rank 4, naming the gap."""
-    c_T, c_M = config.parameters.c_T, config.parameters.c_M
-    p = config.rotor_positions
+    from vehicle.allocation import allocation_matrix  # imports vehicle.config: not at the top
+
+    thrust, roll, pitch, yaw = allocation_matrix(config)
     eps = config.rotor_directions
-    ones = np.ones(config.rotor_count)
-    thrust, roll, pitch, yaw = c_T * ones, c_T * p[:, 1], -c_T * p[:, 0], -eps * c_M
     directions = "(" + ", ".join(f"{int(e):+d}" for e in eps) + ")"
     if not _rank_ok(np.vstack([thrust, yaw])):
         _fail(file, "[[rotors]].direction",
@@ -371,7 +368,7 @@ def check_vehicle(file: str, config: VehicleConfig) -> None:
     limits = config.limits
     k = config.rotor_count
     lift = k * params.c_T * limits.rotor_speed_max**2
-    weight = config.mass * _GRAVITY
+    weight = config.mass * GRAVITY
     if lift < weight:
         _fail(file, "[limits].rotor_speed_max",
               f"a speed at which the {k} rotors lift the vehicle ({k} × c_T × "
