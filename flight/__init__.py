@@ -7,7 +7,7 @@ is the only place where NED/FRD frames appear.
 from __future__ import annotations
 
 from flight.controller import ControllerGains, GeometricController
-from flight.effects import ConstantWrench, TruthEffect
+from flight.effects import ConstantWrench, ProcessNoise, TruthEffect
 from flight.excitation import ExcitationSpec, excitation_trajectory
 from flight.simulator import SimulationResult, SimulationSettings, Simulator
 
@@ -16,6 +16,7 @@ __all__ = [
     "ControllerGains",
     "ExcitationSpec",
     "GeometricController",
+    "ProcessNoise",
     "SimulationResult",
     "SimulationSettings",
     "Simulator",

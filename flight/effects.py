@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ConstantWrench", "TruthEffect", "applies_wrench"]
+__all__ = ["ConstantWrench", "ProcessNoise", "TruthEffect", "applies_wrench"]
 
 
 class TruthEffect:
@@ -35,8 +35,8 @@ class TruthEffect:
         """The effect's parameters, for the flight metadata."""
         return {}
 
-    def reset(self) -> None:
-        """Forget any internal state before a new flight."""
+    def reset(self, physics_dt: float) -> None:
+        """Forget any internal state before a new flight; ``physics_dt`` is the step, s."""
 
     def wrench(
         self, t: float, x: np.ndarray, n: np.ndarray
@@ -85,3 +85,46 @@ class ConstantWrench(TruthEffect):
         self, t: float, x: np.ndarray, n: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray] | None:
         return np.asarray(self.force, dtype=float), np.asarray(self.torque, dtype=float)
+
+
+@dataclass
+class ProcessNoise(TruthEffect):
+    """White force and moment noise on the body: the estimator's process-noise model made true.
+
+    Continuous white noise of density q held over one physics step dt is a constant of
+    σ = q / √dt, drawn anew every step.
+
+    Attributes
+    ----------
+    force_density : float
+        N·√s, per body axis.
+    moment_density : float
+        N·m·√s, per body axis.
+    seed : int
+    """
+
+    force_density: float
+    moment_density: float
+    seed: int = 0
+    name: str = "process_noise"
+
+    def parameters(self) -> dict[str, float | list[float]]:
+        return {"force_density": self.force_density, "moment_density": self.moment_density,
+                "seed": float(self.seed)}
+
+    def reset(self, physics_dt: float) -> None:
+        self._rng = np.random.default_rng(self.seed)
+        self._sigma = np.repeat([self.force_density, self.moment_density], 3) / np.sqrt(
+            physics_dt)
+        self._block = np.empty((0, 6))
+        self._next = 0
+
+    def wrench(
+        self, t: float, x: np.ndarray, n: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        if self._next == len(self._block):  # draw in blocks: one call per step is slow
+            self._block = self._rng.normal(size=(4096, 6)) * self._sigma
+            self._next = 0
+        w = self._block[self._next]
+        self._next += 1
+        return w[:3], w[3:]

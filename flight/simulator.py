@@ -222,7 +222,7 @@ class Simulator:
                 np.ascontiguousarray(cfg.rotor_directions))
         wrench_effects = [e for e in self.effects if applies_wrench(e)]
         for effect in self.effects:
-            effect.reset()
+            effect.reset(dt)
         zero = np.zeros(3)
         noise = _SensorNoise(cfg, s.seed, enabled=s.sensor_noise)
         n_log = n_control // per_log + 1

@@ -10,7 +10,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-from mavsysid import __version__, offline
+from mavsysid import __version__, estimate, offline
 from vehicle.errors import MavsysidError
 
 __all__ = ["build_parser", "main"]
@@ -22,7 +22,6 @@ _PLANNED = {
     "plan": "plan a maximally informative calibration flight",
     "sim": "run a simulated MAVLink vehicle endpoint",
     "stream": "stream a trajectory to a vehicle over MAVLink and record the flight",
-    "estimate": "estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a flight log",
     "diagnose": "find, name and fit what the model still gets wrong",
     "evaluate": "run the paper's repeatability experiment",
 }
@@ -68,6 +67,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     offline.add_arguments(simulate)
     simulate.set_defaults(run=offline.main)
+
+    est = sub.add_parser(
+        "estimate", parents=[common], help="estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a log",
+        description="Estimate the thrust, drag and moment coefficients and the inertia, with "
+        "uncertainties, from a flight log (pose.csv, .tlog, .ulg or .bin): a parameter EKF, "
+        "then a process-noise fit and a batch MAP refinement.",
+    )
+    estimate.add_arguments(est)
+    est.set_defaults(run=estimate.main)
 
     for command, summary in _PLANNED.items():
         p = sub.add_parser(command, parents=[common], help=f"{summary} (not implemented yet)",

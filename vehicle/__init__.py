@@ -8,6 +8,10 @@ file format.
 
 from __future__ import annotations
 
+from vehicle.compiled_cache import configure_numba_cache
+
+configure_numba_cache()  # before any module imports numba
+
 from vehicle.allocation import allocation_matrix, allocation_pinv, rotor_speeds_squared
 from vehicle.config import (
     PARAMETER_NAMES,

@@ -45,6 +45,11 @@ SHIPPED_VEHICLES: tuple[str, ...] = ("firefly", "quad_x", "micro_quad")
 
 _CONFIG_DIR = Path(__file__).with_name("configs")
 
+#: Default unmodelled linear acceleration noise density, m/s²·√s.
+LINEAR_NOISE_DENSITY = 0.02
+#: Default unmodelled angular acceleration noise density, rad/s²·√s.
+ANGULAR_NOISE_DENSITY = 0.02
+
 
 @dataclass(frozen=True)
 class RotorConfig:
@@ -111,15 +116,23 @@ class Limits:
 
 @dataclass(frozen=True)
 class MotorConfig:
-    """Motor dynamics, used on the truth side of the simulator only.
+    """Motor lag (simulator truth side) and the motor curve (logs without rotor speeds).
 
     Attributes
     ----------
     time_constant : float
         First-order lag between commanded and actual rotor speed, s.
+    pwm_min, pwm_max : float
+        Motor output PWM for zero and full throttle u, µs.
+    thrust_expo : float
+        ArduPilot's MOT_THST_EXPO e in [0, 1]: thrust ∝ (1 − e) u + e u², so a rotor
+        speed is rotor_speed_max · sqrt((1 − e) u + e u²).
     """
 
     time_constant: float = 0.02
+    pwm_min: float = 1000.0
+    pwm_max: float = 2000.0
+    thrust_expo: float = 0.65
 
 
 @dataclass(frozen=True)
@@ -209,30 +222,29 @@ class VehicleConfig:
 
 
 def default_noise_densities(
-    mass: float, rotor_positions: np.ndarray
+    mass: float, inertia: tuple[float, float, float]
 ) -> tuple[float, float]:
     """Process-noise densities used when `[noise]` does not give them.
+
+    Stated as unmodelled accelerations so that one default suits a 30 g quad and a 3 kg
+    hexacopter alike: 0.02 m/s²·√s of linear and 0.02 rad/s²·√s of angular acceleration
+    noise. Estimation can fit the level to a flight (`estimation.noise_fit`).
 
     Parameters
     ----------
     mass : float
         Vehicle mass, kg.
-    rotor_positions : ndarray, shape (k, 3)
-        Rotor positions, m, body FLU.
+    inertia : tuple of 3 float
+        Principal moments of inertia, kg·m².
 
     Returns
     -------
     force_density : float
-        ``0.002 m g``, N·√s.
+        ``0.02 m``, N·√s.
     moment_density : float
-        ``0.002 m g arm``, N·m·√s, with arm the mean horizontal distance of the rotors
-        from the centre of gravity, m.
+        ``0.02 mean(J)``, N·m·√s.
     """
-    # Scaled with the vehicle so one default suits a 30 g quad and a 1.5 kg hexacopter.
-    force = 0.002 * mass * GRAVITY
-    positions = np.asarray(rotor_positions, dtype=float).reshape(-1, 3)
-    arm = float(np.mean(np.hypot(positions[:, 0], positions[:, 1])))
-    return force, force * arm
+    return LINEAR_NOISE_DENSITY * mass, ANGULAR_NOISE_DENSITY * float(np.mean(inertia))
 
 
 def _resolve(spec: str | Path) -> tuple[Path, str, str]:
@@ -276,9 +288,7 @@ def _build(values: dict[str, Any], name: str, source: str) -> VehicleConfig:
         RotorConfig(position=(p[0], p[1], p[2]), direction=d) for p, d in values["rotors"]
     )
     noise = dict(values["noise"])
-    force, moment = default_noise_densities(
-        values["mass"], np.array([r.position for r in rotors], dtype=float)
-    )
+    force, moment = default_noise_densities(values["mass"], tuple(values["parameters"]["J"]))
     noise.setdefault("force_density", force)
     noise.setdefault("moment_density", moment)
     return VehicleConfig(

@@ -47,7 +47,12 @@ _LIMITS: dict[str, tuple[str, str]] = {
     "speed_max": ("m/s", "positive"),
     "segment_time_max": ("s", "positive"),
 }
-_MOTOR: dict[str, tuple[str, str]] = {"time_constant": ("s", "nonnegative")}
+_MOTOR: dict[str, tuple[str, str]] = {
+    "time_constant": ("s", "nonnegative"),
+    "pwm_min": ("µs", "nonnegative"),
+    "pwm_max": ("µs", "positive"),
+    "thrust_expo": ("between 0 and 1", "nonnegative"),
+}
 _NOISE: dict[str, tuple[str, str]] = {
     "position_sigma": ("m", "nonnegative"),
     "attitude_sigma": ("rad", "nonnegative"),
@@ -345,7 +350,8 @@ def check_vehicle(file: str, config: VehicleConfig) -> None:
     ConfigError
         Inconsistent inertia, a c_M that is RotorS's ratio c_M/c_T, rotors that cannot
         produce independent thrust, roll, pitch and yaw torque, rotors that cannot lift
-        the vehicle, or limits in the wrong order.
+        the vehicle, limits in the wrong order, or a motor curve out of range (pwm_min ≥
+        pwm_max, thrust_expo > 1).
     """
     params = config.parameters
     j = params.J
@@ -378,6 +384,12 @@ def check_vehicle(file: str, config: VehicleConfig) -> None:
         _fail(file, "[limits].rotor_speed_min",
               f"a speed in [0, rotor_speed_max = {limits.rotor_speed_max!r}) rad/s",
               repr(limits.rotor_speed_min))
+    motor = config.motor
+    if motor.pwm_min >= motor.pwm_max:
+        _fail(file, "[motor].pwm_min", f"a PWM below pwm_max = {motor.pwm_max!r} µs",
+              repr(motor.pwm_min))
+    if motor.thrust_expo > 1.0:
+        _fail(file, "[motor].thrust_expo", "a number between 0 and 1", repr(motor.thrust_expo))
     if limits.thrust_min_ratio >= limits.thrust_max_ratio:
         _fail(file, "[limits].thrust_min_ratio",
               f"a ratio below thrust_max_ratio = {limits.thrust_max_ratio!r}",

@@ -17,11 +17,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from vehicle.config import GRAVITY, VehicleConfig
-from vehicle.dynamics import ATT, POS, RATE, VEL
-from vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply, quat_to_matrix, skew
+from vehicle.config import VehicleConfig
+from vehicle.constants import GRAVITY
+from vehicle.dynamics import ATT, POS, RATE, VEL, rotation_kernel
+from vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
 
 __all__ = [
     "ERROR_DIM",
@@ -33,6 +35,8 @@ __all__ = [
     "MEAS_DIM",
     "NOISE_DIM",
     "ErrorStateModel",
+    "jacobian_kernel",
+    "transition_kernel",
 ]
 
 ERROR_DIM = 18
@@ -44,9 +48,6 @@ E_ATT = slice(6, 9)
 E_RATE = slice(9, 12)
 E_THETA = slice(12, 18)
 
-_D = np.diag([1.0, 1.0, 0.0])  # rotor drag acts in the rotor plane only (paper Eq. drag)
-_E3 = np.array([0.0, 0.0, 1.0])
-_G = np.array([0.0, 0.0, -GRAVITY])
 
 
 @dataclass(frozen=True)
@@ -98,71 +99,10 @@ class ErrorStateModel:
         A : ndarray, shape (..., 18, 18)
         G : ndarray, shape (..., 18, 6)
         """
-        x = np.asarray(x, dtype=float)
-        batch = x.shape[:-1]
-        x = x.reshape(-1, x.shape[-1])
-        b = x.shape[0]
-        k = self.config.rotor_count
-        n = np.broadcast_to(np.asarray(n, dtype=float), (*batch, k)).reshape(b, k)
-        th = np.broadcast_to(np.asarray(theta, dtype=float), (*batch, 6)).reshape(b, 6)
-        m = self.config.mass
-        r = self.config.rotor_positions
-        eps = self.config.rotor_directions
-        c_T, c_D, c_M = th[:, 0:1], th[:, 1:2], th[:, 2:3]
-        J = th[:, 3:6]
-
-        R = quat_to_matrix(x[:, ATT])
-        v = x[:, VEL]
-        w = x[:, RATE]
-        n2 = n * n
-        T = c_T * n2  # (b, k) rotor thrusts
-        hub = v[:, None, :] + np.cross(w[:, None, :], r[None, :, :])  # v_B + ω × r_i
-        hub_d = hub @ _D
-        dF_dcT_i = n2[..., None] * (_E3 - c_D[..., None] * hub_d)  # (b, k, 3)
-        dF_dcD_i = -T[..., None] * hub_d
-        F_i = c_T[..., None] * dF_dcT_i
-        M = np.sum(np.cross(r, F_i), axis=1) + np.outer(-(n2 @ eps), _E3) * c_M
-        Jw = J * w
-        w_dot = (M - np.cross(w, Jw)) / J
-
-        Tr = T @ r  # Σ T_i r_i, (b, 3)
-        rx = skew(r)  # (k, 3, 3)
-        dF_dv = -(c_D * T.sum(axis=1, keepdims=True))[..., None] * _D
-        dF_dw = c_D[..., None] * (_D @ skew(Tr))
-        dM_dv = -c_D[..., None] * (skew(Tr) @ _D)
-        dM_dw = c_D[..., None] * np.einsum("bk,kij->bij", T, rx @ _D @ rx)
-
-        A = np.zeros((b, ERROR_DIM, ERROR_DIM))
-        # ṗ = R v_B with R = R̂ (I + [δφ]×)
-        A[:, E_POS, E_VEL] = R
-        A[:, E_POS, E_ATT] = -R @ skew(v)
-        # Paper Eq. newton
-        A[:, E_VEL, E_VEL] = dF_dv / m - skew(w)
-        A[:, E_VEL, E_ATT] = skew(np.einsum("bji,j->bi", R, _G))
-        A[:, E_VEL, E_RATE] = dF_dw / m + skew(v)
-        A[:, E_VEL, 12] = dF_dcT_i.sum(axis=1) / m
-        A[:, E_VEL, 13] = dF_dcD_i.sum(axis=1) / m
-        # Attitude error kinematics: δφ̇ = -ω × δφ + δω
-        A[:, E_ATT, E_ATT] = -skew(w)
-        A[:, E_ATT, E_RATE] = np.eye(3)
-        # Paper Eq. euler
-        Jinv = (1.0 / J)[..., None]
-        J_mat = J[:, :, None] * np.eye(3)
-        A[:, E_RATE, E_VEL] = Jinv * dM_dv
-        A[:, E_RATE, E_RATE] = Jinv * (dM_dw - skew(w) @ J_mat + skew(Jw))
-        A[:, E_RATE, 12] = np.sum(np.cross(r, dF_dcT_i), axis=1) / J
-        A[:, E_RATE, 13] = np.sum(np.cross(r, dF_dcD_i), axis=1) / J
-        A[:, E_RATE, 14] = np.outer(-(n2 @ eps), _E3) / J
-        for a in range(3):
-            e_a = np.eye(3)[a]
-            col = -np.cross(w, e_a) * w[:, a : a + 1] / J
-            col[:, a] -= w_dot[:, a] / J[:, a]
-            A[:, E_RATE, 15 + a] = col
-        A[:, :, E_THETA] *= self.theta_scale
-
-        G = np.zeros((b, ERROR_DIM, NOISE_DIM))
-        G[:, E_VEL, 0:3] = np.eye(3) / m
-        G[:, E_RATE, 3:6] = Jinv * np.eye(3)
+        X, N, Th, batch = self._batch(x, n, theta)
+        A = np.empty((X.shape[0], ERROR_DIM, ERROR_DIM))
+        G = np.empty((X.shape[0], ERROR_DIM, NOISE_DIM))
+        _jacobian_batch(X, N, Th, *self.kernel_args(), A, G)
         return A.reshape(*batch, ERROR_DIM, ERROR_DIM), G.reshape(*batch, ERROR_DIM, NOISE_DIM)
 
     def process_noise_density(self) -> np.ndarray:
@@ -171,26 +111,43 @@ class ErrorStateModel:
         return np.diag([nz.force_density**2] * 3 + [nz.moment_density**2] * 3)
 
     def discrete(
-        self, x: np.ndarray, n: np.ndarray, theta: np.ndarray, dt: float, order: int = 4
+        self, x: np.ndarray, n: np.ndarray, theta: np.ndarray, dt: float
     ) -> tuple[np.ndarray, np.ndarray]:
         """Discrete transition F_k and process noise Q_k over a step ``dt`` (paper Eq. prior).
 
-        F_k = exp(A dt) by its Taylor series to ``order``; Q_k by the trapezoidal rule,
-        ½ (F G Qc Gᵀ Fᵀ + G Qc Gᵀ) dt.
+        F_k = exp(A dt) (4th-order Taylor series of exp(A dt/2), squared); Q_k by
+        Simpson's rule on ∫ Φ G Qc Gᵀ Φᵀ (see `transition_kernel`).
 
         Returns
         -------
         F, Q : ndarray, shape (..., 18, 18)
         """
-        A, G = self.continuous(x, n, theta)
-        Adt = A * dt
-        eye = np.eye(ERROR_DIM)
-        F = eye + Adt / order
-        for i in range(order - 1, 0, -1):  # Horner: I + Adt (I + Adt/2 (I + …))
-            F = eye + (Adt @ F) / i
-        GQG = G @ self.process_noise_density() @ np.swapaxes(G, -1, -2)
-        Q = 0.5 * dt * (F @ GQG @ np.swapaxes(F, -1, -2) + GQG)
-        return F, Q
+        X, N, Th, batch = self._batch(x, n, theta)
+        F = np.empty((X.shape[0], ERROR_DIM, ERROR_DIM))
+        Q = np.empty_like(F)
+        _discrete_batch(X, N, Th, *self.kernel_args(), self.process_noise_density(), float(dt),
+                        F, Q)
+        return F.reshape(*batch, ERROR_DIM, ERROR_DIM), Q.reshape(*batch, ERROR_DIM, ERROR_DIM)
+
+    def kernel_args(self) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """(mass, rotor positions (k, 3), directions (k,), θ scale (6,)) for the kernels."""
+        cfg = self.config
+        return (float(cfg.mass), np.ascontiguousarray(cfg.rotor_positions),
+                np.ascontiguousarray(cfg.rotor_directions),
+                np.ascontiguousarray(self.theta_scale, dtype=float))
+
+    def _batch(
+        self, x: np.ndarray, n: np.ndarray, theta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]:
+        x = np.asarray(x, dtype=float)
+        batch = x.shape[:-1]
+        k = self.config.rotor_count
+        X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        b = X.shape[0]
+        N = np.ascontiguousarray(np.broadcast_to(np.asarray(n, float), (*batch, k)).reshape(b, k))
+        th = np.broadcast_to(np.asarray(theta, float), (*batch, 6))
+        Th = np.ascontiguousarray(th.reshape(b, 6))
+        return X, N, Th, batch
 
     # -- measurement ------------------------------------------------------------------
 
@@ -265,3 +222,150 @@ class ErrorStateModel:
         P = np.asarray(P, dtype=float)
         s = self.theta_scale
         return P[..., E_THETA, E_THETA] * s[:, None] * s[None, :]
+
+
+@numba.njit(cache=True)
+def _skew_into(v, out):
+    out[0, 0] = 0.0
+    out[0, 1] = -v[2]
+    out[0, 2] = v[1]
+    out[1, 0] = v[2]
+    out[1, 1] = 0.0
+    out[1, 2] = -v[0]
+    out[2, 0] = -v[1]
+    out[2, 1] = v[0]
+    out[2, 2] = 0.0
+
+
+@numba.njit(cache=True)
+def jacobian_kernel(x, n, theta, mass, r, eps, scale, A, G):
+    """A (18, 18) and G (18, 6) of one state into ``A`` and ``G``; see `ErrorStateModel`."""
+    c_T, c_D, c_M = theta[0], theta[1], theta[2]
+    J = theta[3:6]
+    R = rotation_kernel(x[6:10])
+    v = x[3:6]
+    w = x[10:13]
+    A[:] = 0.0
+    G[:] = 0.0
+    sum_T = 0.0
+    sum_eps_n2 = 0.0
+    Tr = np.zeros(3)
+    M = np.zeros(3)
+    dF_dcT = np.zeros(3)
+    dF_dcD = np.zeros(3)
+    dM_dcT = np.zeros(3)
+    dM_dcD = np.zeros(3)
+    dM_dw = np.zeros((3, 3))
+    rx = np.empty((3, 3))
+    for i in range(n.shape[0]):
+        n2 = n[i] * n[i]
+        T = c_T * n2
+        ri = r[i]
+        hub = v + np.cross(w, ri)  # v_B + ω × r_i (paper Eq. drag)
+        a = np.array([-c_D * n2 * hub[0], -c_D * n2 * hub[1], n2])  # ∂F_i/∂c_T
+        b = np.array([-T * hub[0], -T * hub[1], 0.0])  # ∂F_i/∂c_D
+        M += np.cross(ri, c_T * a)
+        dM_dcT += np.cross(ri, a)
+        dM_dcD += np.cross(ri, b)
+        dF_dcT += a
+        dF_dcD += b
+        sum_T += T
+        sum_eps_n2 += eps[i] * n2
+        Tr += T * ri
+        _skew_into(ri, rx)
+        # Σ T_i [r_i]× D [r_i]×, with D = diag(1, 1, 0) zeroing the third column of [r_i]×.
+        for p in range(3):
+            for q in range(3):
+                dM_dw[p, q] += T * (rx[p, 0] * rx[0, q] + rx[p, 1] * rx[1, q])
+    M[2] -= c_M * sum_eps_n2
+    Jw = J * w
+    w_dot = (M - np.cross(w, Jw)) / J
+
+    sk = np.empty((3, 3))
+    # ṗ = R v_B with R = R̂ (I + [δφ]×)
+    _skew_into(v, sk)
+    A[0:3, 3:6] = R
+    A[0:3, 6:9] = -(R @ sk)
+    # Paper Eq. newton
+    _skew_into(w, sk)
+    for p in range(3):
+        for q in range(3):
+            A[3 + p, 3 + q] = -sk[p, q]
+    A[3, 3] -= c_D * sum_T / mass
+    A[4, 4] -= c_D * sum_T / mass
+    g_body = -GRAVITY * R[2, :]  # Rᵀ g
+    _skew_into(g_body, sk)
+    A[3:6, 6:9] = sk
+    _skew_into(Tr, rx)
+    _skew_into(v, sk)
+    for q in range(3):  # ∂F/∂ω = c_D D [Σ T_i r_i]×, plus [v]× from -ω × v
+        A[3, 9 + q] = c_D * rx[0, q] / mass + sk[0, q]
+        A[4, 9 + q] = c_D * rx[1, q] / mass + sk[1, q]
+        A[5, 9 + q] = sk[2, q]
+    A[3:6, 12] = dF_dcT / mass
+    A[3:6, 13] = dF_dcD / mass
+    # Attitude error kinematics: δφ̇ = -ω × δφ + δω
+    _skew_into(w, sk)
+    for p in range(3):
+        for q in range(3):
+            A[6 + p, 6 + q] = -sk[p, q]
+        A[6 + p, 9 + p] = 1.0
+    # Paper Eq. euler
+    for p in range(3):
+        for q in range(2):  # ∂M/∂v = -c_D [Σ T_i r_i]× D
+            A[9 + p, 3 + q] = -c_D * rx[p, q] / J[p]
+    # ∂(ω × J ω)/∂ω = [ω]× J - [J ω]×
+    wx = np.empty((3, 3))
+    _skew_into(w, wx)
+    _skew_into(Jw, sk)
+    for p in range(3):
+        for q in range(3):
+            A[9 + p, 9 + q] = (c_D * dM_dw[p, q] - wx[p, q] * J[q] + sk[p, q]) / J[p]
+    A[9:12, 12] = dM_dcT / J
+    A[9:12, 13] = dM_dcD / J
+    A[11, 14] = -sum_eps_n2 / J[2]
+    for a_ in range(3):
+        e_a = np.zeros(3)
+        e_a[a_] = 1.0
+        col = -np.cross(w, e_a) * w[a_] / J
+        col[a_] -= w_dot[a_] / J[a_]
+        A[9:12, 15 + a_] = col
+    for q in range(6):
+        A[:, 12 + q] *= scale[q]
+    for p in range(3):
+        G[3 + p, p] = 1.0 / mass
+        G[9 + p, 3 + p] = 1.0 / J[p]
+
+
+@numba.njit(cache=True)
+def transition_kernel(A, G, Qc, dt, F, Q):
+    """F = exp(A dt) and Q = ∫₀^dt Φ(s) G Qc Gᵀ Φ(s)ᵀ ds, into F and Q.
+
+    exp(A dt/2) by a 4th-order Taylor series (Horner), squared for F. Q by Simpson's
+    rule, exact for the cubic growth of position and attitude variance under force and
+    moment noise (the trapezoidal rule overstates it by half).
+    """
+    d = A.shape[0]
+    Ah = A * (0.5 * dt)
+    eye = np.eye(d)
+    Fh = eye + Ah / 4.0
+    for i in range(3, 0, -1):  # Horner: I + Ah (I + Ah/2 (I + Ah/3 (I + Ah/4)))
+        Fh = eye + (Ah @ Fh) / i
+    F[:] = Fh @ Fh
+    GQG = G @ Qc @ G.T
+    Q[:] = dt / 6.0 * (GQG + 4.0 * (Fh @ GQG @ Fh.T) + F @ GQG @ F.T)
+
+
+@numba.njit(cache=True)
+def _jacobian_batch(X, N, Th, mass, r, eps, scale, A, G):
+    for j in range(X.shape[0]):
+        jacobian_kernel(X[j], N[j], Th[j], mass, r, eps, scale, A[j], G[j])
+
+
+@numba.njit(cache=True)
+def _discrete_batch(X, N, Th, mass, r, eps, scale, Qc, dt, F, Q):
+    A = np.empty((F.shape[1], F.shape[2]))
+    G = np.empty((F.shape[1], Qc.shape[0]))
+    for j in range(X.shape[0]):
+        jacobian_kernel(X[j], N[j], Th[j], mass, r, eps, scale, A, G)
+        transition_kernel(A, G, Qc, dt, F[j], Q[j])

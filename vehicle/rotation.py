@@ -7,11 +7,15 @@ the conversion happens here and nowhere else.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 __all__ = [
+    "exp_kernel",
+    "log_kernel",
     "matrix_to_quat",
+    "multiply_kernel",
     "quat_conjugate",
     "quat_exp",
     "quat_log",
@@ -110,3 +114,35 @@ def quat_log(q: np.ndarray) -> np.ndarray:
     # θ / sin(θ/2) → 2 / w (1 + …) near zero; 2/w is exact to O(|v|²).
     scale = np.where(small, 2.0 / w, angle / safe)
     return scale * v
+
+
+# Scalar versions for compiled loops (the EKF and batch estimator), same conventions.
+
+
+@numba.njit(cache=True)
+def multiply_kernel(p, q):
+    """p ⊗ q for single quaternions (4,), for numba code."""
+    return np.array([
+        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
+    ])
+
+
+@numba.njit(cache=True)
+def exp_kernel(v):
+    """Exp of one rotation vector (3,) → unit quaternion (4,), for numba code."""
+    angle = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    sinc = 0.5 - angle * angle / 48.0 if angle < 0.0001 else np.sin(0.5 * angle) / angle
+    return np.array([np.cos(0.5 * angle), sinc * v[0], sinc * v[1], sinc * v[2]])
+
+
+@numba.njit(cache=True)
+def log_kernel(q):
+    """Log of one unit quaternion (4,) → rotation vector (3,) with angle ≤ π, for numba code."""
+    sign = -1.0 if q[0] < 0.0 else 1.0
+    w = sign * q[0]
+    vn = np.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    scale = 2.0 / w if vn < 1e-08 else 2.0 * np.arctan2(vn, w) / vn
+    return sign * scale * q[1:4]

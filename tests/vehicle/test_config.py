@@ -147,13 +147,14 @@ def test_minimal_file_loads_with_documented_defaults(tmp_path: Path) -> None:
     assert config.limits.yaw_acceleration_max == 2.0 * math.pi
     assert (config.limits.speed_max, config.limits.segment_time_max) == (3.0, 3.0)
     assert config.motor == MotorConfig()
+    assert (config.motor.pwm_min, config.motor.pwm_max) == (1000.0, 2000.0)
+    assert config.motor.thrust_expo == 0.65
     noise = config.noise
     assert noise.position_sigma == 0.0005
     assert noise.attitude_sigma == math.radians(0.1)
     assert noise.rotor_speed_sigma == 0.0
-    assert noise.force_density == pytest.approx(0.002 * 1.0 * GRAVITY)
-    arm = math.hypot(0.12, 0.12)
-    assert noise.moment_density == pytest.approx(0.002 * 1.0 * GRAVITY * arm)
+    assert noise.force_density == pytest.approx(0.02 * 1.0)
+    assert noise.moment_density == pytest.approx(0.02 * (0.0082 + 0.0082 + 0.0149) / 3)
 
 
 def test_name_key_overrides_file_stem(tmp_path: Path) -> None:
@@ -165,14 +166,16 @@ def test_name_key_overrides_file_stem(tmp_path: Path) -> None:
 def test_optional_keys_are_read(tmp_path: Path) -> None:
     """Optional [limits], [motor] and [noise] keys override the defaults."""
     text = MINIMAL + (
-        "speed_max = 2\nrotor_speed_min = 100.0\n\n[motor]\ntime_constant = 0\n\n"
+        "speed_max = 2\nrotor_speed_min = 100.0\n\n[motor]\ntime_constant = 0\n"
+        "pwm_min = 1100\npwm_max = 1900\nthrust_expo = 0.5\n\n"
         "[noise]\nforce_density = 0.5\nattitude_sigma = 0.01\n"
     )
     config = load_vehicle(_write(tmp_path, text))
     assert config.limits.speed_max == 2.0
     assert isinstance(config.limits.speed_max, float)
     assert config.limits.rotor_speed_min == 100.0
-    assert config.motor.time_constant == 0.0
+    assert config.motor == MotorConfig(time_constant=0.0, pwm_min=1100.0, pwm_max=1900.0,
+                                       thrust_expo=0.5)
     assert config.noise.force_density == 0.5
     assert config.noise.attitude_sigma == 0.01
 
@@ -237,6 +240,14 @@ MALFORMED = [
                  id="segment_time_max-negative"),
     pytest.param(MINIMAL + "\n[motor]\ntime_constant = -0.01\n", "[motor].time_constant",
                  id="motor-negative"),
+    pytest.param(MINIMAL + "\n[motor]\npwm_min = 2000\npwm_max = 1000\n", "[motor].pwm_min",
+                 id="pwm-reversed"),
+    pytest.param(MINIMAL + "\n[motor]\npwm_max = 900\n", "[motor].pwm_min",
+                 id="pwm_max-below-default-min"),
+    pytest.param(MINIMAL + "\n[motor]\nthrust_expo = 1.5\n", "[motor].thrust_expo",
+                 id="thrust_expo-above-1"),
+    pytest.param(MINIMAL + "\n[motor]\nthrust_expo = -0.1\n", "[motor].thrust_expo",
+                 id="thrust_expo-negative"),
     pytest.param(MINIMAL + "\n[noise]\nposition_sigma = -0.001\n", "[noise].position_sigma",
                  id="noise-negative"),
     pytest.param(MINIMAL + "\n[noise]\nmoment_density = [1.0]\n", "[noise].moment_density",

@@ -1,0 +1,296 @@
+"""The parameter EKF (paper Sections "Robot Model and EKF" and "MAV Model"), on filterpy.
+
+`ParameterEKF` subclasses `filterpy.kalman.ExtendedKalmanFilter` and keeps its API:
+``x``, ``P``, ``F``, ``Q``, ``R``, ``y``, ``S``, ``SI``, ``K``, ``predict()``,
+``update(z)``, ``log_likelihood``, ``mahalanobis``, ``x_prior``/``P_prior``,
+``x_post``/``P_post``. What differs, and why:
+
+* ``x`` is the nominal state [p, v_B, q, ω, θ], shape (19,), with θ in SI units, while
+  ``P`` is the covariance of the error state (18, 18) of `vehicle.linearization`:
+  the attitude error is a 3-vector (``q = q̂ ⊗ Exp(δφ)``) and θ errors are in units of
+  ``theta_scale`` (the prior), so P stays well conditioned at any vehicle scale.
+* ``predict(u, dt, u_next)`` integrates the nonlinear model (RK4, rotor speeds linear
+  between ``u`` and ``u_next``) and propagates P with the shared linearisation
+  (paper Eq. prior); ``update(z)`` takes z = [p (3), q (4)] and applies the correction
+  multiplicatively to the attitude (Joseph form, with the error-state reset).
+
+The arithmetic lives in compiled kernels shared by the per-step methods and by `run`,
+which filters a whole flight in one compiled loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from estimation.flight_data import FlightData
+from estimation.results import EstimationHistory, ParameterEstimate
+from vehicle.config import VehicleConfig
+from vehicle.dynamics import STATE_DIM, derivative_kernel
+from vehicle.linearization import (
+    ERROR_DIM,
+    MEAS_DIM,
+    ErrorStateModel,
+    jacobian_kernel,
+    transition_kernel,
+)
+from vehicle.rotation import (
+    exp_kernel,
+    log_kernel,
+    multiply_kernel,
+    quat_log,
+    quat_multiply,
+    quat_to_matrix,
+)
+
+__all__ = ["FILTER_DIM", "FilterRun", "ParameterEKF"]
+
+#: Length of the nominal filter state x = [p, v_B, q, ω, θ].
+FILTER_DIM = STATE_DIM + 6
+
+
+@dataclass(frozen=True)
+class FilterRun:
+    """A whole flight filtered: the history, and the full state at every sample.
+
+    Attributes
+    ----------
+    history : EstimationHistory
+    states : ndarray, shape (N, 13)
+        Filtered model states after each update.
+    estimate : ParameterEstimate
+        Final θ and its covariance, SI.
+    log_likelihood : float
+        Log-likelihood of all innovations, Σ log N(y_k; 0, S_k).
+    """
+
+    history: EstimationHistory
+    states: np.ndarray
+    estimate: ParameterEstimate
+    log_likelihood: float
+
+
+@numba.njit(cache=True)
+def _rk4_kernel(x, n0, n1, theta, dt, mass, r, eps, out):
+    """One RK4 step of the model state x (13,) with rotor speeds linear from n0 to n1."""
+    zero = np.zeros(3)
+    nm = 0.5 * (n0 + n1)
+    k1 = np.empty(13)
+    k2 = np.empty(13)
+    k3 = np.empty(13)
+    k4 = np.empty(13)
+    derivative_kernel(x, n0, theta, mass, r, eps, zero, zero, k1)
+    derivative_kernel(x + 0.5 * dt * k1, nm, theta, mass, r, eps, zero, zero, k2)
+    derivative_kernel(x + 0.5 * dt * k2, nm, theta, mass, r, eps, zero, zero, k3)
+    derivative_kernel(x + dt * k3, n1, theta, mass, r, eps, zero, zero, k4)
+    out[:] = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    out[6:10] /= np.sqrt(np.sum(out[6:10] ** 2))
+
+
+@numba.njit(cache=True)
+def _predict_kernel(x, P, n0, n1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
+    """Paper Eq. prior: x ← f-integrated, P ← F P Fᵀ + Q (F, Q at the step's start)."""
+    theta = x[13:19]
+    jacobian_kernel(x[:13], n0, theta, mass, r, eps, scale, A, G)
+    transition_kernel(A, G, Qc, dt, F, Q)
+    state = np.empty(13)
+    _rk4_kernel(x[:13], n0, n1, theta, dt, mass, r, eps, state)
+    x[:13] = state
+    P[:] = F @ P @ F.T + Q
+    P[:] = 0.5 * (P + P.T)
+
+
+@numba.njit(cache=True)
+def _update_kernel(x, P, z, R, scale, y, S, SI, K):
+    """Measurement update with z = [p, q]; returns the NIS yᵀ S⁻¹ y.
+
+    H selects δp and δφ (paper measurement model), so S and K are read off P directly.
+    """
+    y[0:3] = z[0:3] - x[0:3]
+    q_hat = x[6:10]
+    conj = np.array([q_hat[0], -q_hat[1], -q_hat[2], -q_hat[3]])
+    y[3:6] = log_kernel(multiply_kernel(conj, z[3:7]))
+    idx = np.array([0, 1, 2, 6, 7, 8])
+    n = P.shape[0]
+    PHT = np.empty((n, 6))
+    for j in range(6):
+        PHT[:, j] = P[:, idx[j]]
+    for i in range(6):
+        for j in range(6):
+            S[i, j] = PHT[idx[i], j] + R[i, j]
+    SI[:] = np.linalg.inv(S)
+    K[:] = PHT @ SI
+    dx = K @ y
+    # Multiplicative attitude correction and additive everything else.
+    x[0:6] += dx[0:6]
+    q = multiply_kernel(q_hat, exp_kernel(dx[6:9]))
+    x[6:10] = q / np.sqrt(np.sum(q * q))
+    x[10:13] += dx[9:12]
+    x[13:19] += scale * dx[12:18]
+    # Joseph form: (I - KH) P (I - KH)ᵀ + K R Kᵀ.
+    IKH = np.eye(n)
+    for j in range(6):
+        IKH[:, idx[j]] -= K[:, j]
+    P[:] = IKH @ P @ IKH.T + K @ R @ K.T
+    # Error-state reset: the new attitude error is measured from the corrected nominal.
+    Gam = np.eye(n)
+    d = dx[6:9]
+    Gam[6, 7], Gam[6, 8] = 0.5 * d[2], -0.5 * d[1]
+    Gam[7, 6], Gam[7, 8] = -0.5 * d[2], 0.5 * d[0]
+    Gam[8, 6], Gam[8, 7] = 0.5 * d[1], -0.5 * d[0]
+    P[:] = Gam @ P @ Gam.T
+    P[:] = 0.5 * (P + P.T)
+    return y @ SI @ y
+
+
+@numba.njit(cache=True)
+def _filter_kernel(t, z, n, x, P, mass, r, eps, scale, Qc, R,
+                   out_x, out_sigma, out_innov, out_nis):
+    """Filter samples 1..N-1 (sample 0 initialised x, P); histories into the out arrays.
+
+    Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k).
+    """
+    log_likelihood = 0.0
+    A = np.empty((ERROR_DIM, ERROR_DIM))
+    G = np.empty((ERROR_DIM, 6))
+    F = np.empty((ERROR_DIM, ERROR_DIM))
+    Q = np.empty((ERROR_DIM, ERROR_DIM))
+    y = np.empty(6)
+    S = np.empty((6, 6))
+    SI = np.empty((6, 6))
+    K = np.empty((ERROR_DIM, 6))
+    out_x[0] = x
+    for j in range(6):
+        out_sigma[0, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
+    out_innov[0] = 0.0
+    out_nis[0] = np.nan
+    for k in range(1, t.shape[0]):
+        _predict_kernel(x, P, n[k - 1], n[k], t[k] - t[k - 1], mass, r, eps, scale, Qc,
+                        A, G, F, Q)
+        out_nis[k] = _update_kernel(x, P, z[k], R, scale, y, S, SI, K)
+        log_det = 2.0 * np.sum(np.log(np.diag(np.linalg.cholesky(S))))
+        log_likelihood -= 0.5 * (out_nis[k] + log_det + 6.0 * np.log(2.0 * np.pi))
+        out_innov[k] = y
+        out_x[k] = x
+        for j in range(6):
+            out_sigma[k, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
+    return log_likelihood
+
+
+class ParameterEKF(ExtendedKalmanFilter):
+    """EKF over the state [p, v_B, q, ω] augmented with θ, driven by logged rotor speeds.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        Mass, rotor geometry and process-noise densities (``[noise]``).
+    prior : ParameterEstimate
+        Prior θ (SI) and its covariance; its values also set the θ error units.
+    measurement_sigma : tuple of 2 float
+        Position σ (m) and attitude σ (rad) of the pose measurements.
+    """
+
+    def __init__(
+        self, config: VehicleConfig, prior: ParameterEstimate,
+        measurement_sigma: tuple[float, float],
+    ) -> None:
+        super().__init__(dim_x=ERROR_DIM, dim_z=MEAS_DIM)
+        scale = np.abs(prior.value)
+        self.model = ErrorStateModel.for_vehicle(config, np.where(scale > 0.0, scale, 1.0))
+        self.prior = prior
+        self._kernel_args = self.model.kernel_args()
+        self._Qc = self.model.process_noise_density()
+        sp, sa = measurement_sigma
+        self.R = np.diag([sp**2] * 3 + [sa**2] * 3)
+        self.x = np.concatenate([np.zeros(STATE_DIM), prior.value])
+        self.x[6] = 1.0
+        s = self.model.theta_scale
+        self.P = np.zeros((ERROR_DIM, ERROR_DIM))
+        self.P[12:, 12:] = prior.covariance / np.outer(s, s)
+        self.K = np.zeros((ERROR_DIM, MEAS_DIM))
+        self.y = np.zeros(MEAS_DIM)
+        self._G = np.zeros((ERROR_DIM, 6))
+        self._A = np.zeros((ERROR_DIM, ERROR_DIM))
+
+    # -- filterpy API -----------------------------------------------------------------
+
+    def initialize(
+        self, position: np.ndarray, quaternion: np.ndarray, velocity_body: np.ndarray,
+        body_rates: np.ndarray, state_sigma: tuple[float, float, float, float],
+    ) -> None:
+        """Set the model state and its σ (position m, velocity m/s, attitude rad, rate rad/s)."""
+        self.x[0:3] = position
+        self.x[3:6] = velocity_body
+        self.x[6:10] = quaternion / np.linalg.norm(quaternion)
+        self.x[10:13] = body_rates
+        for i, sigma in enumerate(state_sigma):
+            self.P[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.eye(3) * sigma**2
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+
+    def predict(self, u: np.ndarray, dt: float, u_next: np.ndarray | None = None) -> None:
+        """Propagate over ``dt`` s with rotor speeds ``u`` (k,) (linear to ``u_next``)."""
+        u = np.ascontiguousarray(u, dtype=float)
+        u1 = u if u_next is None else np.ascontiguousarray(u_next, dtype=float)
+        mass, r, eps, scale = self._kernel_args
+        _predict_kernel(self.x, self.P, u, u1, float(dt), mass, r, eps, scale, self._Qc,
+                        self._A, self._G, self.F, self.Q)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    def update(self, z: np.ndarray, R: np.ndarray | None = None) -> None:  # type: ignore[override]
+        """Correct with a pose z = [x, y, z, qw, qx, qy, qz] (m, unit quaternion)."""
+        R = self.R if R is None else np.asarray(R, dtype=float)
+        self.S = np.empty((MEAS_DIM, MEAS_DIM))
+        self.SI = np.empty((MEAS_DIM, MEAS_DIM))
+        _update_kernel(self.x, self.P, np.ascontiguousarray(z, dtype=float), R,
+                       self._kernel_args[3], self.y, self.S, self.SI, self.K)
+        self.z = np.asarray(z, dtype=float).copy()
+        self._log_likelihood = None
+        self._likelihood = None
+        self._mahalanobis = None
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+
+    # -- results ----------------------------------------------------------------------
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Current θ estimate, SI, shape (6,)."""
+        return self.x[STATE_DIM:].copy()
+
+    @property
+    def theta_covariance(self) -> np.ndarray:
+        """Current θ covariance, SI, shape (6, 6)."""
+        return self.model.parameter_covariance_si(self.P)
+
+    def run(self, flight: FlightData, state_sigma: tuple[float, float, float, float]) -> FilterRun:
+        """Filter a whole flight: initialise from its first samples, then predict/update.
+
+        The initial velocity and body rates come from finite differences of the first two
+        poses; ``state_sigma`` gives their initial σ (position, velocity, attitude, rate).
+        """
+        t = np.ascontiguousarray(flight.t, dtype=float)
+        dt0 = t[1] - t[0]
+        q0, q1 = flight.quaternion[0], flight.quaternion[1]
+        rates = quat_log(quat_multiply(q0 * [1, -1, -1, -1], q1)) / dt0
+        v_world = (flight.position[1] - flight.position[0]) / dt0
+        v_body = quat_to_matrix(q0).T @ v_world
+        self.initialize(flight.position[0], q0, v_body, rates, state_sigma)
+        z = np.ascontiguousarray(np.hstack([flight.position, flight.quaternion]))
+        n = np.ascontiguousarray(flight.rotor_speeds, dtype=float)
+        N = t.size
+        out_x = np.empty((N, FILTER_DIM))
+        out_sigma = np.empty((N, 6))
+        out_innov = np.empty((N, MEAS_DIM))
+        out_nis = np.empty(N)
+        mass, r, eps, scale = self._kernel_args
+        log_likelihood = _filter_kernel(t, z, n, self.x, self.P, mass, r, eps, scale, self._Qc,
+                                        self.R, out_x, out_sigma, out_innov, out_nis)
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        history = EstimationHistory(
+            t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],
+            quaternion=out_x[:, 6:10], innovation=out_innov, nis=out_nis,
+        )
+        return FilterRun(history, out_x[:, :STATE_DIM],
+                         ParameterEstimate(self.theta, self.theta_covariance), log_likelihood)

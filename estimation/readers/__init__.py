@@ -1,0 +1,90 @@
+"""Flight-log readers: `load_flight` turns any supported log into a checked `FlightData`.
+
+Formats, by file extension: ``.csv`` (mavsysid's pose log), ``.tlog`` (MAVLink telemetry),
+``.ulg`` (PX4 ULog), ``.bin`` (ArduPilot DataFlash). One module per format returns the
+pose and rotor speeds it found (`estimation.readers.streams.LogStreams`, already in
+ENU/FLU and rad/s); `merge` optionally replaces the pose by an external motion-capture
+file; `streams.to_flight_data` resamples the rotor speeds to the pose times and
+`checks.validate_flight` checks the result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from estimation.flight_data import FlightData
+from estimation.readers.dataflash import read_dataflash
+from estimation.readers.merge import merge_pose
+from estimation.readers.pose_csv import read_pose_csv
+from estimation.readers.streams import LogStreams, to_flight_data
+from estimation.readers.tlog import read_tlog
+from estimation.readers.ulog import read_ulog
+from vehicle.config import VehicleConfig
+from vehicle.errors import InputError
+
+__all__ = ["READERS", "load_flight"]
+
+#: The reader of each supported file extension (lower case).
+READERS: dict[str, Callable[[Path, VehicleConfig], LogStreams]] = {
+    ".csv": read_pose_csv,
+    ".tlog": read_tlog,
+    ".ulg": read_ulog,
+    ".bin": read_dataflash,
+}
+
+
+def _existing_file(path: str | Path, what: str) -> Path:
+    """`path` as a Path if it is a readable regular file, else a one-line `InputError`."""
+    path = Path(path)
+    if not path.is_file():
+        found = "a directory" if path.is_dir() else "no such file"
+        raise InputError(f"{path}: {what}: expected a file, found {found}")
+    return path
+
+
+def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | None = None,
+                time_offset: float | None = None) -> FlightData:
+    """Read a flight log as pose and rotor speeds in mavsysid's conventions.
+
+    Parameters
+    ----------
+    path : str or Path
+        The flight log: ``.csv``, ``.tlog``, ``.ulg`` or ``.bin`` (case-insensitive).
+    vehicle : VehicleConfig
+        The vehicle that flew: rotor count, nominal c_T and mass for the checks, and the
+        ``[motor]`` curve for logs with motor outputs but no rotor speeds.
+    pose : str or Path, optional
+        A motion-capture pose CSV (``t, x, y, z, qw, qx, qy, qz``, world ENU) to use
+        instead of the log's own pose; the log then supplies the rotor speeds and clock.
+    time_offset : float, optional
+        s, with t_log = t_pose + time_offset; found by cross-correlation if omitted.
+        Only meaningful with `pose`.
+
+    Returns
+    -------
+    FlightData
+        Times on the log's clock (the autopilot's, s since boot, for autopilot logs),
+        position in m (world ENU), unit quaternions [w, x, y, z] (body FLU → world ENU),
+        rotor speeds in rad/s resampled to the pose times, and warnings of repairs.
+
+    Raises
+    ------
+    InputError
+        An unsupported extension or a missing file.
+    LogFormatError
+        A log that cannot be read or fails a check (`estimation.readers.checks`); the
+        message is one line naming the file.
+    """
+    path = _existing_file(path, "flight log")
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        known = ", ".join(READERS)
+        raise InputError(f"{path}: unsupported flight log type {path.suffix or '(none)'!r}; "
+                         f"expected one of {known}")
+    if pose is None and time_offset is not None:
+        raise InputError(f"{path}: a time offset applies only with a motion-capture pose file")
+    streams = reader(path, vehicle)
+    if pose is not None:
+        streams = merge_pose(streams, _existing_file(pose, "motion-capture pose"), time_offset)
+    return to_flight_data(streams, vehicle)

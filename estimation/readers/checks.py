@@ -1,0 +1,232 @@
+"""Checks applied to every flight before a reader returns it.
+
+Problems the estimator cannot work around are errors (`LogFormatError`, one line naming
+the file, exit code 2): a rotor count other than the vehicle config's, rotor speeds in
+the wrong unit (rpm, rev/s, normalised outputs), less than `MIN_DURATION` of data, a gap
+longer than `MAX_GAP`, attitudes far from unit quaternions. Problems that can be repaired
+are repaired and reported with counts as warnings: rows with NaN dropped, out-of-order
+timestamps sorted, duplicate timestamps dropped, short gaps, slightly non-unit
+quaternions normalised.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from estimation.flight_data import FlightData
+from vehicle.config import VehicleConfig
+from vehicle.constants import GRAVITY
+from vehicle.errors import LogFormatError
+
+__all__ = [
+    "HOVER_FACTOR",
+    "MAX_GAP",
+    "MIN_DURATION",
+    "QUATERNION_ERROR",
+    "QUATERNION_WARNING",
+    "check_sampling",
+    "normalise_quaternions",
+    "repair_samples",
+    "validate_flight",
+]
+
+#: Longest gap between samples the estimator may bridge, s.
+MAX_GAP = 0.2
+#: Shortest flight worth estimating from, s.
+MIN_DURATION = 2.0
+#: Hover thrust Σ c_T n² off from m g by more than this factor means a unit error.
+HOVER_FACTOR = 5.0
+#: Quaternion norms off by more than this are reported when normalised.
+QUATERNION_WARNING = 1e-3
+#: Quaternion norms off by more than this are not attitudes: a wrong column or unit.
+QUATERNION_ERROR = 0.1
+
+# Hover ratio Σ c_T n² / (m g) that rotor speeds in rpm or rev/s instead of rad/s give.
+_RPM_RATIO = (60.0 / (2.0 * np.pi)) ** 2
+_REV_RATIO = (1.0 / (2.0 * np.pi)) ** 2
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+def repair_samples(t: np.ndarray, values: np.ndarray, source: str,
+                   what: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Drop non-finite rows, sort by time and drop duplicate timestamps.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s.
+    values : ndarray, shape (N, m)
+        The samples.
+    source : str
+        The file, for messages.
+    what : str
+        What the samples are ("pose", "ESC rpm", …), for messages.
+
+    Returns
+    -------
+    t : ndarray, shape (M,)
+        Strictly increasing.
+    values : ndarray, shape (M, m)
+    warnings : list of str
+        One line per repair, with counts.
+    """
+    t = np.asarray(t, dtype=float)
+    values = np.asarray(values, dtype=float).reshape(t.shape[0], -1)
+    notes: list[str] = []
+    finite = np.isfinite(t) & np.isfinite(values).all(axis=1)
+    if not finite.all():
+        bad = int((~finite).sum())
+        notes.append(f"{source}: dropped {_plural(bad, 'row')} of {what} samples with NaN "
+                     f"or infinite values (of {t.shape[0]})")
+        t, values = t[finite], values[finite]
+    backwards = int((np.diff(t) < 0.0).sum())
+    if backwards:
+        # Stable, so that of two samples with one timestamp the first logged is kept.
+        order = np.argsort(t, kind="stable")
+        t, values = t[order], values[order]
+        notes.append(f"{source}: {_plural(backwards, 'timestamp')} of {what} samples out of "
+                     "order; sorted by time")
+    repeat = np.concatenate([[False], np.diff(t) == 0.0])
+    if repeat.any():
+        notes.append(f"{source}: dropped {_plural(int(repeat.sum()), 'sample')} of {what} "
+                     "with a duplicate timestamp")
+        t, values = t[~repeat], values[~repeat]
+    return t, values, notes
+
+
+def normalise_quaternions(q: np.ndarray, t: np.ndarray, source: str,
+                          what: str) -> tuple[np.ndarray, list[str]]:
+    """Normalise attitude quaternions, shape (N, 4), reporting or rejecting bad norms.
+
+    Norm errors up to `QUATERNION_WARNING` are rounding and pass silently; up to
+    `QUATERNION_ERROR` they are normalised with a warning; beyond, `LogFormatError`.
+    """
+    norm = np.linalg.norm(q, axis=1)
+    off = np.abs(norm - 1.0)
+    wrong = off > QUATERNION_ERROR
+    if wrong.any():
+        i = int(np.argmax(wrong))
+        raise LogFormatError(
+            f"{source}: {_plural(int(wrong.sum()), 'attitude quaternion')} of {what} with "
+            f"norm far from 1 (first at t = {t[i]:.3f} s, norm {norm[i]:.4g}); the attitude "
+            "columns hold something else than a unit quaternion [w, x, y, z]")
+    notes = []
+    fixed = int((off > QUATERNION_WARNING).sum())
+    if fixed:
+        notes.append(f"{source}: normalised {_plural(fixed, 'attitude quaternion')} of {what} "
+                     f"with norm off by more than {QUATERNION_WARNING:g} (largest "
+                     f"{off.max():.3g})")
+    return q / norm[:, None], notes
+
+
+def check_sampling(t: np.ndarray, source: str, what: str) -> list[str]:
+    """Check gaps in strictly increasing sample times, shape (N ≥ 2,), s.
+
+    Returns warnings for gaps between 2 sample periods (the median step) and `MAX_GAP`;
+    raises `LogFormatError` naming the time of a longer gap, or for sampling slower than
+    1 / `MAX_GAP`.
+    """
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    if period > MAX_GAP:
+        raise LogFormatError(f"{source}: {what} sampled every {period:.3g} s; the estimator "
+                             f"needs samples at least every {MAX_GAP:g} s")
+    if (dt > MAX_GAP).any():
+        i = int(np.argmax(dt > MAX_GAP))
+        raise LogFormatError(
+            f"{source}: gap of {dt[i]:.3g} s in the {what} samples after t = {t[i]:.3f} s "
+            f"(at most {MAX_GAP:g} s can be bridged); use a log without dropouts")
+    long = dt > 2.0 * period
+    if not long.any():
+        return []
+    i = int(np.argmax(np.where(long, dt, 0.0)))
+    return [f"{source}: {_plural(int(long.sum()), 'gap')} in the {what} samples longer than "
+            f"2 sample periods ({2.0 * period:.3g} s), longest {dt[i]:.3g} s after "
+            f"t = {t[i]:.3f} s"]
+
+
+def _check_rotor_count(data: FlightData, vehicle: VehicleConfig) -> None:
+    if data.rotor_count != vehicle.rotor_count:
+        raise LogFormatError(
+            f"{data.source}: the log has rotor speeds of {data.rotor_count} rotors, the "
+            f"vehicle config {vehicle.source or vehicle.name} has {vehicle.rotor_count} "
+            "rotors; use the config of the vehicle that flew")
+
+
+def _check_hover(data: FlightData, vehicle: VehicleConfig) -> None:
+    """Compare the median Σ c_T n² with m g to catch rotor speeds in the wrong unit."""
+    n = data.rotor_speeds
+    spinning = (n > 0.0).any(axis=1)
+    if not spinning.any():
+        raise LogFormatError(f"{data.source}: the rotor speeds are zero throughout; the "
+                             "rotors never spun in this log")
+    # Samples with the rotors stopped (on the ground, disarmed) say nothing about units.
+    thrust = vehicle.parameters.c_T * np.sum(n[spinning] ** 2, axis=1)
+    ratio = float(np.median(thrust)) / (vehicle.mass * GRAVITY)
+    if 1.0 / HOVER_FACTOR <= ratio <= HOVER_FACTOR:
+        return
+    found = (f"the median thrust Σ c_T n² is {ratio:.3g} × m g (nominal c_T and mass of "
+             f"{vehicle.source or vehicle.name})")
+    top = float(np.max(np.abs(n)))
+    if top <= 1.0:
+        unit = (f"rotor speeds are at most {top:.3g}: they look like normalised motor outputs "
+                "(0..1), not rad/s; log actual rotor speeds or convert the outputs with the "
+                "motor curve")
+    elif _RPM_RATIO / 3.0 <= ratio <= _RPM_RATIO * 3.0:
+        unit = (f"{found}, close to (60/2π)² = {_RPM_RATIO:.3g}: the rotor speeds look like "
+                "rpm; divide them by 60/2π = 9.549 to get rad/s")
+    elif _REV_RATIO / 3.0 <= ratio <= _REV_RATIO * 3.0:
+        unit = (f"{found}, close to (1/2π)² = {_REV_RATIO:.3g}: the rotor speeds look like "
+                "rev/s; multiply them by 2π to get rad/s")
+    else:
+        unit = (f"{found}, not within a factor {HOVER_FACTOR:g} of 1: check that the rotor "
+                "speeds are in rad/s and that c_T and the mass in the vehicle config are right")
+    raise LogFormatError(f"{data.source}: {unit}")
+
+
+def validate_flight(data: FlightData, vehicle: VehicleConfig) -> FlightData:
+    """Apply every check of this module to a flight.
+
+    Parameters
+    ----------
+    data : FlightData
+        A flight as a reader assembled it (times need not be sorted yet).
+    vehicle : VehicleConfig
+        The vehicle that flew: rotor count, nominal c_T and mass.
+
+    Returns
+    -------
+    FlightData
+        Repaired (see `repair_samples`, `normalise_quaternions`), with the warnings of
+        the repairs and of short gaps appended to ``data.warnings``.
+
+    Raises
+    ------
+    LogFormatError
+        One line naming ``data.source`` and the problem.
+    """
+    source = data.source
+    _check_rotor_count(data, vehicle)
+    k = data.rotor_count
+    stacked = np.column_stack([data.position, data.quaternion, data.rotor_speeds])
+    t, stacked, notes = repair_samples(data.t, stacked, source, "pose and rotor speed")
+    if t.shape[0] < 2:
+        raise LogFormatError(f"{source}: {_plural(t.shape[0], 'usable sample')}; need at least "
+                             f"{MIN_DURATION:g} s of pose and rotor speeds")
+    q, more = normalise_quaternions(stacked[:, 3:7], t, source, "pose")
+    notes += more
+    duration = float(t[-1] - t[0])
+    if duration < MIN_DURATION:
+        raise LogFormatError(f"{source}: only {duration:.3g} s of pose and rotor speeds (t = "
+                             f"{t[0]:.3f} to {t[-1]:.3f} s); need at least {MIN_DURATION:g} s")
+    notes += check_sampling(t, source, "pose")
+    repaired = dataclasses.replace(data, t=t, position=stacked[:, :3], quaternion=q,
+                                   rotor_speeds=stacked[:, 7:7 + k],
+                                   warnings=(*data.warnings, *notes))
+    _check_hover(repaired, vehicle)
+    return repaired

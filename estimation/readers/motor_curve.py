@@ -1,0 +1,78 @@
+"""The motor curve: rotor speed from a motor output, for logs without measured speeds.
+
+A log that has no ESC rpm still has what the autopilot sent to the motors: a PWM pulse
+width or a normalised output. With throttle u in [0, 1] and ArduPilot's MOT_THST_EXPO
+(PX4's THR_MDL_FAC has the same meaning) e, thrust ∝ (1 − e) u + e u², and thrust ∝ n², so
+
+    n = rotor_speed_max · sqrt((1 − e) u + e u²).
+
+This is a commanded speed through a nominal curve, not a measured one: the `[motor]`
+keys of the vehicle config (``pwm_min``, ``pwm_max``, ``thrust_expo``) set it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vehicle.config import VehicleConfig
+
+__all__ = ["describe_curve", "rotor_speed_from_pwm", "rotor_speed_from_throttle",
+           "throttle_from_pwm"]
+
+
+def throttle_from_pwm(pwm: np.ndarray, pwm_min: float, pwm_max: float) -> np.ndarray:
+    """Throttle u from a PWM pulse width.
+
+    Parameters
+    ----------
+    pwm : array_like, any shape
+        Motor output pulse width, µs. 0 (an output that is off) gives u = 0.
+    pwm_min, pwm_max : float
+        Pulse widths of zero and full throttle, µs, ``pwm_min < pwm_max``.
+
+    Returns
+    -------
+    ndarray, same shape
+        u in [0, 1] (values outside the PWM range are clipped).
+    """
+    u = (np.asarray(pwm, dtype=float) - pwm_min) / (pwm_max - pwm_min)
+    return np.clip(u, 0.0, 1.0)
+
+
+def rotor_speed_from_throttle(u: np.ndarray, rotor_speed_max: float,
+                              thrust_expo: float) -> np.ndarray:
+    """Rotor speed from throttle through the thrust curve.
+
+    Parameters
+    ----------
+    u : array_like, any shape
+        Throttle, clipped to [0, 1]. NaN stays NaN (PX4 marks unused motors so).
+    rotor_speed_max : float
+        Rotor speed at full throttle, rad/s.
+    thrust_expo : float
+        e in [0, 1]: thrust ∝ (1 − e) u + e u².
+
+    Returns
+    -------
+    ndarray, same shape
+        n = rotor_speed_max · sqrt((1 − e) u + e u²), rad/s.
+    """
+    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    return rotor_speed_max * np.sqrt((1.0 - thrust_expo) * u + thrust_expo * u * u)
+
+
+def rotor_speed_from_pwm(pwm: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
+    """Rotor speed, rad/s, from PWM, µs (any shape), with the vehicle's `[motor]` curve."""
+    motor = vehicle.motor
+    u = throttle_from_pwm(pwm, motor.pwm_min, motor.pwm_max)
+    return rotor_speed_from_throttle(u, vehicle.limits.rotor_speed_max, motor.thrust_expo)
+
+
+def describe_curve(vehicle: VehicleConfig, pwm: bool) -> str:
+    """The curve in words for a warning: its formula and the config values it used."""
+    motor, n_max = vehicle.motor, vehicle.limits.rotor_speed_max
+    if pwm:
+        return (f"n = {n_max:g} rad/s · sqrt((1 − e) u + e u²), e = [motor].thrust_expo = "
+                f"{motor.thrust_expo:g}, u = (PWM − {motor.pwm_min:g}) / "
+                f"({motor.pwm_max:g} − {motor.pwm_min:g}) µs")
+    return f"n = {n_max:g} rad/s · sqrt(u), u the relative thrust command (0..1)"

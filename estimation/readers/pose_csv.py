@@ -1,0 +1,110 @@
+"""Pose CSV files: mavsysid's own flight log ``pose.csv`` and external motion-capture poses.
+
+Both have the header of DESIGN.md's pose log (``t, x, y, z, qw, qx, qy, qz`` in world ENU,
+body FLU → world ENU). A flight's ``pose.csv`` also has the rotor speeds ``n1..nk`` and is
+read strictly by `vehicle.poselog.read_pose_log`; a simulated flight's ``meta.json`` next
+to it supplies the truth. An external pose file (``--pose``) needs no rotor columns.
+"""
+
+from __future__ import annotations
+
+import csv
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from estimation.readers.streams import LogStreams, Series
+from vehicle.config import VehicleConfig
+from vehicle.errors import LogFormatError
+from vehicle.flight_dir import read_meta
+from vehicle.poselog import POSE_COLUMNS, read_pose_log, read_text_file
+
+__all__ = ["read_external_pose", "read_pose_csv"]
+
+
+def read_pose_csv(path: Path, vehicle: VehicleConfig) -> LogStreams:
+    """Read a mavsysid pose log, with the truth of a simulated flight.
+
+    Parameters
+    ----------
+    path : Path
+        The ``pose.csv`` file; a ``meta.json`` beside it with ``"simulated": true``
+        supplies its ``"truth"`` block.
+    vehicle : VehicleConfig
+        The vehicle: the file must have its k rotor-speed columns.
+
+    Returns
+    -------
+    LogStreams
+        Motion-capture pose and rotor speeds on the same sample times.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        log = read_pose_log(path, vehicle.rotor_count)
+    notes = tuple(" ".join(str(w.message).split()) for w in caught)
+    truth = None
+    meta_path = path.parent / "meta.json"
+    if meta_path.is_file():
+        meta = read_meta(meta_path)
+        if meta.get("simulated") is True and isinstance(meta.get("truth"), dict):
+            truth = meta["truth"]
+    pose = Series(log.t, np.column_stack([log.position, log.quaternion]), "pose")
+    rotors = (Series(log.t, log.rotor_speeds, "rotor speed"),)
+    return LogStreams(source=str(path), pose=pose, pose_source="motion_capture",
+                      rotors=rotors, warnings=notes, truth=truth)
+
+
+def read_external_pose(path: Path) -> Series:
+    """Read the pose columns of a motion-capture CSV file (other columns are ignored).
+
+    Parameters
+    ----------
+    path : Path
+        CSV text with a header naming at least ``t, x, y, z, qw, qx, qy, qz``.
+
+    Returns
+    -------
+    Series
+        Times on the motion-capture clock, s, and the pose (m = 7), as in the file (rows
+        with NaN or out of order are left for `repair_samples` to report).
+
+    Raises
+    ------
+    LogFormatError
+        A missing column, a short row or a field that is not a number, with its line.
+    """
+    text = read_text_file(path, "utf-8-sig")
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise LogFormatError(f"{path}: no header row (expected {', '.join(POSE_COLUMNS)})")
+    names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    missing = [c for c in POSE_COLUMNS if c not in names]
+    if missing:
+        raise LogFormatError(f"{path}: missing pose column(s) {', '.join(missing)}")
+    index = [names.index(c) for c in POSE_COLUMNS]
+    rows = []
+    for number, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        fields = line.split(",")
+        if len(fields) != len(names):
+            raise LogFormatError(f"{path}: line {number} has {len(fields)} fields, the header "
+                                 f"has {len(names)}")
+        try:
+            rows.append([float(fields[j]) for j in index])
+        except ValueError:
+            bad = next(fields[j].strip() for j in index if not _is_float(fields[j]))
+            raise LogFormatError(f"{path}: line {number}: {bad[:24]!r} is not a number") from None
+    if not rows:
+        raise LogFormatError(f"{path}: no samples, only a header row")
+    data = np.array(rows, dtype=float)
+    return Series(data[:, 0], data[:, 1:], f"pose of {path.name}")
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

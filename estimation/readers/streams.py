@@ -1,0 +1,187 @@
+"""What a format reader extracts from a log, and its assembly into a `FlightData`.
+
+Each reader returns `LogStreams`: the pose samples (already in ENU/FLU) and one or more
+rotor-speed series (already in rad/s), each on its own clock samples. `to_flight_data`
+resamples the rotor speeds to the pose times (linear interpolation; pose samples outside
+the rotor-speed time span are dropped) and runs the checks of `estimation.readers.checks`.
+Keeping the streams apart until then lets `--pose` swap in a motion-capture pose first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from estimation.flight_data import FlightData
+from estimation.readers.checks import (
+    check_sampling,
+    normalise_quaternions,
+    repair_samples,
+    validate_flight,
+)
+from estimation.readers.frames import (
+    interpolate_quaternions,
+    ned_to_enu,
+    quaternion_ned_frd_to_enu_flu,
+)
+from vehicle.config import VehicleConfig
+from vehicle.errors import LogFormatError
+
+__all__ = ["LogStreams", "PoseSource", "Series", "combine_pose", "to_flight_data"]
+
+#: Where a pose came from (see `estimation.flight_data.POSE_SOURCES`).
+PoseSource = Literal["motion_capture", "autopilot"]
+
+
+@dataclass(frozen=True)
+class Series:
+    """Timed samples of one signal.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s, on the flight's clock (need not be sorted or clean yet).
+    values : ndarray, shape (N, m)
+        The samples. A pose has m = 7: x, y, z (m, world ENU), qw, qx, qy, qz (body FLU →
+        world ENU); rotor speeds have one column per rotor, rad/s.
+    label : str
+        What the samples are, for messages ("ESC_TELEMETRY_1_TO_4 rpm", …).
+    """
+
+    t: np.ndarray
+    values: np.ndarray
+    label: str
+
+
+@dataclass(frozen=True)
+class LogStreams:
+    """The pose and rotor speeds found in one log.
+
+    Attributes
+    ----------
+    source : str
+        The file (with ``+ pose FILE`` once merged).
+    pose : Series or None
+        The pose (m = 7), or None if the log has none.
+    pose_source : {"motion_capture", "autopilot"}
+        Origin of the pose.
+    rotors : tuple of Series
+        Rotor speeds, rad/s; their columns, concatenated in order, are rotors 1..k.
+    warnings : tuple of str
+        Notes from reading, one line each.
+    truth : dict or None
+        The truth block of a simulated flight.
+    pose_hint : str
+        What pose messages the reader looked for, for the error when there is none.
+    """
+
+    source: str
+    pose: Series | None
+    pose_source: PoseSource
+    rotors: tuple[Series, ...]
+    warnings: tuple[str, ...] = ()
+    truth: dict | None = None
+    pose_hint: str = ""
+
+
+def combine_pose(source: str, position: Series, attitude: Series,
+                 ned: bool = True) -> tuple[Series, list[str]]:
+    """One pose series from separately timed position and attitude samples.
+
+    Parameters
+    ----------
+    source : str
+        The file, for messages.
+    position : Series
+        Positions (m = 3), m, world NED if `ned` else ENU.
+    attitude : Series
+        Quaternions ``[w, x, y, z]`` (m = 4), body FRD → world NED if `ned` else FLU → ENU.
+    ned : bool
+        Whether the inputs are in NED/FRD.
+
+    Returns
+    -------
+    pose : Series
+        At the position times inside the attitude time span, with the attitude
+        interpolated (slerp) to them; in ENU/FLU.
+    warnings : list of str
+        From cleaning both inputs (see `repair_samples`).
+    """
+    tp, p, notes = repair_samples(position.t, position.values, source, position.label)
+    ta, q, more = repair_samples(attitude.t, attitude.values, source, attitude.label)
+    notes += more
+    if tp.shape[0] < 2 or ta.shape[0] < 2:
+        thin = position if tp.shape[0] < 2 else attitude
+        raise LogFormatError(f"{source}: fewer than 2 usable {thin.label} samples")
+    q, more = normalise_quaternions(q, ta, source, attitude.label)
+    notes += more
+    inside = (tp >= ta[0]) & (tp <= ta[-1])
+    if not inside.any():
+        raise LogFormatError(f"{source}: {position.label} and {attitude.label} samples do not "
+                             "overlap in time")
+    tp, p = tp[inside], p[inside]
+    q = interpolate_quaternions(ta, q, tp)
+    if ned:
+        p, q = ned_to_enu(p), quaternion_ned_frd_to_enu_flu(q)
+    label = f"{position.label} + {attitude.label}"
+    return Series(tp, np.column_stack([p, q]), label), notes
+
+
+def to_flight_data(streams: LogStreams, vehicle: VehicleConfig) -> FlightData:
+    """Resample the rotor speeds to the pose times and check the result.
+
+    Parameters
+    ----------
+    streams : LogStreams
+        What a reader (and possibly `merge_pose`) found.
+    vehicle : VehicleConfig
+        The vehicle that flew.
+
+    Returns
+    -------
+    FlightData
+        Pose samples inside the time span covered by every rotor-speed series, with the
+        rotor speeds linearly interpolated to them; checked by `validate_flight`.
+
+    Raises
+    ------
+    LogFormatError
+        No pose, too few rotor-speed samples, no overlap, or any failed check.
+    """
+    source = streams.source
+    if streams.pose is None:
+        hint = f" ({streams.pose_hint})" if streams.pose_hint else ""
+        raise LogFormatError(f"{source}: no pose in the log{hint}; give a motion-capture pose "
+                             "file to merge")
+    if not streams.rotors:
+        raise LogFormatError(f"{source}: no rotor speeds or motor outputs in {source}")
+    pose = streams.pose
+    t, values, notes = repair_samples(pose.t, pose.values, source, pose.label)
+    q, more = normalise_quaternions(values[:, 3:7], t, source, pose.label)
+    values = np.column_stack([values[:, :3], q])
+    notes = [*streams.warnings, *notes, *more]
+    columns: list[tuple[np.ndarray, np.ndarray]] = []
+    lo, hi = -np.inf, np.inf
+    for series in streams.rotors:
+        ts, vs, more = repair_samples(series.t, series.values, source, series.label)
+        notes += more
+        if ts.shape[0] < 2:
+            raise LogFormatError(f"{source}: fewer than 2 usable {series.label} samples")
+        notes += check_sampling(ts, source, series.label)
+        lo, hi = max(lo, ts[0]), min(hi, ts[-1])
+        columns.append((ts, vs))
+    keep = (t >= lo) & (t <= hi)
+    if not keep.any():
+        span = f"t = {t[0]:.3f} to {t[-1]:.3f} s" if t.shape[0] else "no samples"
+        raise LogFormatError(f"{source}: the pose ({span}) and the rotor speeds (t = {lo:.3f} "
+                             f"to {hi:.3f} s) do not overlap in time")
+    t, values = t[keep], values[keep]
+    speeds = np.column_stack([np.interp(t, ts, vs[:, j])
+                              for ts, vs in columns for j in range(vs.shape[1])])
+    data = FlightData(t=t, position=values[:, :3], quaternion=values[:, 3:7],
+                      rotor_speeds=speeds, source=source,
+                      pose_source=streams.pose_source,
+                      truth=streams.truth, warnings=tuple(notes))
+    return validate_flight(data, vehicle)

@@ -1,0 +1,331 @@
+"""What `estimate` tells the user: a table on stdout, ``estimate.json`` and a new config.
+
+The JSON follows DESIGN.md's user-facing contract (``{"parameters": {"c_T": {"value",
+"sigma", ...}, ...}, ...}``); everything in it is SI, and quantities that do not exist
+(a parameter that never converged, no refinement) are ``null``, never NaN.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimation.results import EstimationResult, ParameterEstimate
+from vehicle.config import PARAMETER_NAMES, VehicleConfig
+
+__all__ = [
+    "CONVERGENCE_TOLERANCE",
+    "convergence_time",
+    "format_table",
+    "result_to_json",
+    "software_version",
+    "updated_vehicle",
+    "write_estimate_json",
+]
+
+#: Relative band that counts as converged (the paper's "within 5 %").
+CONVERGENCE_TOLERANCE = 0.05
+
+_UNITS: dict[str, str] = {
+    "c_T": "N/(rad/s)²",
+    "c_D": "s/m",
+    "c_M": "N·m/(rad/s)²",
+    "j_x": "kg·m²",
+    "j_y": "kg·m²",
+    "j_z": "kg·m²",
+}
+
+_POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
+
+
+def convergence_time(
+    t: np.ndarray,
+    theta: np.ndarray,
+    reference: np.ndarray,
+    tolerance: float = CONVERGENCE_TOLERANCE,
+) -> np.ndarray:
+    """When each parameter's estimate settles within a relative band around a reference.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s, increasing.
+    theta : ndarray, shape (N, P)
+        Estimates over time (P = 6 for θ), SI.
+    reference : ndarray, shape (P,)
+        Values to converge to (the truth, or the final estimate), SI.
+    tolerance : float, optional
+        Half-width of the band relative to ``|reference|`` (0.05 = 5 %).
+
+    Returns
+    -------
+    ndarray, shape (P,)
+        Per parameter, the first t_i such that ``|theta[k, j] - reference[j]| <=
+        tolerance * |reference[j]|`` for every k ≥ i, s; NaN when the last sample is
+        outside the band (or there are no samples). A NaN estimate counts as outside.
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    theta = np.asarray(theta, dtype=float)
+    reference = np.asarray(reference, dtype=float).reshape(-1)
+    if theta.ndim != 2 or theta.shape != (t.size, reference.size):
+        raise ValueError(
+            f"convergence_time: theta of shape ({t.size}, {reference.size}) to match t "
+            f"and reference, got {theta.shape}"
+        )
+    out = np.full(reference.size, np.nan)
+    if t.size == 0:
+        return out
+    inside = np.abs(theta - reference) <= tolerance * np.abs(reference)
+    # A reversed running AND marks the samples from which the estimate never leaves again.
+    stays = np.logical_and.accumulate(inside[::-1], axis=0)[::-1]
+    settled = stays[-1]
+    out[settled] = t[np.argmax(stays[:, settled], axis=0)]
+    return out
+
+
+def software_version() -> str:
+    """The installed mavsysid version, ``"0+unknown"`` when run from an uninstalled tree."""
+    try:
+        return importlib.metadata.version("mavsysid")
+    except importlib.metadata.PackageNotFoundError:
+        return "0+unknown"
+
+
+# --- the table on stdout ---------------------------------------------------------------
+
+
+def _fmt(value: float, spec: str, missing: str = "n/a") -> str:
+    """`value` formatted with `spec`, or `missing` when it is NaN or infinite."""
+    return format(value, spec) if math.isfinite(value) else missing
+
+
+def _relative(difference: float, reference: float) -> float:
+    """difference / |reference|, NaN when the reference is 0 (a simulated c_D = 0, say)."""
+    return difference / abs(reference) if reference != 0.0 else math.nan
+
+
+def _percent(fraction: float) -> str:
+    """A relative quantity as a percentage with two decimals, "<0.01" below that."""
+    percent = 100.0 * fraction
+    # Two decimals read well in a column; tiny values must not print as a bare 0.00.
+    return "<0.01" if 0.0 <= percent < 0.005 else _fmt(percent, ".2f")
+
+
+def _rows(header: list[str], rows: list[list[str]], left: int = 1) -> list[str]:
+    """Fixed-width lines: the first `left` columns left-aligned, the rest right-aligned."""
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+
+    def line(cells: list[str]) -> str:
+        parts = [c.ljust(w) if i < left else c.rjust(w)
+                 for i, (c, w) in enumerate(zip(cells, widths, strict=True))]
+        return "  ".join(parts).rstrip()
+
+    return [line(header), *(line(r) for r in rows)]
+
+
+def _header(result: EstimationResult, config: VehicleConfig, log_name: str) -> list[str]:
+    """Where the numbers come from: log, vehicle, pose source and assumed noise."""
+    position_sigma, attitude_sigma = result.measurement_sigma
+    source = _POSE_SOURCE_LABELS.get(result.pose_source, result.pose_source)
+    lines = [
+        f"Parameter estimate from {log_name}",
+        f"  vehicle      {config.name} (mass {config.mass:.4g} kg, {config.rotor_count} rotors)",
+        f"  pose source  {source}; measurement σ assumed {position_sigma * 1e3:.2f} mm, "
+        f"{math.degrees(attitude_sigma):.3f}°",
+    ]
+    if result.pose_source == "autopilot":
+        lines += [
+            "               The pose comes from the autopilot's own estimator (filtered and",
+            "               lagged), so a larger measurement noise was assumed and the",
+            "               results are less certain than with motion capture.",
+        ]
+    return lines
+
+
+def _main_block(result: EstimationResult) -> list[str]:
+    """One row per parameter: prior, final estimate, σ, convergence (and truth)."""
+    final = result.final
+    truth = result.true_theta
+    header = ["parameter", "unit", "prior", "estimate", "σ", "σ/|θ| %", "converged s"]
+    if truth is not None:
+        header += ["true", "error %"]
+    rows = []
+    for j, name in enumerate(PARAMETER_NAMES):
+        value = float(final.value[j])
+        row = [
+            name,
+            _UNITS[name],
+            _fmt(float(result.prior.value[j]), ".3e"),
+            _fmt(value, ".3e"),
+            _fmt(float(final.sigma[j]), ".2e"),
+            _percent(_relative(float(final.sigma[j]), value)),
+            _fmt(float(result.convergence_time[j]), ".2f", missing="—"),
+        ]
+        if truth is not None:
+            true_value = float(truth[j])
+            row += [_fmt(true_value, ".3e"),
+                    _fmt(100.0 * _relative(value - true_value, true_value), "+.2f")]
+        rows.append(row)
+    which = "batch refinement" if result.refined is not None else "filter"
+    target = "the truth" if truth is not None else "its own final value"
+    return [
+        *_rows(header, rows, left=2),
+        f"estimate: {which}; σ: its standard deviation; converged: first time after which",
+        f"the filter estimate stays within {100 * CONVERGENCE_TOLERANCE:g} % of {target} "
+        "(— never).",
+    ]
+
+
+def _refined_block(filtered: ParameterEstimate, refined: ParameterEstimate) -> list[str]:
+    """Filter and refined estimates side by side, value and σ."""
+    header = ["parameter", "filter", "σ", "refined", "σ"]
+    rows = [[name, _fmt(float(filtered.value[j]), ".3e"), _fmt(float(filtered.sigma[j]), ".2e"),
+             _fmt(float(refined.value[j]), ".3e"), _fmt(float(refined.sigma[j]), ".2e")]
+            for j, name in enumerate(PARAMETER_NAMES)]
+    return ["Filter vs batch refinement", *_rows(header, rows)]
+
+
+def format_table(result: EstimationResult, config: VehicleConfig, log_name: str) -> str:
+    """The human-readable report printed by ``mavsysid estimate``.
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The estimate to report.
+    config : VehicleConfig
+        The vehicle it was estimated for (name, mass).
+    log_name : str
+        How to name the log (usually its path as given by the user).
+
+    Returns
+    -------
+    str
+        Fixed-width text ending in a newline: header lines, one row per parameter,
+        the filter-vs-refined comparison when the result was refined, the result's notes
+        and a reminder that mass and rotor geometry are taken as known.
+    """
+    lines = [*_header(result, config, log_name), "", *_main_block(result)]
+    if result.refined is not None:
+        lines += ["", *_refined_block(result.filtered, result.refined)]
+    lines.append("")
+    lines += [f"note: {note}" for note in result.notes]
+    lines += [
+        f"Mass ({config.mass:.4g} kg) and rotor geometry are taken as known: a wrong mass "
+        "scales c_T, c_M and J",
+        "together and cannot be detected from pose and rotor speeds.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+# --- estimate.json ---------------------------------------------------------------------
+
+
+def _number(value: float) -> float | None:
+    """A JSON number, or None for NaN and infinity (JSON has neither)."""
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _block(
+    estimate: ParameterEstimate, convergence: np.ndarray | None, truth: np.ndarray | None
+) -> dict[str, dict[str, float | None]]:
+    """One estimate as ``{name: {"value", "sigma", "relative_sigma", ...}}``."""
+    out: dict[str, dict[str, float | None]] = {}
+    for j, name in enumerate(PARAMETER_NAMES):
+        value, sigma = float(estimate.value[j]), float(estimate.sigma[j])
+        entry: dict[str, float | None] = {
+            "value": _number(value),
+            "sigma": _number(sigma),
+            "relative_sigma": _number(_relative(sigma, value)),
+            "convergence_time_s": None if convergence is None else _number(convergence[j]),
+        }
+        if truth is not None:
+            true_value = float(truth[j])
+            entry["true_value"] = _number(true_value)
+            entry["error_relative"] = _number(_relative(value - true_value, true_value))
+        out[name] = entry
+    return out
+
+
+def result_to_json(
+    result: EstimationResult, config: VehicleConfig, log_path: str | Path
+) -> dict[str, Any]:
+    """The ``estimate.json`` document (DESIGN.md, "User-facing contract").
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The estimate to write.
+    config : VehicleConfig
+        The vehicle it was estimated for.
+    log_path : str or Path
+        The log it was estimated from, stored as given.
+
+    Returns
+    -------
+    dict
+        JSON-ready (no NaN; absent quantities are None). Keys: ``parameters`` (the final
+        estimate: refined if present, else the filter's), ``filter``, ``refined`` (or
+        None) and ``prior``, each ``{name: {"value", "sigma", "relative_sigma",
+        "convergence_time_s"}}`` plus ``"true_value"`` and ``"error_relative"`` (signed,
+        (value − true)/|true|) when the truth is known. ``convergence_time_s`` (s) is the
+        filter's (see `EstimationResult.convergence_time`): given in ``parameters`` and
+        ``filter``, None there for a parameter that never settled, and always None in
+        ``refined`` and ``prior``, which have no time history. Also ``covariance`` (final, 6×6, SI),
+        ``parameter_names``, ``log``, ``vehicle``, ``pose_source``,
+        ``measurement_sigma`` (``position_m``, ``attitude_rad``), ``notes`` and
+        ``software`` (``name``, ``version``).
+    """
+    truth = result.true_theta
+    position_sigma, attitude_sigma = result.measurement_sigma
+    convergence = result.convergence_time
+    return {
+        "parameters": _block(result.final, convergence, truth),
+        "filter": _block(result.filtered, convergence, truth),
+        "refined": None if result.refined is None else _block(result.refined, None, truth),
+        "prior": _block(result.prior, None, truth),
+        "covariance": [[_number(c) for c in row] for row in result.final.covariance],
+        "parameter_names": list(PARAMETER_NAMES),
+        "log": str(log_path),
+        "vehicle": config.name,
+        "pose_source": result.pose_source,
+        "measurement_sigma": {"position_m": _number(position_sigma),
+                              "attitude_rad": _number(attitude_sigma)},
+        "notes": list(result.notes),
+        "software": {"name": "mavsysid", "version": software_version()},
+    }
+
+
+def write_estimate_json(
+    path: str | Path, result: EstimationResult, config: VehicleConfig, log_path: str | Path
+) -> None:
+    """Write `result_to_json` to `path` atomically, creating its directory.
+
+    A reader sees the previous file or the complete new one, never a partial write.
+    """
+    path = Path(path)
+    text = json.dumps(result_to_json(result, config, log_path), indent=2,
+                      ensure_ascii=False, allow_nan=False) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleConfig:
+    """`config` with the final estimate as its nominal θ (save with `save_vehicle`)."""
+    return config.with_parameters(np.asarray(result.final.value, dtype=float))

@@ -1,0 +1,265 @@
+"""Fixtures of the reader tests: a synthetic flight and minimal writers of each log format.
+
+The flight is smooth, known in closed form, and physically consistent in its collective
+thrust (Σ c_T n² = m e_z^B · (a − g)), so the hover check passes and the clock alignment
+by Σ n² has something to find. The file side (NED/FRD) is derived through rotation
+matrices, independently of the reader's quaternion formula.
+
+Writers: ``.tlog`` with pymavlink's own MAVLink packer (8-byte big-endian µs receipt time,
+then the packed message); ULog with the minimal writer below, following the ULog spec
+(file header, flag bits, format, add-logged and data messages: pyulog's ``write_ulog``
+only re-writes a parsed file); DataFlash with pymavlink's `DFFormat` for the struct
+layout and FMT messages, then data messages (pymavlink has no log writer).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from estimation.flight_data import FlightData
+from vehicle.config import VehicleConfig
+from vehicle.constants import GRAVITY
+from vehicle.rotation import matrix_to_quat, quat_exp, quat_to_matrix
+
+Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
+
+_AMPLITUDE = np.array([0.5, 0.4, 0.2])
+_OMEGA = np.array([1.3, 0.9, 1.7])
+_PHASE = np.array([0.0, 0.3, 0.5])
+# ENU ↔ NED (an involution) and body FLU ↔ FRD.
+_T = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_B = np.diag([1.0, -1.0, -1.0])
+
+
+def synthetic_truth(vehicle: VehicleConfig, t: np.ndarray) -> dict[str, np.ndarray]:
+    """The synthetic flight at times t (N,): ENU/FLU and NED/FRD pose, rotor speeds."""
+    t = np.asarray(t, dtype=float)
+    arg = np.outer(t, _OMEGA) + _PHASE
+    position = _AMPLITUDE * np.sin(arg) + np.array([0.0, 0.0, 1.0])
+    acceleration = -_AMPLITUDE * _OMEGA**2 * np.sin(arg)
+    rotvec = np.column_stack([0.25 * np.sin(2.1 * t), 0.2 * np.sin(1.7 * t + 0.5),
+                              0.6 * np.sin(0.8 * t + 0.2)])
+    quaternion = quat_exp(rotvec)
+    R = quat_to_matrix(quaternion)
+    specific_force = np.einsum("ni,ni->n", R[:, :, 2], acceleration + [0.0, 0.0, GRAVITY])
+    k = vehicle.rotor_count
+    hover = np.sqrt(vehicle.mass * specific_force / (k * vehicle.parameters.c_T))
+    wiggle = 1.0 + 0.02 * np.sin(np.outer(t, np.full(k, 3.0)) + np.arange(k))
+    return {
+        "position": position,
+        "quaternion": quaternion,
+        "position_ned": position @ _T.T,
+        "quaternion_ned": matrix_to_quat(_T @ R @ _B),
+        "rotor_speeds": hover[:, None] * wiggle,
+    }
+
+
+@pytest.fixture
+def truth(firefly: VehicleConfig) -> Truth:
+    """The synthetic flight of the Firefly as a function of time."""
+    return lambda t: synthetic_truth(firefly, t)
+
+
+def _assert_matches(data: FlightData, truth: Truth, rotor_atol: float,
+                    pose_atol: float = 1e-5) -> None:
+    expected = truth(data.t)
+    np.testing.assert_allclose(data.position, expected["position"], atol=pose_atol)
+    # q and −q are one attitude.
+    sign = np.sign(np.sum(data.quaternion * expected["quaternion"], axis=1))[:, None]
+    np.testing.assert_allclose(sign * data.quaternion, expected["quaternion"], atol=pose_atol)
+    np.testing.assert_allclose(data.rotor_speeds, expected["rotor_speeds"], atol=rotor_atol)
+
+
+@pytest.fixture
+def assert_matches_truth() -> Callable[..., None]:
+    """Check a FlightData against the truth: (data, truth, rotor_atol, pose_atol=1e-5)."""
+    return _assert_matches
+
+
+# ---------------------------------------------------------------------------- tlog
+
+
+def write_tlog(path: Path, records: Iterable[tuple[float, Any, tuple[int, int]]]) -> None:
+    """Write (receipt time s, message, (system, component)) records as a MAVLink 2 tlog."""
+    from pymavlink.dialects.v20 import ardupilotmega
+
+    with path.open("wb") as f:
+        mav = ardupilotmega.MAVLink(f, srcSystem=1, srcComponent=1)
+        for receipt, message, (system, component) in sorted(records, key=lambda r: r[0]):
+            mav.srcSystem, mav.srcComponent = system, component
+            f.write(struct.pack(">Q", round(receipt * 1e6)))
+            mav.send(message)
+
+
+@pytest.fixture
+def tlog_writer() -> Callable[..., None]:
+    """`write_tlog`."""
+    return write_tlog
+
+
+# ---------------------------------------------------------------------------- ULog
+
+_ULOG_CODES = {"int8_t": "b", "uint8_t": "B", "int16_t": "h", "uint16_t": "H", "int32_t": "i",
+               "uint32_t": "I", "int64_t": "q", "uint64_t": "Q", "float": "f", "double": "d",
+               "bool": "?"}
+
+
+def _ulog_message(kind: str, payload: bytes) -> bytes:
+    return struct.pack("<HB", len(payload), ord(kind)) + payload
+
+
+def _ulog_fields(name: str, formats: dict[str, str], prefix: str = "") -> list[tuple[str, str]]:
+    """Flattened (field name, struct code) of a format, nested types expanded as pyulog does."""
+    out = []
+    for item in filter(None, formats[name].split(";")):
+        kind, field = item.split(" ")
+        size = int(kind[kind.index("[") + 1:-1]) if "[" in kind else 0
+        kind = kind.split("[")[0]
+        names = [f"{field}[{i}]" for i in range(size)] if size else [field]
+        for n in names:
+            if kind in _ULOG_CODES:
+                out.append((prefix + n, _ULOG_CODES[kind]))
+            else:
+                out += _ulog_fields(kind, formats, f"{prefix}{n}.")
+    return out
+
+
+def write_ulog(path: Path, formats: dict[str, str],
+               topics: dict[str, list[dict[str, float]]]) -> None:
+    """Write a ULog file.
+
+    ``formats`` maps each type name to its fields (``"uint64_t timestamp;float[4] q;"``);
+    ``topics`` maps logged type names to rows of flattened field values (missing: 0).
+    """
+    out = bytearray(b"ULog\x01\x12\x35" + bytes([1]) + struct.pack("<Q", 0))
+    out += _ulog_message("B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
+    for name, fields in formats.items():
+        out += _ulog_message("F", f"{name}:{fields}".encode())
+    for msg_id, (name, rows) in enumerate(topics.items()):
+        out += _ulog_message("A", struct.pack("<BH", 0, msg_id) + name.encode())
+        fields = _ulog_fields(name, formats)
+        layout = struct.Struct("<H" + "".join(code for _, code in fields))
+        # Rows in the given order, topic after topic: pyulog needs no time order, and
+        # the tests of out-of-order timestamps need them kept.
+        for row in rows:
+            out += _ulog_message("D", layout.pack(msg_id, *(row.get(n, 0) for n, _ in fields)))
+    path.write_bytes(bytes(out))
+
+
+ULOG_FORMATS = {
+    "vehicle_mocap_odometry": "uint64_t timestamp;uint64_t timestamp_sample;float[3] position;"
+                              "float[4] q;uint8_t pose_frame;",
+    "vehicle_local_position": "uint64_t timestamp;uint64_t timestamp_sample;float x;float y;"
+                              "float z;",
+    "vehicle_attitude": "uint64_t timestamp;uint64_t timestamp_sample;float[4] q;",
+    "esc_report": "uint64_t timestamp;int32_t esc_rpm;float esc_voltage;",
+    "esc_status": "uint64_t timestamp;uint8_t esc_count;esc_report[8] esc;",
+    "actuator_motors": "uint64_t timestamp;uint64_t timestamp_sample;uint16_t reversible_flags;"
+                       "float[12] control;",
+    "actuator_outputs": "uint64_t timestamp;uint32_t noutputs;float[16] output;",
+}
+
+
+def ulog_flight(path: Path, truth: Truth, vehicle: VehicleConfig, pose: str | None = "mocap",
+                rotors: str = "esc", t0: float = 20.0, duration: float = 4.0,
+                esc_count: int | None = None,
+                edit: Callable[[dict[str, list[dict[str, float]]]], None] | None = None) -> Path:
+    """Write the synthetic flight as a PX4 log and return its path.
+
+    pose: "mocap" (100 Hz odometry), "autopilot" (50 Hz local position, 100 Hz attitude
+    at other instants) or None; rotors: "esc" (50 Hz rpm), "motors" (actuator_motors) or
+    "outputs" (actuator_outputs PWM); edit: changes the rows before writing.
+    """
+    topics: dict[str, list[dict[str, float]]] = {}
+
+    def rows(rate: float, phase: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        t = t0 + phase + np.arange(round(duration * rate)) / rate
+        return t, truth(t)
+
+    if pose == "mocap":
+        t, x = rows(100.0, 0.0)
+        topics["vehicle_mocap_odometry"] = [
+            {"timestamp": round(ti * 1e6) + 3000, "timestamp_sample": round(ti * 1e6),
+             "pose_frame": 1, **{f"position[{i}]": p[i] for i in range(3)},
+             **{f"q[{i}]": q[i] for i in range(4)}}
+            for ti, p, q in zip(t, x["position_ned"], x["quaternion_ned"], strict=True)]
+    elif pose == "autopilot":
+        t, x = rows(50.0, 0.0)
+        topics["vehicle_local_position"] = [
+            {"timestamp": round(ti * 1e6), "x": p[0], "y": p[1], "z": p[2]}
+            for ti, p in zip(t, x["position_ned"], strict=True)]
+        t, x = rows(100.0, 0.004)
+        topics["vehicle_attitude"] = [
+            {"timestamp": round(ti * 1e6), **{f"q[{i}]": q[i] for i in range(4)}}
+            for ti, q in zip(t, x["quaternion_ned"], strict=True)]
+    t, x = rows(50.0, 0.007)
+    n = x["rotor_speeds"]
+    k = n.shape[1]
+    stamps = [round(ti * 1e6) for ti in t]
+    if rotors == "esc":
+        count = k if esc_count is None else esc_count
+        topics["esc_status"] = [
+            {"timestamp": s, "esc_count": count,
+             **{f"esc[{i}].esc_rpm": round(row[i] * 60 / (2 * np.pi)) for i in range(count)}}
+            for s, row in zip(stamps, n, strict=True)]
+    elif rotors == "motors":
+        thrust = (n / vehicle.limits.rotor_speed_max) ** 2
+        topics["actuator_motors"] = [
+            {"timestamp": s, **{f"control[{i}]": row[i] if i < k else np.nan
+                                for i in range(12)}}
+            for s, row in zip(stamps, thrust, strict=True)]
+    else:
+        e = vehicle.motor.thrust_expo
+        s_ = (n / vehicle.limits.rotor_speed_max) ** 2
+        u = (-(1 - e) + np.sqrt((1 - e) ** 2 + 4 * e * s_)) / (2 * e)
+        topics["actuator_outputs"] = [
+            {"timestamp": s, "noutputs": 8, **{f"output[{i}]": row[i] for i in range(k)}}
+            for s, row in zip(stamps, 1000.0 + 1000.0 * u, strict=True)]
+    if edit is not None:
+        edit(topics)
+    write_ulog(path, ULOG_FORMATS, topics)
+    return path
+
+
+@pytest.fixture
+def ulog_writer() -> Callable[..., Path]:
+    """`ulog_flight`: (path, truth, vehicle, pose=…, rotors=…, …) → path."""
+    return ulog_flight
+
+
+# ---------------------------------------------------------------------------- DataFlash
+
+
+def write_dataflash(path: Path, formats: dict[str, tuple[int, str, str]],
+                    rows: Iterable[tuple[str, tuple[Any, ...]]]) -> None:
+    """Write a DataFlash log: FMT for each (type id, format, columns), then the rows."""
+    from pymavlink.DFReader import DFFormat
+
+    fmt_fmt = DFFormat(0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")
+    parsed = {name: DFFormat(tid, name, 0, fmt, cols)
+              for name, (tid, fmt, cols) in formats.items()}
+
+    def message(f: Any, values: Iterable[Any]) -> bytes:
+        return bytes([0xA3, 0x95, f.type]) + struct.pack(f.msg_struct, *values)
+
+    out = bytearray(message(fmt_fmt, (0x80, 89, b"FMT", b"BBnNZ",
+                                      b"Type,Length,Name,Format,Columns")))
+    for name, f in parsed.items():
+        length = struct.calcsize(f.msg_struct) + 3
+        out += message(fmt_fmt, (f.type, length, name.encode(), f.format.encode(),
+                                 ",".join(f.columns).encode()))
+    for name, values in rows:
+        out += message(parsed[name], values)
+    path.write_bytes(bytes(out))
+
+
+@pytest.fixture
+def dataflash_writer() -> Callable[..., None]:
+    """`write_dataflash`."""
+    return write_dataflash

@@ -1,0 +1,118 @@
+"""Bad inputs to load_flight: one-line errors naming the file, and repairs with counts."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimation.readers import load_flight
+from vehicle.config import VehicleConfig
+from vehicle.errors import InputError, LogFormatError
+
+Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
+Rows = dict[str, list[dict[str, float]]]
+ODOMETRY = "vehicle_mocap_odometry"
+
+
+def _error(path: Path, vehicle: VehicleConfig, **kwargs: object) -> str:
+    with pytest.raises(InputError) as info:
+        load_flight(path, vehicle, **kwargs)  # type: ignore[arg-type]
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message
+    return message
+
+
+@pytest.mark.parametrize(("name", "content", "says"), [
+    ("flight.txt", b"t,x\n", "unsupported flight log type '.txt'"),
+    ("flight.tlog", bytes(range(256)) * 4, "no MAVLink messages"),
+    ("flight.ulg", b"not a ulog file at all" * 10, "cannot be read as a PX4 ULog file"),
+    ("flight.BIN", bytes(range(256)) * 4, "no rotor speeds or motor outputs"),
+])
+def test_unreadable_file_is_one_line(tmp_path: Path, firefly: VehicleConfig, name: str,
+                                     content: bytes, says: str) -> None:
+    """A file of the wrong type or content fails in one line naming it, no traceback text."""
+    path = tmp_path / name
+    path.write_bytes(content)
+    message = _error(path, firefly)
+    assert says in message and "Traceback" not in message
+
+
+def test_missing_file_and_stray_offset_are_input_errors(tmp_path: Path,
+                                                        firefly: VehicleConfig) -> None:
+    """A missing log, or a time offset without a pose file, is an InputError (exit 2)."""
+    assert "no such file" in _error(tmp_path / "absent.ulg", firefly)
+    path = tmp_path / "flight.ulg"
+    path.write_bytes(b"x")
+    assert "time offset" in _error(path, firefly, time_offset=1.0)
+
+
+def _drop_window(t0: float, t1: float, topic: str = ODOMETRY) -> Callable[[Rows], None]:
+    def edit(topics: Rows) -> None:
+        topics[topic] = [r for r in topics[topic]
+                         if not t0 * 1e6 < r.get("timestamp_sample", r["timestamp"]) < t1 * 1e6]
+    return edit
+
+
+def _scale_quaternions(rows: slice, factor: float) -> Callable[[Rows], None]:
+    def edit(topics: Rows) -> None:
+        for r in topics[ODOMETRY][rows]:
+            for i in range(4):
+                r[f"q[{i}]"] *= factor
+    return edit
+
+
+@pytest.mark.parametrize(("kwargs", "says"), [
+    ({"esc_count": 4}, "rotor speeds of 4 rotors, the vehicle config builtin:firefly has 6"),
+    ({"duration": 1.5}, "only 1.47 s of pose and rotor speeds"),
+    ({"edit": _drop_window(21.0, 21.5)}, "gap of 0.5 s in the pose samples after t = 21.000 s"),
+    ({"edit": _drop_window(22.0, 22.4, "esc_status")},
+     "gap of 0.42 s in the esc_status rpm samples after t = 21.987 s"),
+    ({"edit": _scale_quaternions(slice(40, 42), 1.5)}, "2 attitude quaternions of"),
+    ({"pose": None}, "no pose in the log (no vehicle_mocap_odometry"),
+])
+def test_unusable_flight_is_one_line_error(tmp_path: Path, firefly: VehicleConfig,
+                                           truth: Truth, ulog_writer: Callable[..., Path],
+                                           kwargs: dict[str, object], says: str) -> None:
+    """Each unusable flight fails with a LogFormatError naming the file and the problem."""
+    path = ulog_writer(tmp_path / "flight.ulg", truth, firefly, **kwargs)
+    with pytest.raises(LogFormatError):
+        load_flight(path, firefly)
+    assert says in _error(path, firefly)
+
+
+def _nan_rows(topics: Rows) -> None:
+    for r in topics[ODOMETRY][100:103]:
+        r["position[1]"] = np.nan
+
+
+def _shuffle_and_repeat(topics: Rows) -> None:
+    rows = topics[ODOMETRY]
+    rows[10], rows[11] = rows[11], rows[10]
+    rows[50], rows[51] = rows[51], rows[50]
+    rows.insert(200, dict(rows[200]))
+
+
+@pytest.mark.parametrize(("edit", "says"), [
+    (_nan_rows, "dropped 3 rows of vehicle_mocap_odometry samples with NaN or infinite "
+                "values (of 400)"),
+    (_shuffle_and_repeat, "2 timestamps of vehicle_mocap_odometry samples out of order"),
+    (_shuffle_and_repeat, "dropped 1 sample of vehicle_mocap_odometry with a duplicate"),
+    (_drop_window(21.0, 21.05), "1 gap in the pose samples longer than 2 sample periods "
+                                "(0.02 s), longest 0.05 s after t = 21.000 s"),
+    (_scale_quaternions(slice(40, 44), 1.01), "normalised 4 attitude quaternions of "
+                                              "vehicle_mocap_odometry"),
+])
+def test_repairable_flight_warns_with_counts(tmp_path: Path, firefly: VehicleConfig,
+                                             truth: Truth, ulog_writer: Callable[..., Path],
+                                             assert_matches_truth: Callable[..., None],
+                                             edit: Callable[[Rows], None], says: str) -> None:
+    """Repairable problems are repaired, the data stay right, and a warning counts them."""
+    path = ulog_writer(tmp_path / "flight.ulg", truth, firefly, edit=edit)
+    data = load_flight(path, firefly)
+    assert [w for w in data.warnings if says in w] != [], data.warnings
+    assert all(w.startswith(f"{path}: ") and "\n" not in w for w in data.warnings)
+    assert (np.diff(data.t) > 0).all()
+    assert_matches_truth(data, truth, 0.1)
