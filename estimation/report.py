@@ -8,10 +8,7 @@ The JSON follows DESIGN.md's user-facing contract (``{"parameters": {"c_T": {"va
 from __future__ import annotations
 
 import importlib.metadata
-import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +16,7 @@ import numpy as np
 
 from estimation.results import EstimationResult, ParameterEstimate
 from vehicle.config import PARAMETER_NAMES, VehicleConfig
+from vehicle.flight_dir import write_json_atomic
 
 __all__ = [
     "CONVERGENCE_TOLERANCE",
@@ -310,20 +308,7 @@ def write_estimate_json(
 
     A reader sees the previous file or the complete new one, never a partial write.
     """
-    path = Path(path)
-    text = json.dumps(result_to_json(result, config, log_path), indent=2,
-                      ensure_ascii=False, allow_nan=False) + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_json_atomic(path, result_to_json(result, config, log_path))
 
 
 def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleConfig:

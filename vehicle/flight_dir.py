@@ -20,17 +20,23 @@ import numpy as np
 from vehicle.errors import InputError, LogFormatError
 from vehicle.poselog import read_text_file
 
-__all__ = ["new_flight_dir", "read_meta", "write_meta"]
+__all__ = ["new_flight_dir", "read_meta", "write_json_atomic", "write_meta"]
 
 
 def write_meta(path: str | Path, meta: Mapping[str, Any]) -> None:
-    """Write ``meta.json`` atomically: a reader sees the old file or the new one, never half.
+    """Write ``meta.json`` atomically (see `write_json_atomic`)."""
+    write_json_atomic(path, meta)
+
+
+def write_json_atomic(path: str | Path, data: Mapping[str, Any]) -> None:
+    """Write JSON atomically: a reader sees the old file or the new one, never half.
 
     numpy scalars and arrays are stored as numbers and lists, paths as strings. Values
     JSON cannot hold (NaN and infinity included) raise before the disk is touched.
     """
     path = Path(path)
-    text = json.dumps(dict(meta), indent=2, allow_nan=False, default=_json_default) + "\n"
+    text = json.dumps(dict(data), indent=2, ensure_ascii=False, allow_nan=False,
+                      default=_json_default) + "\n"
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
