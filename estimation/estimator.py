@@ -22,6 +22,7 @@ from estimation.report import convergence_time
 from estimation.results import EstimationResult, ParameterEstimate
 from vehicle.config import PARAMETER_NAMES, VehicleConfig
 from vehicle.errors import InputError
+from vehicle.linearization import initial_state_sigma
 
 __all__ = ["EstimatorSettings", "estimate_parameters", "prior_from_config"]
 
@@ -71,12 +72,11 @@ def _measurement_sigma(flight: FlightData, config: VehicleConfig,
     return config.noise.position_sigma, config.noise.attitude_sigma
 
 
-def _initial_state_sigma(flight: FlightData, sigma: tuple[float, float]) -> tuple[float, ...]:
-    """σ of the initial state: velocity and rates come from differencing two noisy poses."""
-    dt = float(flight.t[1] - flight.t[0])
-    sp, sa = sigma
-    return (3.0 * sp, max(0.05, 3.0 * math.sqrt(2.0) * sp / dt), 3.0 * sa,
-            max(0.05, 3.0 * math.sqrt(2.0) * sa / dt))
+def _initial_state_sigma(
+    flight: FlightData, sigma: tuple[float, float]
+) -> tuple[float, float, float, float]:
+    """σ of the initial state for this flight (see `initial_state_sigma`)."""
+    return initial_state_sigma(sigma[0], sigma[1], float(flight.t[1] - flight.t[0]))
 
 
 def estimate_parameters(

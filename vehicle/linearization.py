@@ -35,6 +35,7 @@ __all__ = [
     "MEAS_DIM",
     "NOISE_DIM",
     "ErrorStateModel",
+    "initial_state_sigma",
     "jacobian_kernel",
     "transition_kernel",
 ]
@@ -48,6 +49,23 @@ E_ATT = slice(6, 9)
 E_RATE = slice(9, 12)
 E_THETA = slice(12, 18)
 
+
+
+def initial_state_sigma(
+    position_sigma: float, attitude_sigma: float, dt: float
+) -> tuple[float, float, float, float]:
+    """σ of the state when estimation starts: from the first pose and a difference of two.
+
+    Shared by the estimator (which initialises this way) and the planner (which must
+    predict the covariance the estimator will reach).
+
+    Returns
+    -------
+    tuple of 4 float
+        Position (m), velocity (m/s), attitude (rad) and body-rate (rad/s) σ.
+    """
+    return (3.0 * position_sigma, max(0.05, 3.0 * np.sqrt(2.0) * position_sigma / dt),
+            3.0 * attitude_sigma, max(0.05, 3.0 * np.sqrt(2.0) * attitude_sigma / dt))
 
 
 @dataclass(frozen=True)

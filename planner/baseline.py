@@ -1,0 +1,19 @@
+"""The paper's random baseline: the same graph search, picking the path with the most
+distinct segments ("this heuristic biases the random planner towards exciting all
+directions and fast maneuvers", paper Section "Simulation Based Experiments")."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from planner.results import PlannerSettings, PlanProgress, PlanResult
+from planner.rrbt import search_graph
+from vehicle.config import VehicleConfig
+
+__all__ = ["plan_random"]
+
+
+def plan_random(config: VehicleConfig, settings: PlannerSettings | None = None,
+                progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
+    """A random calibration flight from the same motion graph as `planner.rrbt.plan`."""
+    return search_graph(config, settings or PlannerSettings(), "random", progress)

@@ -1,0 +1,428 @@
+"""The information-gathering planner (paper Algorithm 1, Sections "Information Gathering
+Algorithm" to "Pruning and Optimality"): an RRBT-style search of belief space.
+
+Phase 1 grows a bidirectional motion graph: a sampled pose is connected from its nearest
+vertex by a free-end minimum-snap segment (which fixes the new vertex's derivatives),
+then to and from every vertex by fully constrained segments; only feasible segments
+become edges, each with its precomputed one-step covariance transfer. Phase 2 pushes
+the open beliefs of every vertex that gained an edge through all new path combinations,
+pruning with the paper's modular comparison (Eq. compare). Every vertex carries a
+stopping segment to hover, and a belief is a candidate flight only with its stop
+appended and the whole inside the budget; the best candidate minimises the D-optimality
+det(Σ_θ)^(1/6) (paper Eq. dopt, in log space).
+
+The search core is shared with the random baseline (`planner.baseline`), which keeps
+the same graph and picks the path with the most distinct segments instead.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.belief import (
+    EdgeTransfer,
+    apply_transfer,
+    edge_samples,
+    edge_transfer,
+    identity_transfer,
+    propagate_steps,
+)
+from planner.feasibility import check_segment
+from planner.results import (
+    PlannerGraph,
+    PlannerSettings,
+    PlannerStats,
+    PlanProgress,
+    PlanResult,
+)
+from planner.segments import (
+    Segment,
+    VertexState,
+    connect_fixed,
+    connect_free_end,
+    duration_range,
+    stop_segment,
+)
+from vehicle.config import VehicleConfig
+from vehicle.errors import InputError, JobFailedError
+from vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
+from vehicle.trajectory import PiecewisePolynomial
+
+__all__ = ["plan", "search_graph"]
+
+#: Stopping-segment durations tried for every vertex, shortest feasible wins, s.
+_STOP_DURATIONS = (1.0, 1.5, 2.0, 3.0)
+_PROGRESS_PERIOD = 0.25
+
+
+@dataclass
+class _Edge:
+    src: int
+    dst: int
+    segment: Segment
+    transfer: EdgeTransfer
+
+
+@dataclass
+class _Vertex:
+    state: VertexState
+    stop: Segment | None
+    stop_transfer: EdgeTransfer
+    out_edges: list[_Edge] = field(default_factory=list)
+    beliefs: list[_Belief] = field(default_factory=list)
+
+    @property
+    def stop_time(self) -> float:
+        return 0.0 if self.stop is None else self.stop.duration
+
+
+@dataclass
+class _Belief:
+    sigma: np.ndarray
+    cost: float
+    vertex: int
+    parent: _Belief | None
+    edge: _Edge | None
+    logdet: float
+    logdet_theta: float
+    distinct: int
+    is_open: bool
+    expanded: int = 0
+    pruned: bool = False
+
+    def path_edges(self) -> list[_Edge]:
+        edges, b = [], self
+        while b.edge is not None:
+            edges.append(b.edge)
+            b = b.parent  # type: ignore[assignment]
+        return edges[::-1]
+
+
+def _logdet(m: np.ndarray) -> float:
+    sign, value = np.linalg.slogdet(m)
+    return float(value) if sign > 0 else np.inf
+
+
+class _Search:
+    """Graph, beliefs and the best candidate of one planning run."""
+
+    def __init__(self, config: VehicleConfig, settings: PlannerSettings, objective: str,
+                 progress: Callable[[PlanProgress], None] | None) -> None:
+        self.config, self.settings, self.objective = config, settings, objective
+        self.progress = progress
+        self.theta = config.theta
+        self.model = ErrorStateModel.for_vehicle(config)
+        self.rng = np.random.default_rng(settings.seed)
+        self.box = np.asarray(settings.box, dtype=float)
+        self.vertices: list[_Vertex] = []
+        self.samples = self.edges_attempted = self.edges = self.propagations = 0
+        self.edge_time = self.propagation_time = 0.0
+        self.best: tuple[float, _Belief] | None = None
+        self.history: list[tuple[float, float]] = []
+        self.first_solution: float | None = None
+        self.t0 = time.perf_counter()
+        self._last_progress = -np.inf
+        self._log_scale = float(np.sum(np.log(self.model.theta_scale)))
+
+    # -- budget and termination -----------------------------------------------------------
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def out_of_time(self) -> bool:
+        return self.elapsed() >= self.settings.planning_time
+
+    def done(self) -> bool:
+        s = self.settings
+        return self.out_of_time() or (s.max_samples is not None and self.samples >= s.max_samples)
+
+    # -- geometry -------------------------------------------------------------------------
+
+    def sample_pose(self) -> np.ndarray:
+        lo, hi = self.box[:3], self.box[3:]
+        return np.array([*self.rng.uniform(lo, hi), self.rng.uniform(-np.pi, np.pi)])
+
+    def sample_duration(self, a: VertexState, b_position: np.ndarray, budget_left: float):
+        lim = self.config.limits
+        rng = duration_range(float(np.linalg.norm(b_position - a.position[0])), lim.speed_max,
+                             budget_left, lim.segment_time_max)
+        if rng is None:
+            return None
+        return float(self.rng.uniform(*rng))
+
+    def transfer_of(self, segment: Segment) -> EdgeTransfer:
+        states, n, dt = edge_samples(_as_trajectory(segment), self.config, self.theta,
+                                     self.settings.measurement_rate)
+        return edge_transfer(self.model, states, n, self.theta, dt)
+
+    def feasible(self, segment: Segment) -> bool:
+        return check_segment(segment, self.config, self.box).feasible
+
+    def add_vertex(self, state: VertexState) -> int | None:
+        """A vertex with its stopping segment (None if no stop is feasible)."""
+        stop, transfer = None, identity_transfer()
+        if np.any(np.abs(state.position[1:]) > 1e-12) or np.any(np.abs(state.yaw[1:]) > 1e-12):
+            for duration in _STOP_DURATIONS:
+                candidate = stop_segment(state, duration)
+                if self.feasible(candidate):
+                    stop, transfer = candidate, self.transfer_of(candidate)
+                    break
+            else:
+                return None
+        self.vertices.append(_Vertex(state, stop, transfer))
+        return len(self.vertices) - 1
+
+    def add_edge(self, src: int, dst: int, segment: Segment) -> _Edge:
+        edge = _Edge(src, dst, segment, self.transfer_of(segment))
+        self.vertices[src].out_edges.append(edge)
+        self.edges += 1
+        return edge
+
+    def try_fixed(self, src: int, dst: int, budget_left: float) -> _Edge | None:
+        a, b = self.vertices[src].state, self.vertices[dst].state
+        duration = self.sample_duration(a, b.position[0], budget_left)
+        if duration is None:
+            return None
+        self.edges_attempted += 1
+        segment = connect_fixed(a, b, duration)
+        return self.add_edge(src, dst, segment) if self.feasible(segment) else None
+
+    # -- beliefs --------------------------------------------------------------------------
+
+    def belief(self, sigma: np.ndarray, cost: float, vertex: int, parent: _Belief | None,
+               edge: _Edge | None) -> _Belief:
+        stop_time = self.vertices[vertex].stop_time
+        distinct = 0
+        if parent is not None:
+            distinct = parent.distinct + (edge not in parent.path_edges())
+        return _Belief(sigma, cost, vertex, parent, edge, _logdet(sigma),
+                       _logdet(sigma[E_THETA, E_THETA]), distinct,
+                       is_open=cost + stop_time < self.settings.budget)
+
+    def append(self, belief: _Belief) -> bool:
+        """Keep a belief unless another at its vertex dominates it (paper Eq. compare)."""
+        kept = self.vertices[belief.vertex].beliefs
+        for other in kept:
+            if self._dominates(other, belief):
+                return False
+        for other in kept:
+            if self._dominates(belief, other):
+                other.pruned = True
+        kept[:] = [b for b in kept if not b.pruned]
+        kept.append(belief)
+        self.consider(belief)
+        return True
+
+    def _dominates(self, a: _Belief, b: _Belief) -> bool:
+        if self.objective == "random":  # no information in the baseline's choices
+            return a.cost <= b.cost and a.distinct >= b.distinct
+        return a.cost <= b.cost and a.logdet <= b.logdet and a.logdet_theta <= b.logdet_theta
+
+    def consider(self, belief: _Belief) -> None:
+        """Track the best candidate flight: the belief with its stop, inside the budget."""
+        vertex = self.vertices[belief.vertex]
+        if belief.edge is None or belief.cost + vertex.stop_time > self.settings.budget:
+            return
+        final = apply_transfer(belief.sigma, vertex.stop_transfer)
+        dopt = self.dopt(final)
+        key = -belief.distinct if self.objective == "random" else dopt
+        if self.best is None or key < self.best[0]:
+            self.best = (key, belief)
+            self.history.append((self.elapsed(), dopt))
+            if self.first_solution is None:
+                self.first_solution = self.elapsed()
+
+    def dopt(self, sigma: np.ndarray) -> float:
+        """det(Σ_θ)^(1/6) in SI units (paper Eq. dopt), computed in log space."""
+        return float(np.exp((_logdet(sigma[E_THETA, E_THETA]) + 2.0 * self._log_scale) / 6.0))
+
+    def propagate(self, queue: list[_Belief]) -> None:
+        """Phase 2: push open beliefs through the edges they have not crossed yet."""
+        start = time.perf_counter()
+        budget = self.settings.budget
+        while queue and not self.out_of_time():
+            b = queue.pop()
+            if b.pruned or not b.is_open:
+                continue
+            edges = self.vertices[b.vertex].out_edges
+            for edge in edges[b.expanded:]:
+                dst = self.vertices[edge.dst]
+                cost = b.cost + edge.segment.duration
+                if cost + dst.stop_time > budget:
+                    continue
+                self.propagations += 1
+                new = self.belief(apply_transfer(b.sigma, edge.transfer), cost, edge.dst, b, edge)
+                if self.append(new):
+                    queue.append(new)
+            b.expanded = len(edges)
+            self.report()
+        self.propagation_time += time.perf_counter() - start
+
+    def report(self, force: bool = False) -> None:
+        now = self.elapsed()
+        if self.progress is None or (not force and now - self._last_progress < _PROGRESS_PERIOD):
+            return
+        self._last_progress = now
+        beliefs = sum(len(v.beliefs) for v in self.vertices)
+        best = None if self.best is None else self.history[-1][1]
+        self.progress(PlanProgress(now, self.samples, len(self.vertices), self.edges, beliefs,
+                                   best))
+
+    # -- phase 1 --------------------------------------------------------------------------
+
+    def grow(self) -> list[_Belief]:
+        """One sample: a new vertex connected to the graph; returns beliefs to propagate."""
+        self.samples += 1
+        pose = self.sample_pose()
+        positions = np.array([v.state.position[0] for v in self.vertices])
+        nearest = int(np.argmin(np.linalg.norm(positions - pose[:3], axis=1)))
+        near_state = self.vertices[nearest].state
+        open_costs = [b.cost for b in self.vertices[nearest].beliefs if b.is_open]
+        if not open_costs:
+            return []
+        duration = self.sample_duration(near_state, pose[:3],
+                                        self.settings.budget - min(open_costs))
+        if duration is None:
+            return []
+        start = time.perf_counter()
+        self.edges_attempted += 1
+        segment = connect_free_end(near_state, pose[:3], float(pose[3]), duration)
+        queue: list[_Belief] = []
+        if self.feasible(segment):
+            new = self.add_vertex(segment.end_state())
+            if new is not None:
+                self.add_edge(nearest, new, segment)
+                queue.extend(b for b in self.vertices[nearest].beliefs if b.is_open)
+                budget = self.settings.budget
+                self.try_fixed(new, nearest, budget)
+                for u in range(len(self.vertices) - 1):
+                    if u != nearest and self.try_fixed(u, new, budget) is not None:
+                        queue.extend(b for b in self.vertices[u].beliefs if b.is_open)
+                    if u != nearest:
+                        self.try_fixed(new, u, budget)
+        self.edge_time += time.perf_counter() - start
+        return queue
+
+    def run(self) -> None:
+        pose = self.settings.start_pose
+        root_vertex = self.add_vertex(VertexState.hover(pose[:3], float(pose[3])))
+        assert root_vertex == 0
+        sigma0 = _initial_covariance(self.model, self.config, self.settings)
+        root = self.belief(sigma0, 0.0, 0, None, None)
+        self.vertices[0].beliefs.append(root)
+        while not self.done():
+            self.propagate(self.grow())
+            self.report()
+        self.report(force=True)
+
+
+def _as_trajectory(segment: Segment) -> PiecewisePolynomial:
+    return PiecewisePolynomial(np.array([segment.duration]), segment.position_coeffs[None],
+                               segment.yaw_coeffs[None])
+
+
+def _initial_covariance(model: ErrorStateModel, config: VehicleConfig,
+                        settings: PlannerSettings) -> np.ndarray:
+    """The estimator's initial covariance: state from the first poses, θ from the prior."""
+    s = initial_state_sigma(config.noise.position_sigma, config.noise.attitude_sigma,
+                            1.0 / settings.measurement_rate)
+    diag = np.concatenate([np.full(3, v**2) for v in s] + [np.full(6, 0.0)])
+    sigma = np.diag(diag)
+    sigma[E_THETA, E_THETA] = np.eye(6) * settings.prior_relative_sigma**2
+    assert sigma.shape == (ERROR_DIM, ERROR_DIM)
+    return sigma
+
+
+def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
+    box = np.asarray(settings.box, dtype=float)
+    if box.shape != (6,) or np.any(box[:3] >= box[3:]):
+        raise InputError(f"box {list(settings.box)}: expected x_min,y_min,z_min,x_max,y_max,z_max "
+                         "with each min below its max")
+    if not settings.budget > 0.0:
+        raise InputError(f"budget {settings.budget:g} s: expected a positive flight time")
+    start = settings.start_pose
+    if np.any(start[:3] < box[:3]) or np.any(start[:3] > box[3:]):
+        raise InputError(f"start {list(start[:3])} lies outside the box {list(box)}")
+    lim = config.limits
+    if lim.thrust_min_ratio > 1.0 or lim.thrust_max_ratio < 1.0:
+        raise InputError(f"{config.source}: [limits] thrust ratios [{lim.thrust_min_ratio:g}, "
+                         f"{lim.thrust_max_ratio:g}] × m g exclude hover (1.0)")
+
+
+def _result(search: _Search, kind: str) -> PlanResult:
+    """The chosen flight: the best belief's edges plus its stop, with σ over time."""
+    if search.best is None:
+        raise JobFailedError(
+            f"no feasible trajectory found in {search.elapsed():.1f} s of planning "
+            f"({search.samples} samples, {len(search.vertices)} vertices, {search.edges} edges)")
+    _, best = search.best
+    edges = best.path_edges()
+    segments = [e.segment for e in edges]
+    stop = search.vertices[best.vertex].stop
+    if stop is not None:
+        segments.append(stop)
+    trajectory = PiecewisePolynomial(
+        np.array([s.duration for s in segments]),
+        np.array([s.position_coeffs for s in segments]),
+        np.array([s.yaw_coeffs for s in segments]))
+    model, theta, rate = search.model, search.theta, search.settings.measurement_rate
+    sigma = _initial_covariance(model, search.config, search.settings)
+    times, sig = [0.0], [np.sqrt(np.diag(model.parameter_covariance_si(sigma)))]
+    t_offset = 0.0
+    for segment in segments:
+        states, n, dt = edge_samples(_as_trajectory(segment), search.config, theta, rate)
+        history = propagate_steps(model, sigma, states, n, theta, dt)
+        sigma = history[-1]
+        si = model.parameter_covariance_si(history[1:])
+        sig.extend(np.sqrt(np.diagonal(si, axis1=1, axis2=2)))
+        times.extend(t_offset + dt * np.arange(1, len(history)))
+        t_offset += segment.duration
+    final_cov = model.parameter_covariance_si(sigma)
+    stats = PlannerStats(
+        samples=search.samples, vertices=len(search.vertices), edges=search.edges,
+        beliefs=sum(len(v.beliefs) for v in search.vertices),
+        edges_attempted=search.edges_attempted, beliefs_propagated=search.propagations,
+        elapsed=search.elapsed(), time_to_first_solution=search.first_solution,
+        edge_time=search.edge_time, propagation_time=search.propagation_time,
+        best_history=np.array(search.history, dtype=float).reshape(-1, 2))
+    path = [0] + [e.dst for e in edges]
+    edge_list = [e for v in search.vertices for e in v.out_edges]
+    graph = PlannerGraph(
+        vertices=np.array([v.state.pose for v in search.vertices]),
+        edges=np.array([(e.src, e.dst) for e in edge_list], dtype=int).reshape(-1, 2),
+        edge_paths=[e.segment.flat_outputs(np.linspace(0.0, e.segment.duration, 12)).position
+                    for e in edge_list],
+        path=path)
+    return PlanResult(
+        kind=kind, trajectory=trajectory,
+        predicted_dopt=float(np.exp(_logdet(final_cov) / 6.0)),
+        predicted_covariance=final_cov, sigma_times=np.array(times),
+        predicted_sigma=np.array(sig), config=search.config, settings=search.settings,
+        stats=stats, graph=graph)
+
+
+def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: str,
+                 progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
+    """Run the graph search with an objective: "dopt" or "random" (most distinct segments)."""
+    _validate(config, settings)
+    search = _Search(config, settings, objective, progress)
+    search.run()
+    return _result(search, objective)
+
+
+def plan(config: VehicleConfig, settings: PlannerSettings | None = None,
+         progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
+    """Plan the flight within the budget that minimises the predicted D-optimality.
+
+    Raises
+    ------
+    InputError
+        Bad box, budget or limits.
+    JobFailedError
+        No feasible trajectory was found in the planning time.
+    """
+    return search_graph(config, settings or PlannerSettings(), "dopt", progress)
