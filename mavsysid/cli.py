@@ -10,7 +10,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-from mavsysid import __version__, estimate, offline
+from mavsysid import __version__, estimate, offline, plan
 from vehicle.errors import MavsysidError
 
 __all__ = ["build_parser", "main"]
@@ -19,7 +19,6 @@ EXIT_INTERRUPTED = 130
 
 #: Subcommands still to come, with the one-line summary shown in --help.
 _PLANNED = {
-    "plan": "plan a maximally informative calibration flight",
     "sim": "run a simulated MAVLink vehicle endpoint",
     "stream": "stream a trajectory to a vehicle over MAVLink and record the flight",
     "diagnose": "find, name and fit what the model still gets wrong",
@@ -76,6 +75,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     estimate.add_arguments(est)
     est.set_defaults(run=estimate.main)
+
+    planning = sub.add_parser(
+        "plan", parents=[common], help="plan a maximally informative calibration flight",
+        description="Plan a calibration flight that minimises the predicted parameter "
+        "uncertainty (D-optimality) within a flight-time budget and a flight box, using "
+        "the vehicle's nominal parameters as the model; or, with --random, the paper's "
+        "random baseline. Writes the trajectory file, and on request sampled setpoints "
+        "and a Rerun recording.",
+    )
+    plan.add_arguments(planning)
+    planning.set_defaults(run=plan.main)
 
     for command, summary in _PLANNED.items():
         p = sub.add_parser(command, parents=[common], help=f"{summary} (not implemented yet)",

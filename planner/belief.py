@@ -32,6 +32,7 @@ from vehicle.trajectory import Trajectory
 __all__ = [
     "EdgeTransfer",
     "apply_transfer",
+    "apply_transfer_logdet",
     "edge_samples",
     "edge_transfer",
     "identity_transfer",
@@ -96,6 +97,23 @@ def _apply_kernel(Sigma, A, B, C, D):
     n = Sigma.shape[0]
     out = B + A @ Sigma @ np.linalg.solve(np.eye(n) - C @ Sigma, D)
     return 0.5 * (out + out.T)
+
+
+@numba.njit(cache=True)
+def _apply_logdet_kernel(Sigma, A, B, C, D, theta_start):
+    out = _apply_kernel(Sigma, A, B, C, D)
+    L = np.linalg.cholesky(out)
+    full = 2.0 * np.sum(np.log(np.diag(L)))
+    Lt = np.linalg.cholesky(out[theta_start:, theta_start:])
+    return out, full, 2.0 * np.sum(np.log(np.diag(Lt)))
+
+
+def apply_transfer_logdet(
+    sigma: np.ndarray, transfer: EdgeTransfer, theta_start: int = 12
+) -> tuple[np.ndarray, float, float]:
+    """`apply_transfer` plus log det of Σ' and of its θ block (one compiled call)."""
+    return _apply_logdet_kernel(np.ascontiguousarray(sigma), transfer.A, transfer.B,
+                                transfer.C, transfer.D, theta_start)
 
 
 def apply_transfer(sigma: np.ndarray, transfer: EdgeTransfer) -> np.ndarray:

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from planner.belief import (
     EdgeTransfer,
     apply_transfer,
+    apply_transfer_logdet,
     edge_samples,
     edge_transfer,
     identity_transfer,
@@ -55,32 +56,43 @@ from vehicle.trajectory import PiecewisePolynomial
 __all__ = ["plan", "search_graph"]
 
 #: Stopping-segment durations tried for every vertex, shortest feasible wins, s.
-_STOP_DURATIONS = (1.0, 1.5, 2.0, 3.0)
+_STOP_DURATIONS = (1.0, 1.5, 2.0, 3.0, 4.0)
+#: Stops end at least this far inside the box, m.
+_STOP_MARGIN = 0.2
 _PROGRESS_PERIOD = 0.25
+#: Vertices (nearest first) from which a sample's free-end connection is tried.
+_NEAREST_TRIES = 5
 
 
-@dataclass
+@dataclass(eq=False)
 class _Edge:
     src: int
     dst: int
     segment: Segment
-    transfer: EdgeTransfer
+    _transfer: EdgeTransfer | None = None
 
 
-@dataclass
+@dataclass(eq=False)
 class _Vertex:
+    """A graph vertex. ``can_stop`` is False where no stopping segment is feasible: the
+    vertex is a pass-through point and no flight may end there."""
+
     state: VertexState
     stop: Segment | None
     stop_transfer: EdgeTransfer
+    can_stop: bool
     out_edges: list[_Edge] = field(default_factory=list)
     beliefs: list[_Belief] = field(default_factory=list)
 
     @property
     def stop_time(self) -> float:
+        """Stop duration here, or the shortest stop still to come (pass-through), s."""
+        if not self.can_stop:
+            return _STOP_DURATIONS[0]
         return 0.0 if self.stop is None else self.stop.duration
 
 
-@dataclass
+@dataclass(eq=False)
 class _Belief:
     sigma: np.ndarray
     cost: float
@@ -116,11 +128,12 @@ class _Search:
         self.progress = progress
         self.theta = config.theta
         self.model = ErrorStateModel.for_vehicle(config)
+        self.search_model = _search_model(config, settings)
         self.rng = np.random.default_rng(settings.seed)
         self.box = np.asarray(settings.box, dtype=float)
         self.vertices: list[_Vertex] = []
         self.samples = self.edges_attempted = self.edges = self.propagations = 0
-        self.edge_time = self.propagation_time = 0.0
+        self.edge_time = self.propagation_time = self.transfer_time = 0.0
         self.best: tuple[float, _Belief] | None = None
         self.history: list[tuple[float, float]] = []
         self.first_solution: float | None = None
@@ -156,34 +169,47 @@ class _Search:
 
     def transfer_of(self, segment: Segment) -> EdgeTransfer:
         states, n, dt = edge_samples(_as_trajectory(segment), self.config, self.theta,
-                                     self.settings.measurement_rate)
-        return edge_transfer(self.model, states, n, self.theta, dt)
+                                     self.settings.propagation_rate)
+        return edge_transfer(self.search_model, states, n, self.theta, dt)
 
     def feasible(self, segment: Segment) -> bool:
         return check_segment(segment, self.config, self.box).feasible
 
-    def add_vertex(self, state: VertexState) -> int | None:
-        """A vertex with its stopping segment (None if no stop is feasible)."""
-        stop, transfer = None, identity_transfer()
+    def add_vertex(self, state: VertexState) -> int:
+        """A vertex with its stopping segment, when one is feasible."""
+        stop, transfer, can_stop = None, identity_transfer(), True
         if np.any(np.abs(state.position[1:]) > 1e-12) or np.any(np.abs(state.yaw[1:]) > 1e-12):
+            inner_lo, inner_hi = self.box[:3] + _STOP_MARGIN, self.box[3:] - _STOP_MARGIN
             for duration in _STOP_DURATIONS:
-                candidate = stop_segment(state, duration)
+                # Where a smooth stop would end, kept inside the box.
+                end = np.clip(state.position[0] + 0.5 * duration * state.position[1],
+                              inner_lo, inner_hi)
+                candidate = stop_segment(state, duration, end)
                 if self.feasible(candidate):
                     stop, transfer = candidate, self.transfer_of(candidate)
                     break
             else:
-                return None
-        self.vertices.append(_Vertex(state, stop, transfer))
+                can_stop = False
+        self.vertices.append(_Vertex(state, stop, transfer, can_stop))
         return len(self.vertices) - 1
 
+    def edge_transfer(self, edge: _Edge) -> EdgeTransfer:
+        """The edge's transfer, computed the first time a belief crosses it (many never are)."""
+        if edge._transfer is None:
+            start = time.perf_counter()
+            edge._transfer = self.transfer_of(edge.segment)
+            self.transfer_time += time.perf_counter() - start
+        return edge._transfer
+
     def add_edge(self, src: int, dst: int, segment: Segment) -> _Edge:
-        edge = _Edge(src, dst, segment, self.transfer_of(segment))
+        edge = _Edge(src, dst, segment)
         self.vertices[src].out_edges.append(edge)
         self.edges += 1
         return edge
 
     def try_fixed(self, src: int, dst: int, budget_left: float) -> _Edge | None:
-        a, b = self.vertices[src].state, self.vertices[dst].state
+        a, b = self.vertices[src].state, _nearest_yaw_branch(
+            self.vertices[dst].state, float(self.vertices[src].state.yaw[0]))
         duration = self.sample_duration(a, b.position[0], budget_left)
         if duration is None:
             return None
@@ -194,13 +220,14 @@ class _Search:
     # -- beliefs --------------------------------------------------------------------------
 
     def belief(self, sigma: np.ndarray, cost: float, vertex: int, parent: _Belief | None,
-               edge: _Edge | None) -> _Belief:
+               edge: _Edge | None, logdets: tuple[float, float] | None = None) -> _Belief:
         stop_time = self.vertices[vertex].stop_time
         distinct = 0
-        if parent is not None:
-            distinct = parent.distinct + (edge not in parent.path_edges())
-        return _Belief(sigma, cost, vertex, parent, edge, _logdet(sigma),
-                       _logdet(sigma[E_THETA, E_THETA]), distinct,
+        if parent is not None and self.objective == "random":
+            distinct = parent.distinct + all(e is not edge for e in parent.path_edges())
+        if logdets is None:
+            logdets = (_logdet(sigma), _logdet(sigma[E_THETA, E_THETA]))
+        return _Belief(sigma, cost, vertex, parent, edge, logdets[0], logdets[1], distinct,
                        is_open=cost + stop_time < self.settings.budget)
 
     def append(self, belief: _Belief) -> bool:
@@ -225,7 +252,8 @@ class _Search:
     def consider(self, belief: _Belief) -> None:
         """Track the best candidate flight: the belief with its stop, inside the budget."""
         vertex = self.vertices[belief.vertex]
-        if belief.edge is None or belief.cost + vertex.stop_time > self.settings.budget:
+        if (belief.edge is None or not vertex.can_stop
+                or belief.cost + vertex.stop_time > self.settings.budget):
             return
         final = apply_transfer(belief.sigma, vertex.stop_transfer)
         dopt = self.dopt(final)
@@ -243,6 +271,7 @@ class _Search:
     def propagate(self, queue: list[_Belief]) -> None:
         """Phase 2: push open beliefs through the edges they have not crossed yet."""
         start = time.perf_counter()
+        transfers0 = self.transfer_time
         budget = self.settings.budget
         while queue and not self.out_of_time():
             b = queue.pop()
@@ -255,12 +284,13 @@ class _Search:
                 if cost + dst.stop_time > budget:
                     continue
                 self.propagations += 1
-                new = self.belief(apply_transfer(b.sigma, edge.transfer), cost, edge.dst, b, edge)
+                sigma, full, theta = apply_transfer_logdet(b.sigma, self.edge_transfer(edge))
+                new = self.belief(sigma, cost, edge.dst, b, edge, (full, theta))
                 if self.append(new):
                     queue.append(new)
             b.expanded = len(edges)
             self.report()
-        self.propagation_time += time.perf_counter() - start
+        self.propagation_time += time.perf_counter() - start - (self.transfer_time - transfers0)
 
     def report(self, force: bool = False) -> None:
         now = self.elapsed()
@@ -275,36 +305,53 @@ class _Search:
     # -- phase 1 --------------------------------------------------------------------------
 
     def grow(self) -> list[_Belief]:
-        """One sample: a new vertex connected to the graph; returns beliefs to propagate."""
+        """One sample: a new vertex connected to the graph; returns beliefs to propagate.
+
+        The free-end connection is tried from the nearest vertices with open beliefs, up
+        to `_NEAREST_TRIES` of them: a graph vertex is usually moving, and its nearest
+        position is often not the one that can turn towards the sample.
+        """
         self.samples += 1
         pose = self.sample_pose()
-        positions = np.array([v.state.position[0] for v in self.vertices])
-        nearest = int(np.argmin(np.linalg.norm(positions - pose[:3], axis=1)))
-        near_state = self.vertices[nearest].state
-        open_costs = [b.cost for b in self.vertices[nearest].beliefs if b.is_open]
-        if not open_costs:
-            return []
-        duration = self.sample_duration(near_state, pose[:3],
-                                        self.settings.budget - min(open_costs))
-        if duration is None:
-            return []
         start = time.perf_counter()
-        self.edges_attempted += 1
-        segment = connect_free_end(near_state, pose[:3], float(pose[3]), duration)
+        positions = np.array([v.state.position[0] for v in self.vertices])
+        order = np.argsort(np.linalg.norm(positions - pose[:3], axis=1))
         queue: list[_Belief] = []
-        if self.feasible(segment):
-            new = self.add_vertex(segment.end_state())
-            if new is not None:
-                self.add_edge(nearest, new, segment)
-                queue.extend(b for b in self.vertices[nearest].beliefs if b.is_open)
-                budget = self.settings.budget
-                self.try_fixed(new, nearest, budget)
-                for u in range(len(self.vertices) - 1):
-                    if u != nearest and self.try_fixed(u, new, budget) is not None:
-                        queue.extend(b for b in self.vertices[u].beliefs if b.is_open)
-                    if u != nearest:
-                        self.try_fixed(new, u, budget)
+        tries = 0
+        for nearest in order:
+            nearest = int(nearest)
+            open_costs = [b.cost for b in self.vertices[nearest].beliefs if b.is_open]
+            if not open_costs:
+                continue
+            tries += 1
+            near_state = self.vertices[nearest].state
+            duration = self.sample_duration(near_state, pose[:3],
+                                            self.settings.budget - min(open_costs))
+            if duration is not None:
+                self.edges_attempted += 1
+                yaw = float(near_state.yaw[0]) + _wrap(float(pose[3]) - float(near_state.yaw[0]))
+                segment = connect_free_end(near_state, pose[:3], yaw, duration)
+                if self.feasible(segment):
+                    queue = self._connect_all(nearest, self.add_vertex(segment.end_state()),
+                                              segment)
+                    break
+            if tries == _NEAREST_TRIES:
+                break
         self.edge_time += time.perf_counter() - start
+        return queue
+
+    def _connect_all(self, nearest: int, new: int, segment: Segment) -> list[_Belief]:
+        """Edges nearest → new (free end), new → nearest, and to and from every vertex."""
+        self.add_edge(nearest, new, segment)
+        queue = [b for b in self.vertices[nearest].beliefs if b.is_open]
+        budget = self.settings.budget
+        self.try_fixed(new, nearest, budget)
+        for u in range(len(self.vertices) - 1):
+            if u == nearest:
+                continue
+            if self.try_fixed(u, new, budget) is not None:
+                queue.extend(b for b in self.vertices[u].beliefs if b.is_open)
+            self.try_fixed(new, u, budget)
         return queue
 
     def run(self) -> None:
@@ -320,9 +367,36 @@ class _Search:
         self.report(force=True)
 
 
+def _wrap(angle: float) -> float:
+    """Angle in [-π, π)."""
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _nearest_yaw_branch(state: VertexState, yaw: float) -> VertexState:
+    """The same vertex with its yaw shifted by 2πk to lie within π of ``yaw``.
+
+    Flatness and control use only cos ψ and sin ψ, so the shifted state is the same
+    physical state, and a segment to it turns the short way round.
+    """
+    shift = yaw + _wrap(float(state.yaw[0]) - yaw) - float(state.yaw[0])
+    if shift == 0.0:
+        return state
+    return VertexState(state.position, state.yaw + np.array([shift, 0.0, 0.0]))
+
+
 def _as_trajectory(segment: Segment) -> PiecewisePolynomial:
     return PiecewisePolynomial(np.array([segment.duration]), segment.position_coeffs[None],
                                segment.yaw_coeffs[None])
+
+
+def _search_model(config: VehicleConfig, settings: PlannerSettings) -> ErrorStateModel:
+    """The model for search steps at the propagation rate: each step's measurement carries
+    the information of measurement_rate / propagation_rate measurements."""
+    weight = settings.measurement_rate / settings.propagation_rate
+    nz = config.noise
+    lumped = replace(config, noise=replace(nz, position_sigma=nz.position_sigma / np.sqrt(weight),
+                                           attitude_sigma=nz.attitude_sigma / np.sqrt(weight)))
+    return ErrorStateModel.for_vehicle(lumped)
 
 
 def _initial_covariance(model: ErrorStateModel, config: VehicleConfig,
@@ -335,6 +409,19 @@ def _initial_covariance(model: ErrorStateModel, config: VehicleConfig,
     sigma[E_THETA, E_THETA] = np.eye(6) * settings.prior_relative_sigma**2
     assert sigma.shape == (ERROR_DIM, ERROR_DIM)
     return sigma
+
+
+def _warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
+    """Load (or compile) the numba kernels before the planning clock starts."""
+    pose = settings.start_pose
+    state = VertexState.hover(pose[:3], float(pose[3]))
+    segment = connect_free_end(state, pose[:3] + [0.1, 0.0, 0.0], float(pose[3]), 1.0)
+    check_segment(segment, config, np.asarray(settings.box, dtype=float))
+    model = _search_model(config, settings)
+    states, n, dt = edge_samples(_as_trajectory(segment), config, config.theta,
+                                 settings.propagation_rate)
+    transfer = edge_transfer(model, states, n, config.theta, dt)
+    apply_transfer_logdet(np.eye(ERROR_DIM), transfer)
 
 
 def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
@@ -387,7 +474,8 @@ def _result(search: _Search, kind: str) -> PlanResult:
         beliefs=sum(len(v.beliefs) for v in search.vertices),
         edges_attempted=search.edges_attempted, beliefs_propagated=search.propagations,
         elapsed=search.elapsed(), time_to_first_solution=search.first_solution,
-        edge_time=search.edge_time, propagation_time=search.propagation_time,
+        edge_time=search.edge_time + search.transfer_time,
+        propagation_time=search.propagation_time,
         best_history=np.array(search.history, dtype=float).reshape(-1, 2))
     path = [0] + [e.dst for e in edges]
     edge_list = [e for v in search.vertices for e in v.out_edges]
@@ -409,6 +497,7 @@ def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: st
                  progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
     """Run the graph search with an objective: "dopt" or "random" (most distinct segments)."""
     _validate(config, settings)
+    _warm_up(config, settings)
     search = _Search(config, settings, objective, progress)
     search.run()
     return _result(search, objective)

@@ -1,0 +1,426 @@
+"""Feasibility of a polynomial segment: paper Eq. (constraints) plus speed and rotor limits.
+
+Checked in this order (`vehicle.config.Limits`): position in the flight box; collective
+thrust m‖a − g‖ in [thrust_min_ratio, thrust_max_ratio] · m g; ‖v‖ ≤ speed_max (a
+planner limit in DESIGN.md); |ψ̈| ≤ yaw_acceleration_max; ‖ω‖ ≤ body_rate_max; rotor
+speeds (n² from the allocation) in [rotor_speed_min, rotor_speed_max]² — the Firefly has
+so little yaw authority that without these the planner would plan yaw it cannot fly.
+
+The first four are polynomials in s = τ/T, decided exactly (to rounding) by Bernstein
+subdivision: a polynomial lies in the hull of its Bernstein coefficients on [0, 1], the
+end ones are its end values, and halving (de Casteljau) shrinks the hull quadratically
+onto the true range — the answer the derivative's roots give, cheaper and without
+companion-matrix trouble at clustered extrema. ω and n² are sampled on a grid (10 ms by
+default); Mueller-style, each interval where a sample comes within a conservative local
+bound of a limit (safety × |f'| × half the step) is split ten-fold, down to 0.1 ms, and
+rejected if still undecided there. The pointwise flatness (`vehicle.flatness` math for
+ω and n² only) is a numba kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import ceil, comb
+
+import numba
+import numpy as np
+
+from planner.segments import Segment, VertexState
+from vehicle.allocation import allocation_pinv
+from vehicle.config import GRAVITY, VehicleConfig
+
+__all__ = ["CONSTRAINTS", "FeasibilityResult", "check_segment", "check_vertex_state"]
+
+#: Constraint names in the order they are checked (``FeasibilityResult.reason``).
+CONSTRAINTS = ("box", "thrust", "speed", "yaw_acceleration", "body_rate", "rotor_speed")
+_BOX, _THRUST, _SPEED, _YAW_ACC, _RATE, _ROTOR = range(len(CONSTRAINTS))
+
+_MAX_DEPTH = 40  # hull excess shrinks as 4^-depth: at 40 it is far below rounding
+_REFINE = 10  # sub-intervals per refined grid interval
+_MIN_STEP = 1e-4  # s; a grid interval still undecided at this step is rejected
+_ROUNDING = 1e-14  # rounding allowance per unit of Σ|terms| (45 ε; ≤ 1 ε seen in tests)
+_SLACK = 1e-9  # sampled slacks this close to a limit are refined (and rejected at 0.1 ms)
+
+
+@dataclass(frozen=True)
+class FeasibilityResult:
+    """Outcome of a feasibility check.
+
+    Attributes
+    ----------
+    feasible : bool
+        True when every constraint holds on the whole segment.
+    reason : str
+        The first constraint found violated (one of `CONSTRAINTS`), "" when feasible.
+    time : float or None
+        Local time of the violation (or of the undecided interval), s; None if feasible.
+    samples : int
+        Pointwise flatness evaluations spent (a cost measure).
+    """
+
+    feasible: bool
+    reason: str = ""
+    time: float | None = None
+    samples: int = 0
+
+    def __bool__(self) -> bool:
+        return self.feasible
+
+
+def _bernstein(n: int) -> np.ndarray:
+    """B with Bernstein coefficients β = B a of Σ a_j s^j on [0, 1], degree n."""
+    return np.array([[comb(i, j) / comb(n, j) for j in range(n + 1)] for i in range(n + 1)])
+
+
+def _square_weights(m: int) -> np.ndarray:
+    """W with Bernstein coefficients of p² = Σ_(i+j=k) W_ij β_i β_j, degree m."""
+    return np.array([[comb(m, i) * comb(m, j) / comb(2 * m, i + j) for j in range(m + 1)]
+                     for i in range(m + 1)])
+
+
+_BERN_POS, _BERN_VEL, _BERN_ACC, _BERN_YAW = (_bernstein(n) for n in (9, 8, 7, 3))
+_SQUARE_VEL, _SQUARE_ACC = _square_weights(8), _square_weights(7)
+
+
+@numba.njit(cache=True)
+def _to_bernstein(bern: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Bernstein coefficients of Σ c_j s^j; ``bern`` is `_bernstein` of its degree."""
+    beta = np.zeros(c.size)
+    for i in range(c.size):
+        for j in range(i + 1):
+            beta[i] += bern[i, j] * c[j]
+    return beta
+
+
+@numba.njit(cache=True)
+def _range_violation(beta: np.ndarray, lo: float, hi: float) -> float:
+    """Where the polynomial with Bernstein coefficients β leaves [lo, hi] on [0, 1].
+
+    Returns s ≥ 0 where its value is outside (or the undecided spot at the maximum
+    depth), or −1 when the whole range is inside. Depth-first, left half first.
+    """
+    n = beta.size
+    stack = np.empty((_MAX_DEPTH + 2, n))
+    starts = np.empty(_MAX_DEPTH + 2)
+    depths = np.empty(_MAX_DEPTH + 2, dtype=np.int64)
+    stack[0] = beta
+    starts[0], depths[0], top = 0.0, 0, 1
+    while top > 0:
+        top -= 1
+        b, a, depth = stack[top].copy(), starts[top], depths[top]
+        width = 0.5**depth
+        if not lo <= b[0] <= hi:
+            return a
+        if not lo <= b[n - 1] <= hi:
+            return a + width
+        if lo <= b.min() and b.max() <= hi:
+            continue
+        if depth >= _MAX_DEPTH:
+            return a
+        # de Casteljau at ½: the halves' coefficients are the first and last entries of
+        # the successive averaging rows.
+        left, right = np.empty(n), np.empty(n)
+        left[0], right[n - 1] = b[0], b[n - 1]
+        for r in range(1, n):
+            for i in range(n - r):
+                b[i] = 0.5 * (b[i] + b[i + 1])
+            left[r], right[n - 1 - r] = b[0], b[n - 1 - r]
+        stack[top], starts[top], depths[top] = right, a + 0.5 * width, depth + 1
+        stack[top + 1], starts[top + 1], depths[top + 1] = left, a, depth + 1
+        top += 2
+    return -1.0
+
+
+@numba.njit(cache=True)
+def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
+                       pinv: np.ndarray, v: np.ndarray, out: np.ndarray, row: int) -> None:
+    """Normalised slacks at unit time s into out[row]: ‖ω‖/ω_max − 1, then per rotor.
+
+    Rotor slack max(n² − n²_max, n²_min − n²) / n²_max. Positive means violated; NaN or
+    inf (a singular attitude) counts as violated. Same math as ``flat_to_state``. ``v``
+    (12,) is scratch space (no allocation per sample).
+    """
+    # Horner, all 12 derivatives at once: a, jerk, snap (3 each), ψ, ψ̇, ψ̈.
+    v[:] = 0.0
+    for j in range(dc.shape[0] - 1, -1, -1):
+        for r in range(12):
+            v[r] = v[r] * s + dc[j, 6 + r]
+    tx, ty, tz = v[0], v[1], v[2] + GRAVITY
+    jx, jy, jz = v[3], v[4], v[5]
+    sx, sy, sz = v[6], v[7], v[8]
+    psi, dpsi, ddpsi = v[9], v[10], v[11]
+    norm = np.sqrt(tx * tx + ty * ty + tz * tz)
+    if not norm > 1e-9:
+        out[row] = np.inf
+        return
+    zx, zy, zz = tx / norm, ty / norm, tz / norm
+    cp, sp = np.cos(psi), np.sin(psi)
+    # y_B = z_B × x_C / ‖·‖ with x_C = [cos ψ, sin ψ, 0]; x_B = y_B × z_B.
+    yx, yy, yz = -zz * sp, zz * cp, zx * sp - zy * cp
+    ny = np.sqrt(yx * yx + yy * yy + yz * yz)
+    if not ny > 1e-9:
+        out[row] = np.inf
+        return
+    yx, yy, yz = yx / ny, yy / ny, yz / ny
+    xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
+    ds = zx * jx + zy * jy + zz * jz
+    dzx, dzy, dzz = (jx - ds * zx) / norm, (jy - ds * zy) / norm, (jz - ds * zz) / norm
+    wx = -(yx * dzx + yy * dzy + yz * dzz)
+    wy = xx * dzx + xy * dzy + xz * dzz
+    xxc = xx * cp + xy * sp
+    zxc = zx * cp + zy * sp
+    yyc = -yx * sp + yy * cp
+    wz = (wx * zxc + dpsi * yyc) / xxc
+    dxx, dxy, dxz = wz * yx - wy * zx, wz * yy - wy * zy, wz * yz - wy * zz
+    dyx, dyy, dyz = -wz * xx + wx * zx, -wz * xy + wx * zy, -wz * xz + wx * zz
+    dds = dzx * jx + dzy * jy + dzz * jz + zx * sx + zy * sy + zz * sz
+    cx = (sx - 2.0 * ds * dzx - dds * zx) / norm - wy * dxx + wx * dyx
+    cy = (sy - 2.0 * ds * dzy - dds * zy) / norm - wy * dxy + wx * dyy
+    cz = (sz - 2.0 * ds * dzz - dds * zz) / norm - wy * dxz + wx * dyz
+    dwx = -(yx * cx + yy * cy + yz * cz)
+    dwy = xx * cx + xy * cy + xz * cz
+    lhs_rest = wz * ((dxx * cp + dxy * sp) + dpsi * (-xx * sp + xy * cp))
+    rhs = (dwx * zxc + wx * ((dzx * cp + dzy * sp) + dpsi * (-zx * sp + zy * cp))
+           + ddpsi * yyc + dpsi * (-dyx * sp + dyy * cp))
+    dwz = (rhs - lhs_rest) / xxc
+    out[row, 0] = np.sqrt(wx * wx + wy * wy + wz * wz) / lim[5] - 1.0
+    # Paper Eq. (allocation): [T, J ω̇ + ω × J ω] = A n².
+    thrust = lim[0] * norm
+    tau_x = J[0] * dwx + (wy * J[2] * wz - wz * J[1] * wy)
+    tau_y = J[1] * dwy + (wz * J[0] * wx - wx * J[2] * wz)
+    tau_z = J[2] * dwz + (wx * J[1] * wy - wy * J[0] * wx)
+    for i in range(pinv.shape[0]):
+        n2 = pinv[i, 0] * thrust + pinv[i, 1] * tau_x + pinv[i, 2] * tau_y + pinv[i, 3] * tau_z
+        out[row, 1 + i] = max(n2 - lim[7], lim[6] - n2) / lim[7]
+    for f in range(out.shape[1]):
+        if not out[row, f] <= 1e300:
+            out[row, f] = np.inf
+
+
+@numba.njit(cache=True)
+def _linear_violation(bern: np.ndarray, c: np.ndarray, lo: float, hi: float) -> float:
+    """`_range_violation` of Σ c_j s^j, the limits tightened by _ROUNDING × Σ|c_j|."""
+    tol = _ROUNDING * np.sum(np.abs(c))
+    return _range_violation(_to_bernstein(bern, c), lo + tol, hi - tol)
+
+
+@numba.njit(cache=True)
+def _square_norm(dc: np.ndarray, column: int, bern: np.ndarray, weights: np.ndarray,
+                 lift: float) -> tuple[np.ndarray, float]:
+    """Bernstein coefficients of Σ_axis q_axis(s)², q = dc[:, column + axis] (+ lift on z).
+
+    Squared in the Bernstein basis, whose coefficients are of the size of the values:
+    squaring the monomial coefficients instead loses up to 1e-8 relative to cancellation.
+    Also returns the rounding allowance: Σ_axis max|β| (Σ|q| + max|β|) × _ROUNDING.
+    """
+    n = weights.shape[0]
+    out = np.zeros(2 * n - 1)
+    tol = 0.0
+    for axis in range(3):
+        q = dc[:n, column + axis].copy()
+        if axis == 2:
+            q[0] += lift
+        beta = _to_bernstein(bern, q)
+        top = np.max(np.abs(beta))
+        tol += _ROUNDING * top * (np.sum(np.abs(q)) + top)
+        for i in range(n):
+            for j in range(n):
+                out[i + j] += weights[i, j] * beta[i] * beta[j]
+    return out, tol
+
+
+@numba.njit(cache=True)
+def _polynomial_scan(dc: np.ndarray, box: np.ndarray, lim: np.ndarray) -> tuple[int, float]:
+    """Exact checks of the polynomial constraints: (constraint index, s) or (-1, 0).
+
+    ``dc`` is `Segment.derivative_coeffs`: column 3k + axis the k-th τ-derivative of
+    position in powers of s, column 15 + k of yaw. Each limit is tightened by the
+    rounding error the monomial coefficients may carry (_ROUNDING × Σ|terms|), so that
+    no sampler, this one or another, sees a violation where this accepts.
+    """
+    for axis in range(3):
+        s = _linear_violation(_BERN_POS, dc[:, axis].copy(), box[axis], box[axis + 3])
+        if s >= 0.0:
+            return _BOX, s
+    # Paper Eq. (constraints): thrust per mass ‖a + [0, 0, g]‖, compared squared.
+    f, tol = _square_norm(dc, 6, _BERN_ACC, _SQUARE_ACC, GRAVITY)
+    s = _range_violation(f, lim[1] + tol, lim[2] - tol)
+    if s >= 0.0:
+        return _THRUST, s
+    f, tol = _square_norm(dc, 3, _BERN_VEL, _SQUARE_VEL, 0.0)
+    s = _range_violation(f, -np.inf, lim[3] - tol)
+    if s >= 0.0:
+        return _SPEED, s
+    # Paper Eq. (constraints): |ψ̈| ≤ ψ̈_max, a cubic.
+    s = _linear_violation(_BERN_YAW, dc[:4, 17].copy(), -lim[4], lim[4])
+    if s >= 0.0:
+        return _YAW_ACC, s
+    return -1, 0.0
+
+
+@numba.njit(cache=True)
+def _undecided(g: np.ndarray, i: int, safety: float) -> int:
+    """Column whose bound on [t_i, t_i+1] reaches its limit, or -1.
+
+    Bound: larger sample + safety × |f'| × step / 2, with |f'| × step the largest
+    neighbouring difference.
+    """
+    n = g.shape[0] - 1
+    for f in range(g.shape[1]):
+        d = abs(g[i + 1, f] - g[i, f])
+        if i > 0:
+            d = max(d, abs(g[i, f] - g[i - 1, f]))
+        if i + 2 <= n:
+            d = max(d, abs(g[i + 2, f] - g[i + 1, f]))
+        if max(g[i, f], g[i + 1, f]) + 0.5 * safety * d > -_SLACK:
+            return f
+    return -1
+
+
+@numba.njit(cache=True)
+def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: float,
+                   kernel: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[int, float, int]:
+    """Grid check of ω and n², refining undecided intervals: (column, time, evaluations).
+
+    Column -1 when feasible, else the slack (0 body rate, 1+ a rotor) that a sample
+    violates or that stayed undecided down to the minimum step, at local ``time``.
+    """
+    lim, J, pinv = kernel
+    v = np.empty(12)
+    # Level 0 is the whole segment in ``intervals`` parts; deeper levels split each
+    # undecided interval of the level above into _REFINE parts.
+    starts, columns = np.zeros(1), np.zeros(1, dtype=np.int64)
+    count, width, parts, evaluations = 1, duration, intervals, 0
+    while count > 0:
+        if width <= _MIN_STEP * (1.0 + 1e-9):
+            return columns[0], starts[0], evaluations
+        step = width / parts
+        g = np.empty((parts + 1, 1 + pinv.shape[0]))
+        next_starts = np.empty(count * parts)
+        next_columns = np.empty(count * parts, dtype=np.int64)
+        next_count = 0
+        for q in range(count):
+            for i in range(parts + 1):
+                t = min(starts[q] + i * step, duration)
+                _constraint_values(dc, t / duration, lim, J, pinv, v, g, i)
+                for f in range(g.shape[1]):
+                    if g[i, f] > 0.0:
+                        return f, t, evaluations + i + 1
+            evaluations += parts + 1
+            for i in range(parts):
+                f = _undecided(g, i, safety)
+                if f >= 0:
+                    next_starts[next_count], next_columns[next_count] = starts[q] + i * step, f
+                    next_count += 1
+        starts, columns, count = next_starts, next_columns, next_count
+        width, parts = step, _REFINE
+    return -1, 0.0, evaluations
+
+
+@numba.njit(cache=True)
+def _check_kernel(dc: np.ndarray, duration: float, box: np.ndarray,
+                  kernel: tuple[np.ndarray, np.ndarray, np.ndarray], intervals: int,
+                  safety: float) -> tuple[int, float, int]:
+    """All checks, cheap exact ones first: (constraint index or -1, time, evaluations)."""
+    which, s = _polynomial_scan(dc, box, kernel[0])
+    if which >= 0:
+        return which, s * duration, 0
+    column, time, evaluations = _adaptive_scan(dc, duration, intervals, safety, kernel)
+    if column < 0:
+        return -1, 0.0, evaluations
+    return (_RATE if column == 0 else _ROTOR), time, evaluations
+
+
+# (config, theta) → kernel inputs; keyed by identity (a config's value hash costs more
+# than a check), holding the config so that its id cannot be reused while cached.
+_KERNEL_CACHE: dict[tuple[int, bytes], tuple[VehicleConfig, tuple]] = {}
+
+
+def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(limits, J, A⁺) for the kernels, cached per config and θ.
+
+    limits = [m, (r_min g)², (r_max g)², v_max², ψ̈_max, ω_max, n²_min, n²_max].
+    """
+    th = config.theta if theta is None else np.asarray(theta, dtype=float).reshape(6)
+    key = (id(config), b"" if theta is None else th.tobytes())
+    hit = _KERNEL_CACHE.get(key)
+    if hit is not None and hit[0] is config:
+        return hit[1]
+    lim = config.limits
+    limits = np.array([config.mass, (lim.thrust_min_ratio * GRAVITY) ** 2,
+                       (lim.thrust_max_ratio * GRAVITY) ** 2, lim.speed_max**2,
+                       lim.yaw_acceleration_max, lim.body_rate_max, lim.rotor_speed_min**2,
+                       lim.rotor_speed_max**2])
+    value = (limits, th[3:6].copy(), np.ascontiguousarray(allocation_pinv(config, th)))
+    if len(_KERNEL_CACHE) >= 32:
+        _KERNEL_CACHE.clear()
+    _KERNEL_CACHE[key] = (config, value)
+    return value
+
+
+def check_segment(
+    segment: Segment,
+    config: VehicleConfig,
+    box: np.ndarray,
+    theta: np.ndarray | None = None,
+    *,
+    grid_step: float = 0.01,
+    safety: float = 2.0,
+) -> FeasibilityResult:
+    """Check a segment against all limits on the whole of [0, T].
+
+    Parameters
+    ----------
+    segment : Segment
+        The segment.
+    config : VehicleConfig
+        Mass, rotor geometry and `Limits`.
+    box : array_like, shape (6,)
+        Flight volume [x_min, y_min, z_min, x_max, y_max, z_max], m, world ENU.
+    theta : ndarray, shape (6,), optional
+        Parameters for inertia and allocation; the config's nominal θ by default.
+    grid_step : float, optional
+        Coarse grid step for body rates and rotor speeds, s.
+    safety : float, optional
+        Factor (≥ 2) on the local bound that decides whether an interval is refined.
+
+    Returns
+    -------
+    FeasibilityResult
+    """
+    T = segment.duration
+    which, time, evaluations = _check_kernel(
+        segment.derivative_coeffs, T, np.asarray(box, dtype=float),
+        _kernel_inputs(config, theta), max(2, ceil(T / grid_step)), float(safety))
+    if which < 0:
+        return FeasibilityResult(True, samples=evaluations)
+    return FeasibilityResult(False, CONSTRAINTS[which], time, evaluations)
+
+
+def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarray,
+                       theta: np.ndarray | None = None) -> bool:
+    """Whether one flat state satisfies every instantaneous limit (for sampling).
+
+    Parameters
+    ----------
+    state : VertexState
+        Position derivatives up to snap and yaw up to yaw acceleration.
+    config : VehicleConfig
+        Mass, rotor geometry and `Limits`.
+    box : array_like, shape (6,)
+        Flight volume [x_min, y_min, z_min, x_max, y_max, z_max], m.
+    theta : ndarray, shape (6,), optional
+        Parameters for inertia and allocation; the config's nominal θ by default.
+
+    Returns
+    -------
+    bool
+    """
+    # A constant polynomial in the layout of Segment.derivative_coeffs, checked like one.
+    dc = np.zeros((10, 18))
+    dc[0, :15] = state.position.ravel()
+    dc[0, 15:] = state.yaw
+    which, _, _ = _check_kernel(dc, 1.0, np.asarray(box, dtype=float),
+                                _kernel_inputs(config, theta), 1, 2.0)
+    return which < 0

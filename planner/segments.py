@@ -1,0 +1,405 @@
+"""4-D polynomial segments: minimum-snap position and minimum-yaw-rate yaw.
+
+Paper Section "Motion Planning", Eq. (min_snap_optimization): a segment is a 10-coefficient
+(degree 9) polynomial per position axis and a 6-coefficient (degree 5) polynomial in yaw,
+so that a chain of segments is continuous up to snap and yaw acceleration (and hence in
+rotor speeds). The *first* connection to a sampled state fixes the start derivatives and
+the end position and yaw, and leaves the end derivatives free; it minimises
+∫‖d⁴p/dt⁴‖² dt per axis and, for yaw, ∫ψ̇² dt (the paper's "minimum-angular-velocity"
+yaw segments, read as the yaw *rate*, derivative order 1). Every other connection is
+fully constrained (Hermite interpolation).
+
+The closed form is Richter et al. (2013): with the boundary derivatives d = A c of the
+coefficients c and the cost cᵀ Q c, the free part of d minimises dᵀ A⁻ᵀ Q A⁻¹ d. Time is
+nondimensionalised, s = τ / T ∈ [0, 1], before solving: with b_j = c_j T^j and
+d^k p/dτ^k = T^(-k) d^k p/ds^k, every matrix of the problem is the one of the unit
+interval, so they are computed once at import and each connection is a small matrix
+product. This is also what keeps T = 0.1 s and T = 10 s equally well conditioned.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from math import factorial
+
+import numpy as np
+
+from vehicle.trajectory import FlatOutputs, PiecewisePolynomial
+
+__all__ = [
+    "POSITION_COEFFS", "YAW_COEFFS", "Segment", "VertexState", "connect_fixed",
+    "connect_free_end", "duration_range", "snap_cost", "stop_segment", "to_piecewise",
+    "yaw_rate_cost",
+]
+
+#: Coefficients per position axis (degree 9: continuity up to snap at both ends).
+POSITION_COEFFS = 10
+#: Coefficients of the yaw polynomial (degree 5: continuity up to yaw acceleration).
+YAW_COEFFS = 6
+_POS_DERIVS = POSITION_COEFFS // 2  # position … snap
+_YAW_DERIVS = YAW_COEFFS // 2  # yaw, yaw rate, yaw acceleration
+_SNAP = 4  # derivative order minimised in position
+_YAW_RATE = 1  # derivative order minimised in yaw
+
+
+def _derivative_factors(n_coeffs: int, order: int) -> np.ndarray:
+    """j!/(j-k)! for j = 0…N-1 (zero below the order), shape (N,)."""
+    return np.array(
+        [factorial(j) / factorial(j - order) if j >= order else 0.0 for j in range(n_coeffs)]
+    )
+
+
+def _boundary_matrix(n_coeffs: int) -> np.ndarray:
+    """A of the unit interval: rows d^k/ds^k at s = 0, then at s = 1, k < N/2."""
+    m = n_coeffs // 2
+    at_zero = [np.eye(n_coeffs)[k] * factorial(k) for k in range(m)]
+    at_one = [_derivative_factors(n_coeffs, k) for k in range(m)]
+    return np.array(at_zero + at_one)
+
+
+def _cost_matrix(n_coeffs: int, order: int) -> np.ndarray:
+    """Q of the unit interval: bᵀ Q b = ∫₀¹ (d^r p/ds^r)² ds for r = ``order``."""
+    f = _derivative_factors(n_coeffs, order)
+    j = np.arange(n_coeffs)
+    power = j[:, None] + j[None, :] - 2 * order + 1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.outer(f, f) / power
+    return np.where(np.outer(f, f) != 0.0, q, 0.0)
+
+
+def _free_end_map(n_coeffs: int, order: int) -> np.ndarray:
+    """M with b = M [d_start (N/2); p_end], the end derivatives chosen optimally.
+
+    Richter et al. (2013): R = A⁻ᵀ Q A⁻¹, d_P* = -R_PP⁻¹ R_PF d_F, b = A⁻¹ [d_F; d_P*],
+    with d_F the start derivatives and the end value and d_P the end derivatives.
+    """
+    m = n_coeffs // 2
+    a_inv = np.linalg.inv(_boundary_matrix(n_coeffs))
+    r = a_inv.T @ _cost_matrix(n_coeffs, order) @ a_inv
+    fixed, free = np.arange(m + 1), np.arange(m + 1, n_coeffs)
+    d_free = -np.linalg.solve(r[np.ix_(free, free)], r[np.ix_(free, fixed)])
+    return a_inv[:, fixed] + a_inv[:, free] @ d_free
+
+
+# Constant unit-interval matrices (the only part of the problem that can be cached).
+_POS_HERMITE = np.linalg.inv(_boundary_matrix(POSITION_COEFFS))
+_YAW_HERMITE = np.linalg.inv(_boundary_matrix(YAW_COEFFS))
+_POS_FREE = _free_end_map(POSITION_COEFFS, _SNAP)
+_YAW_FREE = _free_end_map(YAW_COEFFS, _YAW_RATE)
+_POS_COST = _cost_matrix(POSITION_COEFFS, _SNAP)
+_YAW_COST = _cost_matrix(YAW_COEFFS, _YAW_RATE)
+_POWERS = np.arange(POSITION_COEFFS)
+
+
+def _derivative_map() -> np.ndarray:
+    """W with (W c).reshape(10, 18) · T^i = `Segment.derivative_coeffs`, shape (180, 36).
+
+    The k-th τ-derivative of Σ c_j τ^j, written in s = τ/T, has the coefficient
+    c_(i+k) (i+k)!/i! T^i at s^i; c stacks the x, y, z and yaw coefficients.
+    """
+    w = np.zeros((POSITION_COEFFS, 3 * _POS_DERIVS + _YAW_DERIVS, 3 * POSITION_COEFFS + YAW_COEFFS))
+    columns = [(3 * k + a, POSITION_COEFFS * a, POSITION_COEFFS, k)
+               for k in range(_POS_DERIVS) for a in range(3)]
+    columns += [(3 * _POS_DERIVS + k, 3 * POSITION_COEFFS, YAW_COEFFS, k) for k in range(3)]
+    for column, offset, n, k in columns:
+        for i in range(n - k):
+            w[i, column, offset + i + k] = factorial(i + k) / factorial(i)
+    return w.reshape(-1, w.shape[-1])
+
+
+_DERIVATIVE_MAP = _derivative_map()
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class VertexState:
+    """A flat state at a graph vertex: paper Eq. (flat_state).
+
+    Attributes
+    ----------
+    position : ndarray, shape (5, 3)
+        Position (m), velocity (m/s), acceleration (m/s²), jerk (m/s³) and snap (m/s⁴),
+        world ENU.
+    yaw : ndarray, shape (3,)
+        Yaw (rad), yaw rate (rad/s) and yaw acceleration (rad/s²).
+    """
+
+    position: np.ndarray
+    yaw: np.ndarray
+
+    def __post_init__(self) -> None:
+        p = np.array(self.position, dtype=float)
+        y = np.array(self.yaw, dtype=float)
+        if p.shape != (_POS_DERIVS, 3) or y.shape != (_YAW_DERIVS,):
+            raise ValueError(f"expected position (5, 3) and yaw (3,), got {p.shape}, {y.shape}")
+        object.__setattr__(self, "position", _readonly(p))
+        object.__setattr__(self, "yaw", _readonly(y))
+
+    @classmethod
+    def hover(cls, position: np.ndarray, yaw: float) -> VertexState:
+        """At rest at ``position`` (m, shape (3,)) with heading ``yaw`` (rad)."""
+        p = np.zeros((_POS_DERIVS, 3))
+        p[0] = position
+        return cls(p, np.array([yaw, 0.0, 0.0]))
+
+    @property
+    def pose(self) -> np.ndarray:
+        """[x, y, z, yaw] (m, rad), shape (4,)."""
+        return np.append(self.position[0], self.yaw[0])
+
+
+@dataclass(frozen=True, eq=False)
+class Segment:
+    """One 4-D polynomial segment in local time τ ∈ [0, T].
+
+    Attributes
+    ----------
+    duration : float
+        T, s.
+    position_coeffs : ndarray, shape (3, 10)
+        Per axis, coefficients of increasing powers of τ (m/s^j).
+    yaw_coeffs : ndarray, shape (6,)
+        Yaw coefficients of increasing powers of τ (rad/s^j).
+
+    Notes
+    -----
+    Outside [0, T] the segment holds its end points at rest, like
+    `vehicle.trajectory.PiecewisePolynomial`, so a segment is a ``Trajectory``.
+    """
+
+    duration: float
+    position_coeffs: np.ndarray
+    yaw_coeffs: np.ndarray
+
+    def __post_init__(self) -> None:
+        T = float(self.duration)
+        if not T > 0.0 or not np.isfinite(T):
+            raise ValueError(f"duration must be positive and finite, got {self.duration}")
+        pc = np.array(self.position_coeffs, dtype=float)
+        yc = np.array(self.yaw_coeffs, dtype=float)
+        if pc.shape != (3, POSITION_COEFFS) or yc.shape != (YAW_COEFFS,):
+            raise ValueError(f"expected coefficients (3, 10) and (6,), got {pc.shape}, {yc.shape}")
+        object.__setattr__(self, "duration", T)
+        object.__setattr__(self, "position_coeffs", _readonly(pc))
+        object.__setattr__(self, "yaw_coeffs", _readonly(yc))
+
+    @cached_property
+    def unit_coeffs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Coefficients in s = τ/T ∈ [0, 1]: position (3, 10) and yaw (6,)."""
+        scale = self.duration**_POWERS
+        return self.position_coeffs * scale, self.yaw_coeffs * scale[:YAW_COEFFS]
+
+    @cached_property
+    def derivative_coeffs(self) -> np.ndarray:
+        """Rows p, ṗ, p̈, p⃛, p⁗ (x, y, z each), ψ, ψ̇, ψ̈ in powers of s, shape (10, 18).
+
+        Column ``3 k + axis`` (and ``15 + k`` for yaw) holds the coefficients of the k-th
+        τ-derivative in increasing powers of s = τ/T, so values are ``s_powers @ D``.
+        """
+        c = np.concatenate([self.position_coeffs.ravel(), self.yaw_coeffs])
+        out = (_DERIVATIVE_MAP @ c).reshape(POSITION_COEFFS, -1)
+        out *= (self.duration**_POWERS)[:, None]
+        return out
+
+    def _values(self, s: np.ndarray) -> np.ndarray:
+        """All derivatives at unit times s, shape (S, 18)."""
+        return (s[:, None] ** _POWERS) @ self.derivative_coeffs
+
+    def flat_outputs(self, tau: np.ndarray) -> FlatOutputs:
+        """Flat outputs at local times ``tau`` (s, shape (S,)), held at rest outside [0, T]."""
+        tau = np.atleast_1d(np.asarray(tau, dtype=float))
+        v = self._values(np.clip(tau, 0.0, self.duration) / self.duration)
+        outside = (tau < 0.0) | (tau > self.duration)
+        if np.any(outside):
+            v[outside, 3 : 3 * _POS_DERIVS] = 0.0
+            v[outside, 3 * _POS_DERIVS + 1 :] = 0.0
+        pos = v[:, : 3 * _POS_DERIVS].reshape(-1, _POS_DERIVS, 3)
+        yaw = v[:, 3 * _POS_DERIVS :]
+        return FlatOutputs(
+            pos[:, 0], pos[:, 1], pos[:, 2], pos[:, 3], pos[:, 4], yaw[:, 0], yaw[:, 1], yaw[:, 2]
+        )
+
+    def _state_at(self, s: float) -> VertexState:
+        v = self._values(np.array([s]))[0]
+        return VertexState(v[: 3 * _POS_DERIVS].reshape(_POS_DERIVS, 3), v[3 * _POS_DERIVS :])
+
+    def start_state(self) -> VertexState:
+        """Flat state at τ = 0."""
+        return self._state_at(0.0)
+
+    def end_state(self) -> VertexState:
+        """Flat state at τ = T."""
+        return self._state_at(1.0)
+
+
+def _trusted_segment(duration: float, position_b: np.ndarray, yaw_b: np.ndarray) -> Segment:
+    """Segment from unit-time coefficients (3, 10), (6,) that need no validation.
+
+    The connections call this thousands of times per second; it skips the checks and
+    copies of ``Segment.__init__`` (the arrays are fresh and owned by the segment).
+    """
+    inv = duration ** -_POWERS
+    seg = object.__new__(Segment)
+    object.__setattr__(seg, "duration", duration)
+    object.__setattr__(seg, "position_coeffs", _readonly(position_b * inv))
+    object.__setattr__(seg, "yaw_coeffs", _readonly(yaw_b * inv[:YAW_COEFFS]))
+    return seg
+
+
+def connect_free_end(start: VertexState, end_position: np.ndarray, end_yaw: float,
+                     duration: float) -> Segment:
+    """Minimum-snap / minimum-yaw-rate segment with free end derivatives.
+
+    Paper Eq. (min_snap_optimization) with the "free" option: the start is fixed up to
+    snap and yaw acceleration, the end only in position and yaw; minimises
+    ∫‖d⁴p/dt⁴‖² dt per axis and ∫ψ̇² dt (closed form of Richter et al., 2013).
+
+    Parameters
+    ----------
+    start : VertexState
+        Start flat state.
+    end_position : ndarray, shape (3,)
+        End position, m, world ENU.
+    end_yaw : float
+        End yaw, rad. Used as given: the caller chooses its branch (e.g. unwraps a
+        sampled yaw next to ``start.yaw[0]``).
+    duration : float
+        T, s.
+
+    Returns
+    -------
+    Segment
+    """
+    T = float(duration)
+    if not T > 0.0:
+        raise ValueError(f"duration must be positive, got {duration}")
+    # Boundary data in s units: d^k/ds^k = T^k d^k/dτ^k.
+    scale = T**_POWERS
+    d = np.empty((_POS_DERIVS + 1, 3))
+    np.multiply(start.position, scale[:_POS_DERIVS, None], out=d[:_POS_DERIVS])
+    d[_POS_DERIVS] = end_position
+    yd = np.empty(_YAW_DERIVS + 1)
+    np.multiply(start.yaw, scale[:_YAW_DERIVS], out=yd[:_YAW_DERIVS])
+    yd[_YAW_DERIVS] = end_yaw
+    return _trusted_segment(T, (_POS_FREE @ d).T, _YAW_FREE @ yd)
+
+
+def connect_fixed(start: VertexState, end: VertexState, duration: float) -> Segment:
+    """Fully constrained segment: both ends fixed up to snap and yaw acceleration.
+
+    Hermite interpolation, 10 conditions per position axis and 6 in yaw, so the
+    polynomial is unique (paper Eq. (min_snap_optimization), end not free).
+
+    Parameters
+    ----------
+    start, end : VertexState
+        Flat states at τ = 0 and τ = T.
+    duration : float
+        T, s.
+
+    Returns
+    -------
+    Segment
+    """
+    T = float(duration)
+    if not T > 0.0:
+        raise ValueError(f"duration must be positive, got {duration}")
+    # Boundary data in s units: d^k/ds^k = T^k d^k/dτ^k.
+    scale = T**_POWERS
+    d = np.empty((POSITION_COEFFS, 3))
+    np.multiply(start.position, scale[:_POS_DERIVS, None], out=d[:_POS_DERIVS])
+    np.multiply(end.position, scale[:_POS_DERIVS, None], out=d[_POS_DERIVS:])
+    yd = np.empty(YAW_COEFFS)
+    np.multiply(start.yaw, scale[:_YAW_DERIVS], out=yd[:_YAW_DERIVS])
+    np.multiply(end.yaw, scale[:_YAW_DERIVS], out=yd[_YAW_DERIVS:])
+    return _trusted_segment(T, (_POS_HERMITE @ d).T, _YAW_HERMITE @ yd)
+
+
+def stop_segment(start: VertexState, duration: float,
+                 end_position: np.ndarray | None = None) -> Segment:
+    """Segment coming to rest: all end derivatives zero.
+
+    Parameters
+    ----------
+    start : VertexState
+        Start flat state.
+    duration : float
+        T, s.
+    end_position : ndarray, shape (3,), optional
+        Where to stop, m. By default p₀ + v₀ T / 2, roughly where a smooth stop from
+        velocity v₀ ends (a linear decay of the speed covers half of v₀ T).
+
+    Returns
+    -------
+    Segment
+        Ends at rest, yaw held at ψ₀ + ψ̇₀ T / 2 for the same reason.
+    """
+    T = float(duration)
+    if end_position is None:
+        end_position = start.position[0] + start.position[1] * (T / 2.0)
+    end = VertexState.hover(np.asarray(end_position, dtype=float),
+                            start.yaw[0] + start.yaw[1] * (T / 2.0))
+    return connect_fixed(start, end, T)
+
+
+def snap_cost(segment: Segment) -> float:
+    """∫₀^T ‖d⁴p/dτ⁴‖² dτ over the segment, m²/s⁷ (exact, from the Q matrix).
+
+    With s = τ/T: ∫₀^T (p⁗)² dτ = T^(-7) ∫₀¹ (d⁴p/ds⁴)² ds = T^(-7) bᵀ Q b.
+    """
+    b, _ = segment.unit_coeffs
+    return float(np.einsum("ai,ij,aj->", b, _POS_COST, b)) / segment.duration**7
+
+
+def yaw_rate_cost(segment: Segment) -> float:
+    """∫₀^T ψ̇² dτ over the segment, rad²/s (exact, from the Q matrix)."""
+    _, b = segment.unit_coeffs
+    return float(b @ _YAW_COST @ b) / segment.duration
+
+
+def duration_range(distance: float, speed_max: float, budget_left: float,
+                   segment_time_max: float, min_duration: float = 0.0
+                   ) -> tuple[float, float] | None:
+    """Interval to sample a segment duration from (paper, Section "Motion Planning").
+
+    T ∈ [d / v_max, min(budget left, T_max)].
+
+    Parameters
+    ----------
+    distance : float
+        Euclidean distance d between the vertices, m.
+    speed_max : float
+        v_max, m/s.
+    budget_left : float
+        Flight time still available at the start vertex, s (budget minus the least cost
+        of its open beliefs).
+    segment_time_max : float
+        T_max, s.
+    min_duration : float, optional
+        Extra lower bound, s: the paper's bound is 0 for coincident vertices, and a
+        segment needs T > 0.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(lo, hi)`` in s, or None when the interval is empty (or hi ≤ 0).
+    """
+    lo = max(distance / speed_max, min_duration)
+    hi = min(budget_left, segment_time_max)
+    if lo > hi or hi <= 0.0:
+        return None
+    return lo, hi
+
+
+def to_piecewise(segments: Sequence[Segment]) -> PiecewisePolynomial:
+    """Chain segments into one `vehicle.trajectory.PiecewisePolynomial`."""
+    return PiecewisePolynomial(np.array([s.duration for s in segments]),
+                               np.array([s.position_coeffs for s in segments]),
+                               np.array([s.yaw_coeffs for s in segments]))
+
