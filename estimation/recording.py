@@ -13,8 +13,6 @@ Entities (all time series on the ``time`` timeline, s from the start of the log)
 
 from __future__ import annotations
 
-import os
-import tempfile
 import uuid
 from pathlib import Path
 
@@ -26,6 +24,7 @@ from scipy.stats import chi2
 from estimation.flight_data import FlightData
 from estimation.results import EstimationResult
 from vehicle.config import PARAMETER_NAMES
+from vehicle.rerun_file import atomic_recording
 
 __all__ = ["APPLICATION_ID", "recording_id_for", "write_estimation_rrd"]
 
@@ -150,27 +149,8 @@ def write_estimation_rrd(path: str | Path, result: EstimationResult, flight: Fli
     reproducible: rerun 0.41 stamps every chunk and row with fresh time-based random ids
     (TUIDs), and exposes no way to seed them.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    # Recording properties carry the wall-clock start time; only what we send goes in.
-    # strict=True on every call: by default rerun only warns about malformed data (columns
-    # of unequal length, say) and drops it, which would leave a silently incomplete file.
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id_for(flight.source),
-                             send_properties=False)
-    try:
-        rec.set_log_time_enabled(False)
-        rec.save(tmp, default_blueprint=_blueprint())
-        rec.send_recording_name(f"estimate {flight.source}")
+    with atomic_recording(path, APPLICATION_ID, recording_id_for(flight.source),
+                          f"estimate {flight.source}", _blueprint()) as rec:
         _log_parameters(rec, result)
         _log_trajectories(rec, result, flight)
         _log_innovations(rec, result)
-        rec.flush()
-        # Closes the file sink, writing the footer; without it a reader may see a truncated file.
-        rec.disconnect()
-        os.replace(tmp, path)
-    except BaseException:
-        rec.disconnect()
-        Path(tmp).unlink(missing_ok=True)
-        raise

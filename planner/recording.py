@@ -26,8 +26,6 @@ start of the flight):
 
 from __future__ import annotations
 
-import os
-import tempfile
 import uuid
 from pathlib import Path
 
@@ -38,6 +36,7 @@ from scipy.spatial.transform import Rotation
 
 from planner.results import PlanResult
 from vehicle.config import PARAMETER_NAMES
+from vehicle.rerun_file import atomic_recording
 
 __all__ = ["APPLICATION_ID", "recording_id_for", "time_colors", "write_plan_rrd"]
 
@@ -190,27 +189,9 @@ def write_plan_rrd(path: str | Path, result: PlanResult) -> None:
     As for the estimation recording, the data are reproducible but the file is not byte
     for byte: rerun 0.41 stamps chunks and rows with fresh random ids.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    # strict=True on every call: by default rerun only warns about malformed data and
-    # drops it, which would leave a silently incomplete file.
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id_for(result),
-                             send_properties=False)
-    try:
-        rec.set_log_time_enabled(False)
-        rec.save(tmp, default_blueprint=_blueprint())
-        rec.send_recording_name(f"plan {result.kind} {result.config.name}")
+    with atomic_recording(path, APPLICATION_ID, recording_id_for(result),
+                          f"plan {result.kind} {result.config.name}", _blueprint()) as rec:
         _log_graph(rec, result)
         _log_path(rec, result)
         _log_sigma(rec, result)
         _log_inertia(rec, result)
-        rec.flush()
-        # Closes the file sink, writing the footer; without it a reader may see a truncated file.
-        rec.disconnect()
-        os.replace(tmp, path)
-    except BaseException:
-        rec.disconnect()
-        Path(tmp).unlink(missing_ok=True)
-        raise
