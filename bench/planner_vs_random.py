@@ -6,7 +6,7 @@ flights are flown in the offline simulator with the true θ and the filter is ru
 logs. Reported: median D-opt (SI) predicted and reached by the estimator, their ratio,
 the prediction error, and how many seconds of planning reach 90 % of the final log D-opt.
 
-    python bench/planner_vs_random.py [--seeds 20] [--budget 30] [--time 30]
+    python bench/planner_vs_random.py [--seeds 20] [--budget 30] [--time 30] [--process-noise]
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 
 from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.readers import load_flight
+from flight.effects import ProcessNoise
 from flight.simulator import SimulationSettings, Simulator
 from planner.baseline import plan_random
 from planner.results import PlannerSettings, PlanResult
@@ -32,10 +33,16 @@ def dopt(cov: np.ndarray) -> float:
 
 
 def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanResult,
-                     directory: Path, seed: int):
-    """Fly the plan with the true θ (the controller knows only the prior) and filter the log."""
-    Simulator(prior, true_theta=truth.theta, settings=SimulationSettings(seed=seed)).run(
-        result.trajectory, directory)
+                     directory: Path, seed: int, process_noise: bool = False):
+    """Fly the plan with the true θ (the controller knows only the prior) and filter the log.
+
+    With ``process_noise`` the world carries the force and moment noise the filter assumes,
+    so that its σ can be compared with the spread of its errors.
+    """
+    effects = [ProcessNoise(prior.noise.force_density, prior.noise.moment_density,
+                            seed=seed)] if process_noise else []
+    Simulator(prior, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
+              effects=effects).run(result.trajectory, directory)
     flight = load_flight(directory / "pose.csv", prior)
     return estimate_parameters(flight, prior, EstimatorSettings(refine=False))
 
@@ -55,6 +62,8 @@ def main() -> None:
     parser.add_argument("--budget", type=float, default=30.0)
     parser.add_argument("--time", type=float, default=30.0)
     parser.add_argument("--vehicle", default="firefly")
+    parser.add_argument("--process-noise", action="store_true",
+                        help="fly in a world with the process noise the filter assumes")
     args = parser.parse_args()
     truth = load_vehicle(args.vehicle)
     rows = []
@@ -66,7 +75,8 @@ def main() -> None:
             row = {}
             for kind, planner in (("dopt", plan), ("random", plan_random)):
                 result = planner(prior, settings)
-                est = fly_and_estimate(truth, prior, result, Path(tmp) / f"{kind}-{seed}", seed)
+                est = fly_and_estimate(truth, prior, result, Path(tmp) / f"{kind}-{seed}", seed,
+                                       args.process_noise)
                 row[kind] = (result, est)
             rows.append(row)
             (p, e), (rp, re) = row["dopt"], row["random"]
