@@ -26,6 +26,27 @@ _PLANNED = {
 }
 
 
+#: Built commands: (name, module with add_arguments/main, --help line, description).
+_COMMANDS = (
+    ("demo", offline, "the whole experiment on the simulated vehicle",
+     "Run the demonstration on the simulated reference vehicle. For now: simulate it flying "
+     "the built-in excitation trajectory and write a pose log."),
+    ("simulate", offline, "fly the offline simulator and write a pose log",
+     "Simulate a vehicle flying the built-in excitation trajectory (physics ≥ 500 Hz, "
+     "geometric controller, motor lag, motion-capture noise) and write pose.csv, truth.csv "
+     "and meta.json into a new flight directory."),
+    ("estimate", estimate, "estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a log",
+     "Estimate the thrust, drag and moment coefficients and the inertia, with uncertainties, "
+     "from a flight log (pose.csv, .tlog, .ulg or .bin): a parameter EKF, then a "
+     "process-noise fit and a batch MAP refinement."),
+    ("plan", plan, "plan a maximally informative calibration flight",
+     "Plan a calibration flight that minimises the predicted parameter uncertainty "
+     "(D-optimality) within a flight-time budget and a flight box, using the vehicle's "
+     "nominal parameters as the model; or, with --random, the paper's random baseline. "
+     "Writes the trajectory file, and on request sampled setpoints and a Rerun recording."),
+)
+
+
 def _not_implemented(command: str) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
         print(f"mavsysid {command}: not implemented yet", file=sys.stderr)
@@ -50,42 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"mavsysid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    demo = sub.add_parser(
-        "demo", parents=[common], help="the whole experiment on the simulated vehicle",
-        description="Run the demonstration on the simulated reference vehicle. For now: "
-        "simulate it flying the built-in excitation trajectory and write a pose log.",
-    )
-    offline.add_arguments(demo)
-    demo.set_defaults(run=offline.main)
-
-    simulate = sub.add_parser(
-        "simulate", parents=[common], help="fly the offline simulator and write a pose log",
-        description="Simulate a vehicle flying the built-in excitation trajectory "
-        "(physics ≥ 500 Hz, geometric controller, motor lag, motion-capture noise) and "
-        "write pose.csv, truth.csv and meta.json into a new flight directory.",
-    )
-    offline.add_arguments(simulate)
-    simulate.set_defaults(run=offline.main)
-
-    est = sub.add_parser(
-        "estimate", parents=[common], help="estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a log",
-        description="Estimate the thrust, drag and moment coefficients and the inertia, with "
-        "uncertainties, from a flight log (pose.csv, .tlog, .ulg or .bin): a parameter EKF, "
-        "then a process-noise fit and a batch MAP refinement.",
-    )
-    estimate.add_arguments(est)
-    est.set_defaults(run=estimate.main)
-
-    planning = sub.add_parser(
-        "plan", parents=[common], help="plan a maximally informative calibration flight",
-        description="Plan a calibration flight that minimises the predicted parameter "
-        "uncertainty (D-optimality) within a flight-time budget and a flight box, using "
-        "the vehicle's nominal parameters as the model; or, with --random, the paper's "
-        "random baseline. Writes the trajectory file, and on request sampled setpoints "
-        "and a Rerun recording.",
-    )
-    plan.add_arguments(planning)
-    planning.set_defaults(run=plan.main)
+    for name, module, summary, description in _COMMANDS:
+        command = sub.add_parser(name, parents=[common], help=summary, description=description)
+        module.add_arguments(command)
+        command.set_defaults(run=module.main)
 
     for command, summary in _PLANNED.items():
         p = sub.add_parser(command, parents=[common], help=f"{summary} (not implemented yet)",
