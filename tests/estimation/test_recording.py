@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import os
-from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +15,7 @@ from rerun.chunk import RrdReader
 from estimation.flight_data import FlightData
 from estimation.recording import APPLICATION_ID, recording_id_for, write_estimation_rrd
 from estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from tests.support.rrd import series, temporal_rows
 from vehicle.config import PARAMETER_NAMES
 
 TRUE_THETA = np.array([8.54858e-6, 0.0176, 1.36777e-7, 0.0347563, 0.0458929, 0.0977])
@@ -53,27 +53,6 @@ def synthetic(n: int = 120, m: int | None = None, *, truth: bool = True, refined
                                                    np.ones(m)]),
                         np.tile([1.0, 0.0, 0.0, 0.0], (m, 1)), np.full((m, 6), 500.0), SOURCE)
     return result, flight
-
-
-def temporal_rows(path: Path) -> Counter[str]:
-    """Number of time points per entity over all its non-static chunks."""
-    rows: Counter[str] = Counter()
-    for chunk in RrdReader(path).stream():
-        if not chunk.is_static:
-            assert chunk.timeline_names == ["time"]
-            rows[chunk.entity_path] += chunk.num_rows
-    return rows
-
-
-def series(path: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
-    """Times (s) and scalar values of one entity, in time order."""
-    times, values = [], []
-    for chunk in RrdReader(path).stream().filter(content=entity, is_static=False):
-        batch = chunk.to_record_batch()
-        times += [1e-9 * ns for ns in batch.column("time").cast(pa.int64()).to_pylist()]
-        values += [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
-    order = np.argsort(times, kind="stable")
-    return np.asarray(times)[order], np.asarray(values)[order]
 
 
 def content(path: Path) -> list[tuple[Any, ...]]:

@@ -2,20 +2,16 @@
 
 from __future__ import annotations
 
-import math
 import os
-from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
 
-from flight.excitation import ExcitationSpec, excitation_trajectory
 from planner.recording import (
     APPLICATION_ID,
     PATH_RATE,
@@ -23,35 +19,16 @@ from planner.recording import (
     time_colors,
     write_plan_rrd,
 )
-from planner.results import PlannerGraph, PlannerSettings, PlannerStats, PlanResult
-from vehicle.config import PARAMETER_NAMES, load_vehicle
+from planner.results import PlanResult
+from tests.support.plans import fake_plan
+from tests.support.rrd import series, temporal_rows
+from vehicle.config import PARAMETER_NAMES
 
 SIGMA = [f"/planner/{kind}/{name}" for kind in ("sigma", "relative_sigma")
          for name in PARAMETER_NAMES]
 ENTITIES = ["/planner/graph/vertices", "/planner/graph/edges", "/planner/graph/path",
           "/planner/path", "/planner/vehicle", "/planner/inertia_covariance",
           "/planner/inertia_ellipsoids", *SIGMA]
-
-
-def fake_plan(history: int = 25) -> PlanResult:
-    """A hand-made plan: the 12 s excitation figure with a made-up σ history and graph."""
-    config = load_vehicle("firefly")
-    trajectory = excitation_trajectory(ExcitationSpec(duration=12.0))
-    t = np.linspace(0.0, trajectory.duration, history)
-    sigma = 0.5 * config.theta * (0.02 + 0.98 * np.exp(-t[:, None] / 2.0))
-    correlation = np.full((6, 6), 0.3) + 0.7 * np.eye(6)
-    covariance = correlation * np.outer(sigma[-1], sigma[-1]) if history else np.eye(6)
-    knots = trajectory.flat_outputs(np.concatenate([trajectory.segment_starts,
-                                                    [trajectory.duration]]))
-    vertices = np.column_stack([knots.position, knots.yaw])
-    edges = np.column_stack([np.arange(len(vertices) - 1), np.arange(1, len(vertices))])
-    paths = [np.linspace(vertices[a, :3], vertices[b, :3], 5) for a, b in edges]
-    stats = PlannerStats(40, len(vertices), len(edges), 90, 200, 400, 2.5, 0.4, 1.0, 1.2,
-                         np.zeros((0, 2)))
-    settings = PlannerSettings(budget=12.0, max_samples=40, seed=1)
-    return PlanResult("dopt", trajectory, math.exp(np.linalg.slogdet(covariance)[1] / 6.0),
-                      covariance, t, sigma, config, settings, stats,
-                      PlannerGraph(vertices, edges, paths, [0, 3, 5]))
 
 
 def planner_entities(path: Path) -> set[str]:
@@ -64,27 +41,6 @@ def static_cell(path: Path, entity: str, column: str) -> list[Any]:
     """The one static value of an entity's component column."""
     (chunk,) = RrdReader(path).stream().filter(content=entity, is_static=True)
     return chunk.to_record_batch().column(column).to_pylist()[0]
-
-
-def temporal_rows(path: Path) -> Counter[str]:
-    """Number of time points per entity over all its non-static chunks."""
-    rows: Counter[str] = Counter()
-    for chunk in RrdReader(path).stream():
-        if not chunk.is_static:
-            assert chunk.timeline_names == ["time"]
-            rows[chunk.entity_path] += chunk.num_rows
-    return rows
-
-
-def series(path: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
-    """Times (s) and scalar values of one entity, in time order."""
-    times, values = [], []
-    for chunk in RrdReader(path).stream().filter(content=entity, is_static=False):
-        batch = chunk.to_record_batch()
-        times += [1e-9 * ns for ns in batch.column("time").cast(pa.int64()).to_pylist()]
-        values += [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
-    order = np.argsort(times, kind="stable")
-    return np.asarray(times)[order], np.asarray(values)[order]
 
 
 @pytest.fixture(scope="module")

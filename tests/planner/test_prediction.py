@@ -48,7 +48,7 @@ def test_same_seed_and_sample_budget_give_the_same_plan():
 
 
 def test_plan_starts_and_ends_in_hover_inside_the_budget():
-    """The flight starts at rest at the start pose and ends at rest, within the budget."""
+    """The flight starts and ends at rest within the budget; the best D-opt only improves."""
     cfg = load_vehicle("firefly")
     settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=5)
     result = plan(cfg, settings)
@@ -58,4 +58,5 @@ def test_plan_starts_and_ends_in_hover_inside_the_budget():
     for arr in (ends.velocity, ends.acceleration, ends.jerk):
         np.testing.assert_allclose(arr, 0.0, atol=1e-7)
     assert traj.duration <= settings.budget + 1e-9
-    assert result.predicted_dopt < result.stats.best_history[0, 1] + 1e-30
+    history = result.stats.best_history
+    assert history.shape[0] >= 1 and np.all(np.diff(history[:, 1]) < 0.0)

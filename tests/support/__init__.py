@@ -1,0 +1,1 @@
+"""Helpers shared by several test modules (importable because pytest adds the repo root)."""
