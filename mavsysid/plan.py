@@ -133,6 +133,8 @@ def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
         raise InputError("--time: an unlimited planning time needs --samples N")
     if settings.seed < 0:
         raise InputError(f"--seed {settings.seed}: expected an integer ≥ 0")
+    if settings.refine_steps < 0:
+        raise InputError(f"--refine-steps {settings.refine_steps}: expected an integer ≥ 0")
     if not (settings.measurement_rate > 0.0 and settings.prior_relative_sigma > 0.0):
         raise InputError("planner settings: measurement rate and prior σ must be positive")
     _check_box(settings, config)
@@ -249,6 +251,9 @@ def format_summary(result: PlanResult, written: dict[str, Path], verbosity: int 
     lines.append(f"  planner    {stats.samples} samples, {stats.vertices} vertices, "
                  f"{stats.edges} edges, {stats.beliefs} beliefs in {stats.elapsed:.1f} s; "
                  f"first solution after {'—' if first is None else f'{first:.1f} s'}")
+    if stats.refine_steps:
+        lines.append(f"  refined    {stats.refine_accepted} of {stats.refine_steps} "
+                     "perturbations of the best flight kept")
     if verbosity > 0:
         lines.append(f"             {stats.edges_attempted} connections tried "
                      f"({stats.edge_time:.1f} s), {stats.beliefs_propagated} belief "
@@ -276,6 +281,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", metavar="X,Y,Z,YAW",
                         help="start hover, m and rad (default: box centre, yaw 0)")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
+    parser.add_argument("--refine-steps", type=int, default=PlannerSettings.refine_steps,
+                        metavar="N", help="most steps refining the search's best flight in "
+                        f"the last {100 * PlannerSettings.refine_share:.0f}%% of the planning time "
+                        f"(default: {PlannerSettings.refine_steps}; 0: paper's search only)")
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -298,7 +307,8 @@ def _settings(args: argparse.Namespace) -> PlannerSettings:
     elif time == 0.0 and args.samples is not None:
         time = math.inf
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
-                           box=box, start=start, seed=args.seed)  # type: ignore[arg-type]
+                           box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
+                           refine_steps=args.refine_steps)
 
 
 def main(args: argparse.Namespace) -> int:

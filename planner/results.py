@@ -41,6 +41,12 @@ class PlannerSettings:
         100 Hz measurements the predicted σ differ by < 0.1 %, at a quarter of the cost).
     prior_relative_sigma : float
         Prior σ of each parameter relative to the config's nominal θ.
+    refine_share : float
+        Share of the planning time spent refining the search's best flight
+        (`planner.refine`); the graph search gets the rest.
+    refine_steps : int
+        Most refinement steps (0: no refinement). With a sample budget this, not the
+        clock, ends the refinement, so the result still depends only on the seed.
     """
 
     budget: float = 30.0
@@ -52,6 +58,8 @@ class PlannerSettings:
     measurement_rate: float = 100.0
     propagation_rate: float = 25.0
     prior_relative_sigma: float = 0.5
+    refine_share: float = 0.7
+    refine_steps: int = 10_000
 
     @property
     def start_pose(self) -> np.ndarray:
@@ -94,7 +102,10 @@ class PlannerStats:
         Wall time spent building edges (segments, feasibility, transfers) and propagating
         beliefs, s.
     best_history : ndarray, shape (H, 2)
-        (elapsed s, best D-opt) each time the best plan improved.
+        (elapsed s, best D-opt) each time the best plan improved, in the search and then
+        in the refinement.
+    refine_steps, refine_accepted : int
+        Refinement perturbations tried and kept (`planner.refine`).
     """
 
     samples: int
@@ -108,6 +119,8 @@ class PlannerStats:
     edge_time: float
     propagation_time: float
     best_history: np.ndarray
+    refine_steps: int = 0
+    refine_accepted: int = 0
 
 
 @dataclass(frozen=True)
@@ -123,7 +136,8 @@ class PlannerGraph:
     edge_paths : list of ndarray, each shape (P, 3)
         Sampled positions along each edge.
     path : list of int
-        Vertex indices of the chosen path (start vertex first).
+        Vertex indices of the search's best path (start vertex first); the flown
+        trajectory is this path after refinement.
     """
 
     vertices: np.ndarray

@@ -33,6 +33,7 @@ from planner.belief import (
     propagate_steps,
 )
 from planner.feasibility import check_segment
+from planner.refine import PathRefiner, RefinablePath, StopChoice
 from planner.results import (
     PlannerGraph,
     PlannerSettings,
@@ -134,12 +135,18 @@ class _Search:
         self.vertices: list[_Vertex] = []
         self.samples = self.edges_attempted = self.edges = self.propagations = 0
         self.edge_time = self.propagation_time = self.transfer_time = 0.0
+        self.refined_steps = self.refined_accepted = 0
         self.best: tuple[float, _Belief] | None = None
         self.history: list[tuple[float, float]] = []
         self.first_solution: float | None = None
         self.t0 = time.perf_counter()
         self._last_progress = -np.inf
         self._log_scale = float(np.sum(np.log(self.model.theta_scale)))
+        self.sigma0 = _initial_covariance(self.model, config, settings)
+        refines = objective == "dopt" and settings.refine_steps > 0
+        self.search_deadline = settings.planning_time * (
+            1.0 - settings.refine_share if refines else 1.0)
+        self.refine_steps = settings.refine_steps if refines else 0
 
     # -- budget and termination -----------------------------------------------------------
 
@@ -147,7 +154,8 @@ class _Search:
         return time.perf_counter() - self.t0
 
     def out_of_time(self) -> bool:
-        return self.elapsed() >= self.settings.planning_time
+        """Past the search phase's share of the planning time."""
+        return self.elapsed() >= self.search_deadline
 
     def done(self) -> bool:
         s = self.settings
@@ -175,22 +183,27 @@ class _Search:
     def feasible(self, segment: Segment) -> bool:
         return check_segment(segment, self.config, self.box).feasible
 
+    def stop_at(self, state: VertexState) -> StopChoice | None:
+        """The shortest feasible stopping segment from ``state``; None if there is none."""
+        if np.all(np.abs(state.position[1:]) <= 1e-12) and np.all(np.abs(state.yaw[1:]) <= 1e-12):
+            return StopChoice(None, identity_transfer())
+        inner_lo, inner_hi = self.box[:3] + _STOP_MARGIN, self.box[3:] - _STOP_MARGIN
+        for duration in _STOP_DURATIONS:
+            # Where a smooth stop would end, kept inside the box.
+            end = np.clip(state.position[0] + 0.5 * duration * state.position[1],
+                          inner_lo, inner_hi)
+            candidate = stop_segment(state, duration, end)
+            if self.feasible(candidate):
+                return StopChoice(candidate, self.transfer_of(candidate))
+        return None
+
     def add_vertex(self, state: VertexState) -> int:
         """A vertex with its stopping segment, when one is feasible."""
-        stop, transfer, can_stop = None, identity_transfer(), True
-        if np.any(np.abs(state.position[1:]) > 1e-12) or np.any(np.abs(state.yaw[1:]) > 1e-12):
-            inner_lo, inner_hi = self.box[:3] + _STOP_MARGIN, self.box[3:] - _STOP_MARGIN
-            for duration in _STOP_DURATIONS:
-                # Where a smooth stop would end, kept inside the box.
-                end = np.clip(state.position[0] + 0.5 * duration * state.position[1],
-                              inner_lo, inner_hi)
-                candidate = stop_segment(state, duration, end)
-                if self.feasible(candidate):
-                    stop, transfer = candidate, self.transfer_of(candidate)
-                    break
-            else:
-                can_stop = False
-        self.vertices.append(_Vertex(state, stop, transfer, can_stop))
+        stop = self.stop_at(state)
+        if stop is None:
+            self.vertices.append(_Vertex(state, None, identity_transfer(), False))
+        else:
+            self.vertices.append(_Vertex(state, stop.segment, stop.transfer, True))
         return len(self.vertices) - 1
 
     def edge_transfer(self, edge: _Edge) -> EdgeTransfer:
@@ -358,13 +371,51 @@ class _Search:
         pose = self.settings.start_pose
         root_vertex = self.add_vertex(VertexState.hover(pose[:3], float(pose[3])))
         assert root_vertex == 0
-        sigma0 = _initial_covariance(self.model, self.config, self.settings)
-        root = self.belief(sigma0, 0.0, 0, None, None)
+        root = self.belief(self.sigma0, 0.0, 0, None, None)
         self.vertices[0].beliefs.append(root)
         while not self.done():
             self.propagate(self.grow())
             self.report()
         self.report(force=True)
+
+    # -- refinement -----------------------------------------------------------------------
+
+    def flight_dopt(self, transfers: list[EdgeTransfer]) -> float:
+        """Predicted D-optimality after a chain of transfers from the initial belief."""
+        sigma = self.sigma0
+        for transfer in transfers:
+            sigma = apply_transfer(sigma, transfer)
+        return self.dopt(sigma)
+
+    def best_path(self) -> RefinablePath | None:
+        """The best candidate flight found by the search."""
+        if self.best is None:
+            return None
+        belief = self.best[1]
+        edges = belief.path_edges()
+        end = self.vertices[belief.vertex]
+        stop = StopChoice(end.stop, end.stop_transfer)
+        transfers = tuple(self.edge_transfer(e) for e in edges)
+        return RefinablePath(
+            (self.vertices[0].state, *(self.vertices[e.dst].state for e in edges)),
+            tuple(e.segment for e in edges), transfers, stop,
+            self.flight_dopt([*transfers, stop.transfer]))
+
+    def refine(self) -> RefinablePath | None:
+        """Spend the rest of the planning time refining the best flight (`planner.refine`)."""
+        path = self.best_path()
+        if path is None or self.refine_steps == 0:
+            return path
+        refiner = PathRefiner(path, self.feasible, self.transfer_of, self.stop_at,
+                              self.flight_dopt, self.box, self.settings.budget,
+                              np.random.default_rng([self.settings.seed, 1]))
+        while refiner.steps < self.refine_steps and self.elapsed() < self.settings.planning_time:
+            if refiner.step():
+                self.history.append((self.elapsed(), refiner.path.dopt))
+            self.report()
+        self.refined_steps, self.refined_accepted = refiner.steps, refiner.accepted
+        self.report(force=True)
+        return refiner.path
 
 
 def _wrap(angle: float) -> float:
@@ -440,18 +491,15 @@ def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
                          f"{lim.thrust_max_ratio:g}] × m g exclude hover (1.0)")
 
 
-def _result(search: _Search, kind: str) -> PlanResult:
-    """The chosen flight: the best belief's edges plus its stop, with σ over time."""
-    if search.best is None:
+def _result(search: _Search, kind: str, path: RefinablePath | None) -> PlanResult:
+    """The chosen flight: the (refined) best path plus its stop, with σ over time."""
+    if path is None:
         raise JobFailedError(
             f"no feasible trajectory found in {search.elapsed():.1f} s of planning "
             f"({search.samples} samples, {len(search.vertices)} vertices, {search.edges} edges)")
-    _, best = search.best
-    edges = best.path_edges()
-    segments = [e.segment for e in edges]
-    stop = search.vertices[best.vertex].stop
-    if stop is not None:
-        segments.append(stop)
+    segments = list(path.segments)
+    if path.stop.segment is not None:
+        segments.append(path.stop.segment)
     trajectory = PiecewisePolynomial(
         np.array([s.duration for s in segments]),
         np.array([s.position_coeffs for s in segments]),
@@ -476,15 +524,17 @@ def _result(search: _Search, kind: str) -> PlanResult:
         elapsed=search.elapsed(), time_to_first_solution=search.first_solution,
         edge_time=search.edge_time + search.transfer_time,
         propagation_time=search.propagation_time,
-        best_history=np.array(search.history, dtype=float).reshape(-1, 2))
-    path = [0] + [e.dst for e in edges]
+        best_history=np.array(search.history, dtype=float).reshape(-1, 2),
+        refine_steps=search.refined_steps, refine_accepted=search.refined_accepted)
+    assert search.best is not None
+    search_path = [0] + [e.dst for e in search.best[1].path_edges()]
     edge_list = [e for v in search.vertices for e in v.out_edges]
     graph = PlannerGraph(
         vertices=np.array([v.state.pose for v in search.vertices]),
         edges=np.array([(e.src, e.dst) for e in edge_list], dtype=int).reshape(-1, 2),
         edge_paths=[e.segment.flat_outputs(np.linspace(0.0, e.segment.duration, 12)).position
                     for e in edge_list],
-        path=path)
+        path=search_path)
     return PlanResult(
         kind=kind, trajectory=trajectory,
         predicted_dopt=float(np.exp(_logdet(final_cov) / 6.0)),
@@ -500,7 +550,7 @@ def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: st
     _warm_up(config, settings)
     search = _Search(config, settings, objective, progress)
     search.run()
-    return _result(search, objective)
+    return _result(search, objective, search.refine())
 
 
 def plan(config: VehicleConfig, settings: PlannerSettings | None = None,

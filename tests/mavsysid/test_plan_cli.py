@@ -203,7 +203,7 @@ def _real_plan(tmp_path: Path, name: str, *extra: str) -> Path:
     out = tmp_path / f"{name}.json"
     # 120 samples: with seed 1 the planner connects its first vertex only after ~60.
     code = main(["plan", "--vehicle", "firefly", "--samples", "120", "--time", "60",
-                 "--seed", "1", "-o", str(out), *extra])
+                 "--seed", "1", "--refine-steps", "300", "-o", str(out), *extra])
     assert code == 0
     return out
 

@@ -26,7 +26,7 @@ def test_predicted_sigma_matches_the_estimator(tmp_path, seed):
     """
     cfg = load_vehicle("firefly")
     result = plan(cfg, PlannerSettings(budget=20.0, planning_time=np.inf, max_samples=200,
-                                       seed=seed))
+                                       seed=seed, refine_steps=300))
     noise = ProcessNoise(cfg.noise.force_density, cfg.noise.moment_density, seed=seed)
     Simulator(cfg, settings=SimulationSettings(seed=seed), effects=[noise]).run(
         result.trajectory, tmp_path / "f")
@@ -40,7 +40,8 @@ def test_predicted_sigma_matches_the_estimator(tmp_path, seed):
 def test_same_seed_and_sample_budget_give_the_same_plan():
     """With a sample budget the plan depends only on the seed, not on timing."""
     cfg = load_vehicle("firefly")
-    settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=3)
+    settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=3,
+                               refine_steps=300)
     a, b = plan(cfg, settings), plan(cfg, replace(settings))
     np.testing.assert_array_equal(a.trajectory.durations, b.trajectory.durations)
     np.testing.assert_array_equal(a.trajectory.position_coeffs, b.trajectory.position_coeffs)
@@ -50,7 +51,8 @@ def test_same_seed_and_sample_budget_give_the_same_plan():
 def test_plan_starts_and_ends_in_hover_inside_the_budget():
     """The flight starts and ends at rest within the budget; the best D-opt only improves."""
     cfg = load_vehicle("firefly")
-    settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=5)
+    settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=5,
+                               refine_steps=300)
     result = plan(cfg, settings)
     traj = result.trajectory
     ends = traj.flat_outputs(np.array([0.0, traj.duration]))
