@@ -10,7 +10,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-from mavsysid import __version__, estimate, offline, plan
+from mavsysid import __version__, estimate, offline, plan, sim, stream
 from vehicle.errors import MavsysidError
 
 __all__ = ["build_parser", "main"]
@@ -19,8 +19,6 @@ EXIT_INTERRUPTED = 130
 
 #: Subcommands still to come, with the one-line summary shown in --help.
 _PLANNED = {
-    "sim": "run a simulated MAVLink vehicle endpoint",
-    "stream": "stream a trajectory to a vehicle over MAVLink and record the flight",
     "diagnose": "find, name and fit what the model still gets wrong",
     "evaluate": "run the paper's repeatability experiment",
 }
@@ -44,6 +42,16 @@ _COMMANDS = (
      "(D-optimality) within a flight-time budget and a flight box, using the vehicle's "
      "nominal parameters as the model; or, with --random, the paper's random baseline. "
      "Writes the trajectory file, and on request sampled setpoints and a Rerun recording."),
+    ("sim", sim, "run a simulated MAVLink vehicle endpoint",
+     "Run a simulated multirotor that speaks MAVLink 2 like ArduPilot Copter (or PX4 with "
+     "--autopilot px4): heartbeat, telemetry at settable rates, parameters, modes, arming, "
+     "takeoff and landing, GUIDED/OFFBOARD setpoints, with the offline simulator's physics "
+     "in real time (or --speedup K faster), optional signing and a ground-truth log."),
+    ("stream", stream, "stream a trajectory to a vehicle over MAVLink and record the flight",
+     "Fly a trajectory file with a MAVLink vehicle (ArduPilot Copter or PX4, real or "
+     "`mavsysid sim`): check the plan and the vehicle, take off, stream position, velocity, "
+     "acceleration and yaw setpoints at a fixed rate, land, and record flight.tlog, pose.csv "
+     "and meta.json into a new flight directory."),
 )
 
 

@@ -1,0 +1,133 @@
+"""Flying `mavsysid stream` against `mavsysid sim`, both as real processes on UDP loopback.
+
+Helpers for the end-to-end and fault tests: export a built-in excitation figure as a
+trajectory file, start the simulated vehicle, run or start the streamer, find the flight
+directory, and read a tlog back with pymavlink.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from flight.excitation import ExcitationSpec, excitation_trajectory
+from flight.mavlink_setup import load_mavutil
+from planner.trajectory_file import trajectory_file_for, write_trajectory_file
+from vehicle.config import load_vehicle
+
+__all__ = [
+    "BOX",
+    "SimProcess",
+    "export_excitation",
+    "flight_dir",
+    "read_tlog",
+    "run_stream",
+    "start_stream",
+    "wait_for",
+]
+
+#: The flight box of the tests, m (the excitation figure spans x ±1.3, y ±1, z 1.1–1.9).
+BOX = (-2.0, -2.0, 0.5, 2.0, 2.0, 2.5)
+_REPO = Path(__file__).resolve().parents[2]
+_ENV = {**os.environ, "PYTHONPATH": str(_REPO), "PYTHONUNBUFFERED": "1"}
+
+
+def _mavsysid(*args: str) -> list[str]:
+    return [sys.executable, "-m", "mavsysid", *args]
+
+
+def export_excitation(path: Path, duration: float, box: Sequence[float] | None = BOX,
+                      vehicle: str = "firefly") -> Path:
+    """Write the built-in excitation figure of ``duration`` s as a trajectory file."""
+    trajectory = excitation_trajectory(ExcitationSpec(duration=duration))
+    write_trajectory_file(path, trajectory_file_for(trajectory, load_vehicle(vehicle),
+                                                    box=None if box is None else tuple(box)))
+    return path
+
+
+class SimProcess:
+    """``mavsysid sim ARGS`` in its own process; its output goes to files in ``directory``."""
+
+    def __init__(self, directory: Path, *args: str) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.stdout_path = self.directory / "sim.out"
+        self.stderr_path = self.directory / "sim.err"
+        with open(self.stdout_path, "wb") as out, open(self.stderr_path, "wb") as err:
+            self.process = subprocess.Popen(_mavsysid("sim", *args), stdout=out, stderr=err,
+                                            env=_ENV, cwd=self.directory)
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        """Wait until the sim says it runs (its banner)."""
+        wait_for(lambda: "Ctrl-C to stop" in (self.stdout_path.read_text()
+                                              + self.stderr_path.read_text()),
+                 timeout, "the sim to start")
+
+    def kill(self) -> None:
+        """SIGKILL (a crashed vehicle link)."""
+        self.process.kill()
+        self.process.wait(timeout=10)
+
+    def stop(self) -> str:
+        """Stop with SIGINT as a user would; returns its stdout and stderr."""
+        if self.process.poll() is None:
+            self.process.send_signal(2)
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=10)
+        return self.stdout_path.read_text() + self.stderr_path.read_text()
+
+    def __enter__(self) -> SimProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def run_stream(trajectory: Path, *args: str, cwd: Path, timeout: float = 180.0
+               ) -> subprocess.CompletedProcess[str]:
+    """``mavsysid stream TRAJECTORY ARGS`` to completion, output captured."""
+    return subprocess.run(_mavsysid("stream", str(trajectory), *args), capture_output=True,
+                          text=True, env=_ENV, cwd=cwd, timeout=timeout, check=False)
+
+
+def start_stream(trajectory: Path, *args: str, cwd: Path) -> subprocess.Popen[str]:
+    """``mavsysid stream TRAJECTORY ARGS`` started; stderr to ``cwd/stream.err``."""
+    err = open(cwd / "stream.err", "w")  # noqa: SIM115 - the child keeps it open
+    return subprocess.Popen(_mavsysid("stream", str(trajectory), *args), stdout=subprocess.PIPE,
+                            stderr=err, text=True, env=_ENV, cwd=cwd)
+
+
+def flight_dir(log_dir: Path) -> Path:
+    """The one flight directory under ``log_dir``."""
+    (found,) = [p for p in Path(log_dir).iterdir() if p.is_dir()]
+    return found
+
+
+def wait_for(condition: Callable[[], Any], timeout: float, what: str) -> Any:
+    """Poll ``condition`` every 50 ms until it is truthy; fail the test after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+
+
+def read_tlog(path: Path) -> list[tuple[float, Any]]:
+    """(record stamp s, message) of every record of a tlog, read by pymavlink."""
+    log = load_mavutil().mavlink_connection(str(path))
+    out = []
+    while (m := log.recv_match()) is not None:
+        if m.get_type() != "BAD_DATA":
+            out.append((m._timestamp, m))
+    log.close()
+    return out
