@@ -82,10 +82,12 @@ class TlogWriter:
 
     def write(self, packet: bytes | bytearray) -> None:
         """Record one packet, stamped now."""
-        record = struct.pack(">Q", self.clock.epoch_us()) + bytes(packet)
+        data = bytes(packet)
         with self._lock:
+            # Stamped under the lock, so records from the heartbeat thread and the main
+            # loop stay in time order in the file.
             if not self._file.closed:
-                self._file.write(record)
+                self._file.write(struct.pack(">Q", self.clock.epoch_us()) + data)
                 self.records += 1
 
     def close(self) -> None:
