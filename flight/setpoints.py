@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flight.frames import enu_to_ned, wrap_angle, yaw_enu_to_ned, yaw_rate_enu_to_ned
+from vehicle.frames import enu_to_ned, wrap_angle, yaw_enu_to_ned, yaw_rate_enu_to_ned
 from vehicle.trajectory import Trajectory
 
 __all__ = [

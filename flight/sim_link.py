@@ -1,28 +1,20 @@
-"""The simulated vehicle's MAVLink link: pymavlink set up for MAVLink 2 and ArduPilot's
-dialect, connection strings, and the signing key.
+"""The simulated vehicle's MAVLink link: its identity and connection strings.
 
-pymavlink picks the wire protocol from the environment when a dialect is loaded, and a
-connection opened as MAVLink 1 replaces its parser (and with it the signing state) on
-the first MAVLink 2 byte it receives; so MAVLink 2 is forced here, before any
-connection exists.
+pymavlink is set up for MAVLink 2 and ArduPilot's dialect by `flight.mavlink_setup`,
+shared with the streamer, as is the signing key (`signing_key_from_file`).
 """
 
 from __future__ import annotations
 
-import hashlib
-import os
 import re
-from pathlib import Path
 
-os.environ["MAVLINK20"] = "1"
-os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
-
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
+from flight.mavlink_setup import load_mavutil
 from vehicle.errors import InputError
 
-__all__ = ["COMPONENT_ID", "SYSTEM_ID", "mavlink", "mavutil", "open_link", "read_signing_key"]
+__all__ = ["COMPONENT_ID", "SYSTEM_ID", "mavlink", "mavutil", "open_link"]
+
+mavutil = load_mavutil()
+mavlink = mavutil.mavlink
 
 #: The vehicle's MAVLink identity: system 1, MAV_COMP_ID_AUTOPILOT1.
 SYSTEM_ID = 1
@@ -51,7 +43,7 @@ def open_link(connect: str):
     if match.group(1) in ("udp", "tcp"):
         raise InputError(f"--connect {connect!r}: a vehicle sends with udpout: or listens "
                          "with udpin:/tcpin:; udp:/tcp: are ground-station forms")
-    mavutil.set_dialect("ardupilotmega")
+    load_mavutil()  # in case another dialect was loaded since import
     try:
         link = mavutil.mavlink_connection(connect, source_system=SYSTEM_ID,
                                           source_component=COMPONENT_ID)
@@ -60,19 +52,3 @@ def open_link(connect: str):
     if link.WIRE_PROTOCOL_VERSION != "2.0":
         raise RuntimeError("pymavlink did not load MAVLink 2")
     return link
-
-
-def read_signing_key(path: str | Path) -> bytes:
-    """The 32-byte MAVLink 2 secret key from a passphrase file (sha256 of its text).
-
-    The same derivation as MAVProxy's ``signing setup PASSPHRASE``.
-    """
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(f"--signing-key {path}: cannot read the passphrase file: "
-                         f"{getattr(error, 'strerror', None) or error}") from None
-    passphrase = text.strip()
-    if not passphrase:
-        raise InputError(f"--signing-key {path}: the file holds no passphrase")
-    return hashlib.sha256(passphrase.encode("utf-8")).digest()

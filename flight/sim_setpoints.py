@@ -11,7 +11,7 @@ GUID_TIMEOUT without a setpoint the velocity and acceleration feed-forward are d
 and the position target held. PX4: frames 1 and 8 only (others are ignored), any
 combination of the groups; setpoints count towards the OFFBOARD stream whatever the mode.
 
-The target is converted to ENU at once (`flight.frames`). A jerk estimate from
+The target is converted to ENU at once (`vehicle.frames`). A jerk estimate from
 successive acceleration setpoints, over the stream's own (smoothed) period, feeds the
 body-rate reference for a short while (`flight.sim_reference`).
 """
@@ -36,6 +36,7 @@ from flight.sim_reference import (
     hold_target,
 )
 from flight.sim_vehicle import SimVehicle
+from vehicle.frames import ned_to_enu, yaw_enu_to_ned, yaw_ned_to_enu, yaw_rate_ned_to_enu
 
 __all__ = ["SetpointTracker"]
 
@@ -45,10 +46,6 @@ _STREAM_GAP = 0.5       # s: a longer gap breaks the PX4 setpoint stream (> 2 Hz
 _STREAM_SPAN = 1.0      # s: how long the stream must have lasted for OFFBOARD
 _JERK_MAX = 200.0       # m/s³: larger finite differences are jumps, not jerk
 _JERK_HOLD_MAX = 0.1    # s: longest jerk extrapolation after a setpoint
-
-
-def _ned_to_enu(x: float, y: float, z: float) -> np.ndarray:
-    return np.array([y, x, -z])
 
 
 class SetpointTracker:
@@ -168,13 +165,13 @@ class SetpointTracker:
             return None
         v = self.vehicle
         frame = msg.coordinate_frame
-        yaw_ned = math.pi / 2.0 - v.yaw()
+        yaw_ned = float(yaw_enu_to_ned(v.yaw()))
         c, s = math.cos(yaw_ned), math.sin(yaw_ned)
 
         def vector(x: float, y: float, z: float, rotate: bool) -> np.ndarray:
             if rotate:  # body-heading axes → north/east
                 x, y = x * c - y * s, x * s + y * c
-            return _ned_to_enu(x, y, z)
+            return ned_to_enu(np.array([x, y, z]))
 
         body = frame in (8, 9)
         tgt = v.target.copy()
@@ -200,11 +197,12 @@ class SetpointTracker:
 
         use_yaw, use_rate = not msg.type_mask & 1024, not msg.type_mask & 2048
         if use_yaw and math.isfinite(msg.yaw):
-            yaw_enu = math.pi / 2.0 - msg.yaw
+            yaw_enu = float(yaw_ned_to_enu(msg.yaw))
             tgt[T_YAW] = v.yaw() - msg.yaw if frame == 9 else yaw_enu
         else:
             tgt[T_YAW] = v.shaper[6]
-        tgt[T_YAW_RATE] = -msg.yaw_rate if use_rate and math.isfinite(msg.yaw_rate) else 0.0
+        use_rate = use_rate and math.isfinite(msg.yaw_rate)
+        tgt[T_YAW_RATE] = float(yaw_rate_ned_to_enu(msg.yaw_rate)) if use_rate else 0.0
         if not np.all(np.isfinite(tgt)):
             return None
         return tgt

@@ -24,6 +24,7 @@ from flight.autopilot_modes import Autopilot
 from flight.sim_autopilot import SimAutopilot
 from flight.sim_link import mavlink
 from flight.sim_vehicle import ORIGIN
+from vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ned, yaw_enu_to_ned
 
 __all__ = [
     "ORIGIN",
@@ -35,7 +36,6 @@ __all__ = [
 
 M = mavlink
 _EARTH_RADIUS = 6378137.0
-_SQRT_HALF = math.sqrt(0.5)
 MIN_INTERVAL_US = 4000  # 250 Hz
 _ESC_IDS = (M.MAVLINK_MSG_ID_ESC_TELEMETRY_1_TO_4, M.MAVLINK_MSG_ID_ESC_TELEMETRY_5_TO_8,
             M.MAVLINK_MSG_ID_ESC_TELEMETRY_9_TO_12)
@@ -213,16 +213,11 @@ class TelemetryBuilder:
     def _pose_ned(self) -> tuple[list[float], list[float], list[float]]:
         """Published position NED, attitude q_ned_frd, velocity NED."""
         p, q, _ = self.vehicle.measured()
-        v = self.vehicle.velocity().tolist()
-        a, b, c, d = q.tolist()
-        # flight.frames.quaternion_enu_to_ned on floats: it is called at up to 250 Hz.
-        r = _SQRT_HALF
-        q_ned = [r * (a + d), r * (b + c), r * (b - c), r * (a - d)]
-        return [float(p[1]), float(p[0]), float(-p[2])], q_ned, [v[1], v[0], -v[2]]
+        return (enu_to_ned(p).tolist(), quaternion_enu_to_ned(q).tolist(),
+                enu_to_ned(self.vehicle.velocity()).tolist())
 
     def _rates_frd(self) -> tuple[float, float, float]:
-        w = self.vehicle.body_rates
-        return float(w[0]), float(-w[1]), float(-w[2])
+        return tuple(flu_to_frd(self.vehicle.body_rates).tolist())
 
     def _global(self, p_ned) -> tuple[int, int, int]:
         lat0, lon0, alt0 = ORIGIN
@@ -293,7 +288,7 @@ class TelemetryBuilder:
         p, _, v = self._pose_ned()
         lat, lon, alt = self._global(p)
         rel = round((-p[2] - self.ap.home[2]) * 1000.0)
-        heading = math.degrees(math.pi / 2.0 - self.vehicle.yaw()) % 360.0
+        heading = math.degrees(yaw_enu_to_ned(self.vehicle.yaw())) % 360.0
         vel = [max(-32768, min(32767, round(c * 100.0))) for c in v]
         return M.MAVLink_global_position_int_message(self._ms(), lat, lon, alt, rel, *vel,
                                                      round(heading * 100.0) % 36000)

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from flight.frames import ned_to_enu, quaternion_ned_to_enu
 from flight.setpoints import Setpoint
 from vehicle.config import VehicleConfig
+from vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
 from vehicle.poselog_writer import PoseLogWriter
 
 __all__ = [
@@ -45,7 +45,6 @@ __all__ = [
     "PoseSample",
     "SetpointHistory",
     "TelemetryRecorder",
-    "euler_to_quaternion",
 ]
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
@@ -70,15 +69,6 @@ STAMPING = {
                  "autopilot extrapolates); ref_active 0 and the measured pose when none "
                  "was in effect; t_traj = trajectory time of that target, -1 outside",
 }
-
-
-def euler_to_quaternion(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Z-Y-X Euler angles (rad) → [w, x, y, z], same frames (NED/FRD for ATTITUDE)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
 
 
 class ClockOffset:
@@ -212,7 +202,7 @@ class TelemetryRecorder:
                 self._has_att_q = True
         elif kind == "ATTITUDE" and not self._has_att_q:
             self._quaternion = quaternion_ned_to_enu(
-                euler_to_quaternion(msg.roll, msg.pitch, msg.yaw))
+                euler_ned_to_quaternion(msg.roll, msg.pitch, msg.yaw))
         elif kind in _ESC_BASE:
             base = _ESC_BASE[kind]
             for j in range(min(4, self._k - base)):

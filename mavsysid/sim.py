@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 
 from flight.autopilot_modes import Autopilot
+from flight.mavlink_setup import signing_key_from_file
 from flight.sim_endpoint import SimEndpoint, SimSettings
-from flight.sim_link import read_signing_key
 from mavsysid.plan import parse_numbers
 from vehicle.config import load_vehicle
 from vehicle.errors import InputError
@@ -101,7 +101,7 @@ def settings_from_args(args: argparse.Namespace) -> SimSettings:
     if args.truth_log is not None and (args.truth_log / "pose.csv").exists():
         raise InputError(f"--truth-log {args.truth_log}: already holds a pose log; "
                          "choose a new directory")
-    key = None if args.signing_key is None else read_signing_key(args.signing_key)
+    key = None if args.signing_key is None else signing_key_from_file(args.signing_key)
     return SimSettings(autopilot=autopilot, speedup=args.speedup, ekf_delay=args.ekf_delay,
                        start=start, seed=args.seed, theta_scale=scale,  # type: ignore[arg-type]
                        sensor_noise=not args.no_noise, duration=args.duration, signing_key=key,

@@ -26,16 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from estimation.readers.frames import (
-    euler_ned_to_quaternion,
-    ned_to_enu,
-    quaternion_ned_frd_to_enu_flu,
-)
 from estimation.readers.guard import import_parser, parsing
 from estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
 from estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from vehicle.config import VehicleConfig
 from vehicle.errors import LogFormatError
+from vehicle.frames import (
+    euler_ned_to_quaternion,
+    ned_to_enu,
+    quaternion_ned_to_enu,
+)
 
 __all__ = ["read_dataflash"]
 
@@ -90,7 +90,7 @@ def _pose(path: Path, found: _Messages) -> tuple[Series | None, PoseSource, list
         t = np.where(corrected > 0.0, corrected, _time_us(rows))
         p = _array(rows, ["PX", "PY", "PZ"])
         q = _degrees_to_quaternion(rows)
-        values = np.column_stack([ned_to_enu(p), quaternion_ned_frd_to_enu_flu(q)])
+        values = np.column_stack([ned_to_enu(p), quaternion_ned_to_enu(q)])
         return Series(t, values, "VISP"), "motion_capture", []
     for kf, kq in _EKFS:
         if found.get(kf) and found.get(kq):

@@ -1,12 +1,7 @@
-"""Frame conversions at the log boundary and interpolation of pose samples.
+"""Interpolation of pose samples at the log boundary.
 
-Flight logs store MAVLink/PX4/ArduPilot frames: world NED, body FRD. mavsysid uses world
-ENU and body FLU (DESIGN.md). With (w, x, y, z) a NED/FRD quaternion (body → world),
-
-    p_enu = (p_ned[1], p_ned[0], −p_ned[2]),
-    q_enu_flu = √½ (w + z, x + y, x − y, w − z)
-
-(FIELD-NOTES.md; R_enu_flu = T R_ned_frd B with T the ENU↔NED swap and B = diag(1, −1, −1)).
+Frame conversions (NED/FRD → ENU/FLU) live in `vehicle.frames`, shared with the MAVLink
+link in `flight/`.
 """
 
 from __future__ import annotations
@@ -15,48 +10,7 @@ import numpy as np
 
 from vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
 
-__all__ = [
-    "euler_ned_to_quaternion",
-    "interpolate_quaternions",
-    "ned_to_enu",
-    "quaternion_ned_frd_to_enu_flu",
-]
-
-_SQRT_HALF = np.sqrt(0.5)
-
-
-def ned_to_enu(p: np.ndarray) -> np.ndarray:
-    """Positions, shape (N, 3), m: world NED → world ENU."""
-    p = np.asarray(p, dtype=float)
-    return np.stack([p[:, 1], p[:, 0], -p[:, 2]], axis=1)
-
-
-def quaternion_ned_frd_to_enu_flu(q: np.ndarray) -> np.ndarray:
-    """Attitudes, shape (N, 4) ``[w, x, y, z]``: body FRD → world NED to body FLU → world ENU.
-
-    The map is linear and norm-preserving, so a non-unit input stays exactly as far from
-    unit norm as it was (the checks judge that afterwards).
-    """
-    q = np.asarray(q, dtype=float)
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return _SQRT_HALF * np.stack([w + z, x + y, x - y, w - z], axis=1)
-
-
-def euler_ned_to_quaternion(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
-    """Aerospace (Z-Y-X) Euler angles, rad, shape (N,), to NED/FRD quaternions (N, 4).
-
-    q = q_z(yaw) ⊗ q_y(pitch) ⊗ q_x(roll), the convention of MAVLink ATTITUDE and of
-    ArduPilot's ATT and VISP log messages.
-    """
-    cr, sr = np.cos(0.5 * np.asarray(roll, float)), np.sin(0.5 * np.asarray(roll, float))
-    cp, sp = np.cos(0.5 * np.asarray(pitch, float)), np.sin(0.5 * np.asarray(pitch, float))
-    cy, sy = np.cos(0.5 * np.asarray(yaw, float)), np.sin(0.5 * np.asarray(yaw, float))
-    return np.stack([
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    ], axis=1)
+__all__ = ["interpolate_quaternions"]
 
 
 def interpolate_quaternions(t: np.ndarray, q: np.ndarray, t_new: np.ndarray) -> np.ndarray:

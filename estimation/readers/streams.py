@@ -21,13 +21,10 @@ from estimation.readers.checks import (
     repair_samples,
     validate_flight,
 )
-from estimation.readers.frames import (
-    interpolate_quaternions,
-    ned_to_enu,
-    quaternion_ned_frd_to_enu_flu,
-)
+from estimation.readers.frames import interpolate_quaternions
 from vehicle.config import VehicleConfig
 from vehicle.errors import LogFormatError
+from vehicle.frames import ned_to_enu, quaternion_ned_to_enu
 
 __all__ = ["LogStreams", "PoseSource", "Series", "combine_pose", "to_flight_data"]
 
@@ -124,7 +121,7 @@ def combine_pose(source: str, position: Series, attitude: Series,
     tp, p = tp[inside], p[inside]
     q = interpolate_quaternions(ta, q, tp)
     if ned:
-        p, q = ned_to_enu(p), quaternion_ned_frd_to_enu_flu(q)
+        p, q = ned_to_enu(p), quaternion_ned_to_enu(q)
     label = f"{position.label} + {attitude.label}"
     return Series(tp, np.column_stack([p, q]), label), notes
 

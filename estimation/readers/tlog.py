@@ -29,16 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from estimation.readers.frames import (
-    euler_ned_to_quaternion,
-    ned_to_enu,
-    quaternion_ned_frd_to_enu_flu,
-)
 from estimation.readers.guard import import_parser, parsing
 from estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
 from estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from vehicle.config import VehicleConfig
 from vehicle.errors import LogFormatError
+from vehicle.frames import (
+    euler_ned_to_quaternion,
+    ned_to_enu,
+    quaternion_ned_to_enu,
+)
 
 __all__ = ["read_tlog"]
 
@@ -107,7 +107,7 @@ def _pose(path: Path, found: _Messages, own: _Messages,
         t = np.array([r for r, _, _ in mocap]) - offset
         p = np.array([[m.x, m.y, m.z] for _, _, m in mocap], dtype=float)
         q = np.array([list(m.q) for _, _, m in mocap], dtype=float)
-        values = np.column_stack([ned_to_enu(p), quaternion_ned_frd_to_enu_flu(q)])
+        values = np.column_stack([ned_to_enu(p), quaternion_ned_to_enu(q)])
         return Series(t, values, "ATT_POS_MOCAP"), "motion_capture", []
     local = own.get("LOCAL_POSITION_NED", [])
     if not local:

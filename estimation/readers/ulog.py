@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation.readers.frames import ned_to_enu, quaternion_ned_frd_to_enu_flu
 from estimation.readers.guard import import_parser, parsing
 from estimation.readers.motor_curve import (
     describe_curve,
@@ -33,6 +32,7 @@ from estimation.readers.motor_curve import (
 from estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from vehicle.config import VehicleConfig
 from vehicle.errors import LogFormatError
+from vehicle.frames import ned_to_enu, quaternion_ned_to_enu
 
 __all__ = ["read_ulog"]
 
@@ -80,7 +80,7 @@ def _pose(path: Path, topics: dict[str, Topic]) -> tuple[Series | None, PoseSour
                   else ["x", "y", "z"])
         p = _columns(odometry, fields)
         q = _columns(odometry, [f"q[{i}]" for i in range(4)])
-        values = np.column_stack([ned_to_enu(p), quaternion_ned_frd_to_enu_flu(q)])
+        values = np.column_stack([ned_to_enu(p), quaternion_ned_to_enu(q)])
         return Series(_time(odometry), values, name), "motion_capture", []
     local, attitude = topics.get("vehicle_local_position"), topics.get("vehicle_attitude")
     if local is None or attitude is None:

@@ -10,7 +10,8 @@ import pytest
 from flight.mavlink_link import HeartbeatLost, MavlinkLink
 from flight.mavlink_setup import load_mavutil
 from flight.tlog_writer import LinkClock
-from tests.support.mavlink_peer import ScriptedVehicle, free_udp_port
+from tests.support.mavlink_peer import ScriptedVehicle
+from tests.support.ports import free_udp_port
 from vehicle.errors import InputError, JobFailedError
 
 

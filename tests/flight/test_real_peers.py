@@ -12,7 +12,6 @@ import csv
 import os
 import queue
 import re
-import socket
 import subprocess
 import sys
 import threading
@@ -24,48 +23,27 @@ import pytest
 
 from flight.autopilot_modes import Autopilot
 from flight.sim_params import default_parameters
+from tests.support.ports import free_udp_port
+from tests.support.stream_flights import SimProcess
 from vehicle.config import load_vehicle
 
-REPO = Path(__file__).resolve().parents[2]
 TAKEOFF_ALTITUDE = 2.0  # m
 #: The offboard target, NED from home (m), and how close the vehicle must get to it.
 TARGET_NED = (1.0, 0.5, -2.0)
 REACHED = 0.2  # m
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _start_sim(tmp_path: Path, port: int, *extra: str) -> tuple[subprocess.Popen, Path]:
+def _start_sim(tmp_path: Path, port: int, *extra: str) -> tuple[SimProcess, Path]:
     """Start the sim sending to ``127.0.0.1:port`` and wait until it runs (its first start
     compiles the physics, which can take tens of seconds); the process and its truth log."""
     truth = tmp_path / "truth"
-    log_path = tmp_path / "sim.log"
-    cmd = [sys.executable, "-m", "mavsysid", "sim", "--connect", f"udpout:127.0.0.1:{port}",
-           "--speedup", "1", "--truth-log", str(truth), *extra]
-    with open(log_path, "w") as log:
-        proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT,
-                                env=dict(os.environ, PYTHONPATH=str(REPO)))
-    deadline = time.monotonic() + 90.0
-    while "Ctrl-C to stop" not in log_path.read_text(errors="replace"):
-        if proc.poll() is not None or time.monotonic() > deadline:
-            _stop(proc)
-            pytest.fail(f"the sim did not start:\n{_sim_log(tmp_path)}")
-        time.sleep(0.1)
-    return proc, truth
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
+    sim = SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
+                     "1", "--truth-log", str(truth), *extra)
+    try:
+        sim.wait_ready(timeout=90.0)
+    except BaseException:
+        pytest.fail(f"the sim did not start:\n{sim.stop()[-3000:]}")
+    return sim, truth
 
 
 def _truth_positions(truth: Path) -> list[tuple[float, float, float, float]]:
@@ -95,11 +73,6 @@ def _wait_truth(truth: Path, predicate, timeout: float) -> tuple[float, float, f
         last = rows[-1] if rows else None
         time.sleep(0.25)
     pytest.fail(f"truth never satisfied the condition within {timeout} s; last row {last}")
-
-
-def _sim_log(tmp_path: Path) -> str:
-    path = tmp_path / "sim.log"
-    return path.read_text(errors="replace")[-3000:] if path.exists() else ""
 
 
 # -------------------------------------------------------------------------------- MAVProxy
@@ -190,7 +163,7 @@ class _MavproxyConsole:
 def test_mavproxy_sees_vehicle_fetches_params_and_takes_off(tmp_path: Path) -> None:
     """Headless MAVProxy sees the heartbeat, gets the parameters, sets GUIDED, arms, takes off."""
     pytest.importorskip("MAVProxy", reason="MAVProxy cannot be installed here")
-    port = _free_udp_port()
+    port = free_udp_port()
     sim, truth = _start_sim(tmp_path, port)
     console = None
     try:
@@ -220,8 +193,8 @@ def test_mavproxy_sees_vehicle_fetches_params_and_takes_off(tmp_path: Path) -> N
     finally:
         if console is not None:
             console.close()
-        _stop(sim)
-    assert z > 0.9 * TAKEOFF_ALTITUDE, _sim_log(tmp_path)
+        sim_output = sim.stop()
+    assert z > 0.9 * TAKEOFF_ALTITUDE, sim_output[-3000:]
 
 
 # -------------------------------------------------------------------------------- MAVSDK
@@ -319,12 +292,12 @@ async def _fly_offboard(port: int, truth: Path) -> float:
 def test_mavsdk_offboard_reaches_position_setpoint(tmp_path: Path) -> None:
     """MAVSDK connects to the PX4 sim, reads position, arms, and offboard reaches a setpoint."""
     pytest.importorskip("mavsdk.asyncio", reason="mavsdk (4.x) cannot be installed here")
-    port = _free_udp_port()
+    port = free_udp_port()
     sim, truth = _start_sim(tmp_path, port, "--autopilot", "px4")
     try:
         hold_error = asyncio.run(asyncio.wait_for(_fly_offboard(port, truth), timeout=50.0))
     except TimeoutError:
-        pytest.fail(f"MAVSDK offboard flight timed out; sim log:\n{_sim_log(tmp_path)}")
+        pytest.fail(f"MAVSDK offboard flight timed out; sim log:\n{sim.output()[-3000:]}")
     finally:
-        _stop(sim)
+        sim.stop()
     assert hold_error < REACHED

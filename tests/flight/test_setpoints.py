@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.frames import ned_to_enu, yaw_ned_to_enu
 from flight.mavlink_setup import load_mavutil
 from flight.setpoints import (
     MAV_FRAME_LOCAL_NED,
@@ -18,6 +17,7 @@ from flight.setpoints import (
     TickSchedule,
     trajectory_setpoint,
 )
+from vehicle.frames import ned_to_enu, yaw_ned_to_enu
 
 
 def _wire_roundtrip(setpoint: Setpoint):

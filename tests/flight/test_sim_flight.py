@@ -13,10 +13,10 @@ import pytest
 
 from flight.autopilot_modes import ARDUCOPTER_MODES, PX4_MODES, Autopilot
 from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.frames import enu_to_ned, yaw_enu_to_ned, yaw_rate_enu_to_ned
 from flight.sim_link import mavlink as M
 from tests.support.sim_gcs import Gcs, running_sim
 from vehicle.flight_dir import read_meta
+from vehicle.frames import enu_to_ned, yaw_enu_to_ned, yaw_rate_enu_to_ned
 from vehicle.poselog import read_pose_log
 
 ACCEPTED = M.MAV_RESULT_ACCEPTED

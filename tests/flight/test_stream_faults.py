@@ -14,7 +14,7 @@ import pytest
 
 from flight.autopilot_modes import ARDUCOPTER_MODES
 from flight.mavlink_setup import load_mavutil
-from tests.support.mavlink_peer import free_udp_port
+from tests.support.ports import free_udp_port
 from tests.support.stream_flights import (
     SimProcess,
     export_excitation,

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from flight.frames import quaternion_ned_to_enu
 from flight.mavlink_setup import load_mavutil
 from flight.setpoints import Setpoint
 from flight.telemetry_recorder import (
@@ -15,8 +14,8 @@ from flight.telemetry_recorder import (
     ClockOffset,
     SetpointHistory,
     TelemetryRecorder,
-    euler_to_quaternion,
 )
+from vehicle.frames import euler_ned_to_quaternion, quaternion_ned_to_enu
 from vehicle.poselog import read_pose_log
 from vehicle.rotation import quat_to_matrix
 
@@ -101,12 +100,12 @@ def test_attitude_euler_until_the_first_quaternion(tmp_path, firefly, wire):
     assert rec.skipped == {"no attitude yet": 1, "time not increasing": 1}
     np.testing.assert_allclose(log.t, [0.012, 0.016])
     # The Euler quaternion is the Z-Y-X rotation: its matrix's yaw/pitch/roll match.
-    R = quat_to_matrix(euler_to_quaternion(roll, pitch, yaw))
+    R = quat_to_matrix(euler_ned_to_quaternion(roll, pitch, yaw))
     assert math.atan2(R[1, 0], R[0, 0]) == pytest.approx(yaw)
     assert -math.asin(R[2, 0]) == pytest.approx(pitch)
     assert math.atan2(R[2, 1], R[2, 2]) == pytest.approx(roll)
     np.testing.assert_allclose(log.quaternion[0],
-                               quaternion_ned_to_enu(euler_to_quaternion(roll, pitch, yaw)),
+                               quaternion_ned_to_enu(euler_ned_to_quaternion(roll, pitch, yaw)),
                                atol=1e-7)
     np.testing.assert_allclose(log.quaternion[1], quaternion_ned_to_enu(q), atol=2e-7)
 

@@ -8,7 +8,6 @@ stay silent), and keeps every message it received.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Callable
@@ -16,14 +15,8 @@ from typing import Any
 
 from flight.mavlink_setup import load_mavutil
 
-__all__ = ["ScriptedVehicle", "free_udp_port"]
+__all__ = ["ScriptedVehicle"]
 
-
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing is bound to right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class ScriptedVehicle:

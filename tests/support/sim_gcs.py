@@ -9,7 +9,6 @@ the speedup except through wall-clock timeouts.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -18,18 +17,13 @@ from typing import Any
 
 from flight.sim_endpoint import SimEndpoint, SimSettings
 from flight.sim_link import mavlink, mavutil
+from tests.support.ports import free_tcp_port
 from vehicle.config import load_vehicle
 
-__all__ = ["Gcs", "free_tcp_port", "running_sim"]
+__all__ = ["Gcs", "running_sim"]
 
 M = mavlink
 
-
-def free_tcp_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Gcs:

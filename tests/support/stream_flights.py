@@ -64,9 +64,12 @@ class SimProcess:
 
     def wait_ready(self, timeout: float = 60.0) -> None:
         """Wait until the sim says it runs (its banner)."""
-        wait_for(lambda: "Ctrl-C to stop" in (self.stdout_path.read_text()
-                                              + self.stderr_path.read_text()),
-                 timeout, "the sim to start")
+        wait_for(lambda: "Ctrl-C to stop" in self.output(), timeout, "the sim to start")
+
+    def output(self) -> str:
+        """What the sim printed so far (stdout, then stderr)."""
+        return (self.stdout_path.read_text(errors="replace")
+                + self.stderr_path.read_text(errors="replace"))
 
     def kill(self) -> None:
         """SIGKILL (a crashed vehicle link)."""
@@ -82,7 +85,7 @@ class SimProcess:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait(timeout=10)
-        return self.stdout_path.read_text() + self.stderr_path.read_text()
+        return self.output()
 
     def __enter__(self) -> SimProcess:
         return self

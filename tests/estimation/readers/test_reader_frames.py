@@ -4,12 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimation.readers.frames import (
-    euler_ned_to_quaternion,
-    interpolate_quaternions,
-    ned_to_enu,
-    quaternion_ned_frd_to_enu_flu,
-)
+from estimation.readers.frames import interpolate_quaternions
+from vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
 from vehicle.rotation import quat_exp, quat_normalize, quat_to_matrix
 
 SWAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # ENU ↔ NED
@@ -20,7 +16,7 @@ def test_quaternion_conversion_matches_rotation_matrices() -> None:
     """q_enu_flu rotates as T R_ned_frd B for random attitudes."""
     rng = np.random.default_rng(1)
     q_ned = quat_normalize(rng.normal(size=(50, 4)))
-    q_enu = quaternion_ned_frd_to_enu_flu(q_ned)
+    q_enu = quaternion_ned_to_enu(q_ned)
     np.testing.assert_allclose(quat_to_matrix(q_enu), SWAP @ quat_to_matrix(q_ned) @ FLIP,
                                atol=1e-12)
 

@@ -1,7 +1,8 @@
-"""ENU/FLU ↔ NED/FRD at the MAVLink boundary (DESIGN.md conventions).
+"""ENU/FLU ↔ NED/FRD, for the MAVLink link and for flight logs (DESIGN.md conventions).
 
-The rest of mavsysid works in world ENU and body FLU; MAVLink speaks world NED and body
-FRD. Every conversion happens here, so no other module needs to know.
+mavsysid works in world ENU and body FLU; MAVLink, ArduPilot and PX4 (and so their logs)
+use world NED and body FRD. Every conversion, in `flight/` at the link and in
+`estimation/readers/` at the log boundary, goes through this module.
 
     x_ned = y_enu,  y_ned = x_enu,  z_ned = −z_enu,
     yaw_ned = π/2 − yaw_enu,  yaw_rate_ned = −yaw_rate_enu,
@@ -18,6 +19,7 @@ import numpy as np
 
 __all__ = [
     "enu_to_ned",
+    "euler_ned_to_quaternion",
     "flu_to_frd",
     "frd_to_flu",
     "ned_to_enu",
@@ -96,3 +98,21 @@ def quaternion_enu_to_ned(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     a, b, c, d = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return _SQRT_HALF * np.stack([a + d, b + c, b - c, a - d], axis=-1)
+
+
+def euler_ned_to_quaternion(roll: np.ndarray | float, pitch: np.ndarray | float,
+                            yaw: np.ndarray | float) -> np.ndarray:
+    """Aerospace (Z-Y-X) Euler angles, rad, to NED/FRD quaternions [w, x, y, z].
+
+    q = q_z(yaw) ⊗ q_y(pitch) ⊗ q_x(roll), the convention of MAVLink ATTITUDE and of
+    ArduPilot's ATT and VISP log messages. Angles of shape (...) give shape (..., 4).
+    """
+    cr, sr = np.cos(0.5 * np.asarray(roll, float)), np.sin(0.5 * np.asarray(roll, float))
+    cp, sp = np.cos(0.5 * np.asarray(pitch, float)), np.sin(0.5 * np.asarray(pitch, float))
+    cy, sy = np.cos(0.5 * np.asarray(yaw, float)), np.sin(0.5 * np.asarray(yaw, float))
+    return np.stack([
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ], axis=-1)
