@@ -11,8 +11,10 @@ stopping segment to hover, and a belief is a candidate flight only with its stop
 appended and the whole inside the budget; the best candidate minimises the D-optimality
 det(Σ_θ)^(1/6) (paper Eq. dopt, in log space).
 
-The search core is shared with the random baseline (`planner.baseline`), which keeps
-the same graph and picks the path with the most distinct segments instead.
+The search gets the first 1 − refine_share of the planning time; the rest refines its best
+flight (`planner.refine`, beyond the paper). The search core is shared with the random
+baseline (`planner.baseline`), which keeps the same graph and picks the path with the most
+distinct segments instead.
 """
 
 from __future__ import annotations
@@ -482,6 +484,9 @@ def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
                          "with each min below its max")
     if not settings.budget > 0.0:
         raise InputError(f"budget {settings.budget:g} s: expected a positive flight time")
+    if not 0.0 <= settings.refine_share < 1.0 or settings.refine_steps < 0:
+        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1) and "
+                         f"steps {settings.refine_steps} must be ≥ 0")
     start = settings.start_pose
     if np.any(start[:3] < box[:3]) or np.any(start[:3] > box[3:]):
         raise InputError(f"start {list(start[:3])} lies outside the box {list(box)}")

@@ -252,6 +252,21 @@ def _trusted_segment(duration: float, position_b: np.ndarray, yaw_b: np.ndarray)
     return seg
 
 
+def _start_boundary(start: VertexState, duration: float, n_position: int, n_yaw: int
+                    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """T, the powers T^k, and boundary-data arrays (n_position, 3) and (n_yaw,) whose first
+    rows hold the start's derivatives in s units (d^k/ds^k = T^k d^k/dτ^k)."""
+    T = float(duration)
+    if not T > 0.0:
+        raise ValueError(f"duration must be positive, got {duration}")
+    scale = T**_POWERS
+    d = np.empty((n_position, 3))
+    np.multiply(start.position, scale[:_POS_DERIVS, None], out=d[:_POS_DERIVS])
+    yd = np.empty(n_yaw)
+    np.multiply(start.yaw, scale[:_YAW_DERIVS], out=yd[:_YAW_DERIVS])
+    return T, scale, d, yd
+
+
 def connect_free_end(start: VertexState, end_position: np.ndarray, end_yaw: float,
                      duration: float) -> Segment:
     """Minimum-snap / minimum-yaw-rate segment with free end derivatives.
@@ -276,16 +291,8 @@ def connect_free_end(start: VertexState, end_position: np.ndarray, end_yaw: floa
     -------
     Segment
     """
-    T = float(duration)
-    if not T > 0.0:
-        raise ValueError(f"duration must be positive, got {duration}")
-    # Boundary data in s units: d^k/ds^k = T^k d^k/dτ^k.
-    scale = T**_POWERS
-    d = np.empty((_POS_DERIVS + 1, 3))
-    np.multiply(start.position, scale[:_POS_DERIVS, None], out=d[:_POS_DERIVS])
+    T, _, d, yd = _start_boundary(start, duration, _POS_DERIVS + 1, _YAW_DERIVS + 1)
     d[_POS_DERIVS] = end_position
-    yd = np.empty(_YAW_DERIVS + 1)
-    np.multiply(start.yaw, scale[:_YAW_DERIVS], out=yd[:_YAW_DERIVS])
     yd[_YAW_DERIVS] = end_yaw
     return _trusted_segment(T, (_POS_FREE @ d).T, _YAW_FREE @ yd)
 
@@ -307,16 +314,8 @@ def connect_fixed(start: VertexState, end: VertexState, duration: float) -> Segm
     -------
     Segment
     """
-    T = float(duration)
-    if not T > 0.0:
-        raise ValueError(f"duration must be positive, got {duration}")
-    # Boundary data in s units: d^k/ds^k = T^k d^k/dτ^k.
-    scale = T**_POWERS
-    d = np.empty((POSITION_COEFFS, 3))
-    np.multiply(start.position, scale[:_POS_DERIVS, None], out=d[:_POS_DERIVS])
+    T, scale, d, yd = _start_boundary(start, duration, POSITION_COEFFS, YAW_COEFFS)
     np.multiply(end.position, scale[:_POS_DERIVS, None], out=d[_POS_DERIVS:])
-    yd = np.empty(YAW_COEFFS)
-    np.multiply(start.yaw, scale[:_YAW_DERIVS], out=yd[:_YAW_DERIVS])
     np.multiply(end.yaw, scale[:_YAW_DERIVS], out=yd[_YAW_DERIVS:])
     return _trusted_segment(T, (_POS_HERMITE @ d).T, _YAW_HERMITE @ yd)
 

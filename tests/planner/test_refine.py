@@ -13,6 +13,7 @@ from planner.results import PlannerSettings
 from planner.rrbt import plan
 from planner.segments import VertexState, connect_fixed
 from vehicle.config import load_vehicle
+from vehicle.errors import InputError
 
 
 @pytest.fixture(scope="module")
@@ -86,3 +87,12 @@ def test_refiner_respects_the_budget():
     for _ in range(300):
         refiner.step()
     assert refiner.accepted > 0 and 2.0 < refiner.path.duration <= 2.5
+
+
+@pytest.mark.parametrize("change", [{"refine_share": 1.0}, {"refine_share": -0.1},
+                                    {"refine_steps": -1}])
+def test_bad_refinement_settings_are_refused(change):
+    """A refinement share outside [0, 1) or negative steps is an input error, not a crash."""
+    settings = replace(PlannerSettings(max_samples=5, planning_time=np.inf), **change)
+    with pytest.raises(InputError, match="refinement"):
+        plan(load_vehicle("firefly"), settings)
