@@ -1,0 +1,164 @@
+"""``mavsysid evaluate``: the paper's repeatability experiment (thin layer over
+`run_evaluation`, which tests call directly)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from mavsysid.evaluation import (
+    EvaluationSummary,
+    check_executor,
+    load_records,
+    pending_specs,
+    run_specs,
+    summarise,
+    write_csv,
+    write_table,
+)
+from mavsysid.experiment import KINDS, ExperimentSpec
+from mavsysid.plan import parse_numbers
+from vehicle.config import load_vehicle
+from vehicle.errors import InputError
+
+__all__ = ["EvaluationRun", "add_arguments", "main", "run_evaluation"]
+
+_DEFAULT_BOX = "-2,-2,0.5,2,2,2.5"
+
+
+@dataclass(frozen=True)
+class EvaluationRun:
+    """A finished evaluation: where it is, what ran now, and the summary."""
+
+    out: Path
+    ran: int
+    summary: EvaluationSummary
+    table: str
+    files: dict[str, Path]
+
+
+def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
+               planning_time: float = 30.0, samples: int | None = None,
+               box: tuple[float, ...] = (-2.0, -2.0, 0.5, 2.0, 2.0, 2.5), seed: int = 0,
+               iterations: int = 1, refine_steps: int | None = None) -> list[ExperimentSpec]:
+    """The specs of experiments 0 … n−1 (experiment i uses seed ``seed + i``)."""
+    if n < 1:
+        raise InputError(f"--n {n}: expected at least 1 experiment")
+    if iterations < 1:
+        raise InputError(f"--iterations {iterations}: expected at least 1")
+    if samples is not None and samples < 1:
+        raise InputError(f"--samples {samples}: expected at least 1")
+    if not budget > 0.0:
+        raise InputError(f"--budget {budget:g}: expected > 0 s")
+    if samples is None and not (planning_time > 0.0 and math.isfinite(planning_time)):
+        raise InputError(f"--time {planning_time:g}: expected a finite planning time > 0 s "
+                         "(or --samples N)")
+    load_vehicle(vehicle)  # a bad vehicle fails here, not inside a worker
+    return [ExperimentSpec(index=i, seed=seed + i, vehicle=str(vehicle), budget=budget,
+                           planning_time=planning_time, samples=samples,
+                           box=tuple(box), iterations=iterations, kinds=KINDS,  # type: ignore[arg-type]
+                           refine_steps=refine_steps) for i in range(n)]
+
+
+def run_evaluation(out: str | Path, specs: list[ExperimentSpec], executor: str = "local",
+                   workers: int = 1, scheduler: str | None = None, rrd: Path | None = None,
+                   png: bool = True, progress: bool = False) -> EvaluationRun:
+    """Run what is missing, then write runs.csv, table.md, the plots and the recording."""
+    out = Path(out)
+    check_executor(executor, scheduler)
+    done_before = len(specs) - len(pending_specs(out, specs))  # refuses a foreign folder
+    out.mkdir(parents=True, exist_ok=True)
+    bar = tqdm(total=len(specs), initial=done_before, unit="experiment", file=sys.stderr,
+               disable=not progress, desc="evaluate")
+    with bar:
+        ran = run_specs(out, specs, executor, workers, scheduler,
+                        on_record=lambda _record: bar.update(1))
+    wanted = {s.index for s in specs}
+    records = [r for r in load_records(out) if r["spec"]["index"] in wanted]
+    files = {"csv": out / "runs.csv", "table": out / "table.md"}
+    write_csv(files["csv"], records)
+    summary = summarise(records)
+    table = write_table(files["table"], summary)
+    if png:
+        from mavsysid.evaluation_plots import write_evaluation_pngs
+
+        convergence, errors = write_evaluation_pngs(out, summary, records)
+        files.update({"convergence plot": convergence, "error plot": errors})
+    if rrd is not None:
+        from mavsysid.evaluation_plots import write_evaluation_rrd
+
+        write_evaluation_rrd(rrd, summary)
+        files["recording"] = Path(rrd)
+    return EvaluationRun(out, ran, summary, table, files)
+
+
+def format_summary(run: EvaluationRun) -> str:
+    """What the command prints: the table, the headline ratios and the files."""
+    s = run.summary
+    lines = [f"{s.experiments} experiments in {run.out} ({run.ran} run now, "
+             f"{s.experiments - run.ran} reused).", "", run.table.rstrip()]
+    if {"dopt", "random"} <= set(s.kinds):
+        ratio = s.median_dopt["random"] / s.median_dopt["dopt"]
+        conv = {k: float(sum(s.convergence_time[k])) for k in ("dopt", "random")}
+        lines.append("")
+        lines.append(f"median D-opt: random / planned = {ratio:.2f} (paper: 4.4)")
+        if all(math.isfinite(v) for v in conv.values()) and conv["random"] > 0:
+            lines.append(f"summed convergence time: planned {conv['dopt']:.1f} s, random "
+                         f"{conv['random']:.1f} s ({100 * (1 - conv['dopt'] / conv['random']):.0f}"
+                         " % less; paper: 65 %)")
+    lines.append("")
+    lines += [f"  {name:<16} {path}" for name, path in run.files.items()]
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``mavsysid evaluate``."""
+    parser._negative_number_matcher = re.compile(r"-\.?\d")  # type: ignore[attr-defined]
+    parser.add_argument("--n", type=int, default=20, help="experiments (default: 20)")
+    parser.add_argument("--vehicle", default="firefly",
+                        help="shipped vehicle name or TOML path: the truth (default: firefly)")
+    parser.add_argument("--budget", type=float, default=30.0, metavar="S",
+                        help="flight-time budget, s (default: 30)")
+    parser.add_argument("--time", type=float, default=30.0, metavar="S",
+                        help="planning time per plan, s (default: 30; ignored with --samples)")
+    parser.add_argument("--samples", type=int, metavar="N",
+                        help="planner sample budget: results depend only on the seeds")
+    parser.add_argument("--refine-steps", type=int, metavar="N",
+                        help="most refinement steps of the planner (default: the planner's)")
+    parser.add_argument("--box", default=_DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                        help=f"flight volume in m, world ENU (default: {_DEFAULT_BOX})")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of experiment 0; experiment i uses seed + i (default: 0)")
+    parser.add_argument("--iterations", type=int, default=1,
+                        help="plan–fly–estimate rounds per experiment (default: 1)")
+    parser.add_argument("--out", type=Path, default=Path("evaluation"),
+                        help="output folder; finished experiments there are reused "
+                        "(default: evaluation)")
+    parser.add_argument("--executor", choices=("local", "dask"), default="local",
+                        help="local process pool (default) or an existing Dask cluster")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="local processes (default: 1, the paper's single process)")
+    parser.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                        help="Dask scheduler address, with --executor dask")
+    parser.add_argument("--rrd", type=Path, metavar="FILE",
+                        help="also write a Rerun recording of the results")
+    parser.add_argument("--no-png", action="store_true", help="do not write the PNG plots")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run the command; returns the exit code."""
+    box = parse_numbers(args.box, 6, "--box", "x_min,y_min,z_min,x_max,y_max,z_max")
+    if args.workers < 1:
+        raise InputError(f"--workers {args.workers}: expected at least 1")
+    specs = make_specs(args.n, args.vehicle, args.budget, args.time, args.samples, box,
+                       args.seed, args.iterations, args.refine_steps)
+    run = run_evaluation(args.out, specs, args.executor, args.workers, args.scheduler,
+                         args.rrd, png=not args.no_png, progress=args.verbosity >= 0)
+    print(format_summary(run))
+    return 0
