@@ -1,4 +1,4 @@
-"""``mavsysid simulate`` (and, for now, ``mavsysid demo``): fly in the offline simulator.
+"""``mavsysid simulate``: fly in the offline simulator.
 
 The command is a thin layer over `run_offline_flight`, which tests call directly.
 """
