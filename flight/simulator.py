@@ -12,10 +12,10 @@ config's ``[effects.NAME]`` tables are known physics, always simulated (meta.jso
 ``model_effects``); hidden ones are passed as ``effects`` (meta.json ``truth.effects``
 with ``"hidden": true``). A hidden-effect flight in three lines::
 
-    effect = hidden_effect(parse_effect("wind:x=2"))          # flight.effects, vehicle.model_effects
+    effect = hidden_effect(parse_effect("wind:x=2"))  # flight.effects, vehicle.model_effects
     sim = Simulator(config, true_theta=theta, settings=SimulationSettings(seed=1),
                     effects=[effect])
-    result = sim.run(trajectory, directory)                   # pose.csv, truth.csv, meta.json
+    result = sim.run(trajectory, directory)  # pose.csv, truth.csv and meta.json
 
 Effect wrenches see t = time since the flight start (as in the logs), the true state,
 the actual rotor speeds and the true θ; catalogue wrenches are evaluated once per

@@ -10,7 +10,7 @@ from flight.effects import CatalogEffect, applies_wrench, hidden_effect
 from flight.excitation import excitation_trajectory
 from flight.simulator import SimulationSettings, Simulator
 from vehicle.config import GRAVITY
-from vehicle.dynamics import ATT, POS
+from vehicle.dynamics import POS
 from vehicle.flight_dir import read_meta
 from vehicle.model_effects import EFFECTS, EffectInputs, parse_effect
 from vehicle.poselog import read_pose_log
@@ -178,3 +178,22 @@ def test_meta_records_hidden_effects_apart_from_model_effects(firefly, tmp_path)
         {"name": "wind", "parameters": {"x": 2.0, "y": 0.0}, "hidden": True},
         {"name": "motor_lag", "parameters": {"tau": 0.04}, "hidden": True}]
     assert meta["model_effects"] == []
+
+
+def test_config_effects_are_simulated_as_known_physics(firefly, tmp_path):
+    """A config's [effects] act on the truth like hidden ones, recorded as model_effects."""
+    import dataclasses
+
+    from vehicle.model_effects import MarkerOffset
+
+    config = dataclasses.replace(firefly, effects=(MarkerOffset(z=0.05),))
+    result = Simulator(config, settings=_QUIET).run(_hover(1.0), tmp_path / "f")
+    pose = read_pose_log(tmp_path / "f" / "pose.csv", firefly.rotor_count)
+    np.testing.assert_allclose(pose.position - result.states[:, POS],
+                               np.tile([0.0, 0.0, 0.05], (len(pose), 1)), atol=2e-6)
+    meta = read_meta(tmp_path / "f" / "meta.json")
+    assert meta["model_effects"] == [
+        {"name": "marker_offset", "parameters": {"x": 0.0, "y": 0.0, "z": 0.05},
+         "hidden": False}]
+    assert meta["truth"]["effects"] == []
+    assert "[effects.marker_offset]" in meta["vehicle"]["config_toml"]
