@@ -26,7 +26,7 @@ from estimation.results import EstimationResult
 from vehicle.config import PARAMETER_NAMES
 from vehicle.rerun_file import atomic_recording
 
-__all__ = ["APPLICATION_ID", "recording_id_for", "write_estimation_rrd"]
+__all__ = ["APPLICATION_ID", "log_estimation", "recording_id_for", "write_estimation_rrd"]
 
 APPLICATION_ID = "mavsysid"
 
@@ -151,6 +151,12 @@ def write_estimation_rrd(path: str | Path, result: EstimationResult, flight: Fli
     """
     with atomic_recording(path, APPLICATION_ID, recording_id_for(flight.source),
                           f"estimate {flight.source}", _blueprint()) as rec:
-        _log_parameters(rec, result)
-        _log_trajectories(rec, result, flight)
-        _log_innovations(rec, result)
+        log_estimation(rec, result, flight)
+
+
+def log_estimation(rec: rr.RecordingStream, result: EstimationResult,
+                   flight: FlightData) -> None:
+    """Log an estimate's entities (module docstring) into an open recording, e.g. the demo's."""
+    _log_parameters(rec, result)
+    _log_trajectories(rec, result, flight)
+    _log_innovations(rec, result)

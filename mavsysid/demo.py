@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ import numpy as np
 from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.flight_data import FlightData
 from estimation.readers import load_flight
-from estimation.results import ParameterEstimate
+from estimation.results import EstimationResult, ParameterEstimate
 from flight.stream_session import StreamSettings
 from mavsysid.experiment import d_optimality
 from mavsysid.plan import run_plan
@@ -48,6 +48,10 @@ __all__ = ["DemoResult", "DemoRound", "DemoSettings", "run_demo"]
 #: throttle learning, holds altitude with the nominal c_T and has no integral action.
 HIDDEN_SPREAD = np.array([0.05, 0.3, 0.3, 0.3, 0.3, 0.3])
 
+
+#: Share of the top rotor speed the plans leave to the autopilot's feedback: the vehicle's
+#: true θ is not the model's, and a plan at the model's rotor limit saturates the real one.
+ROTOR_HEADROOM = 0.15
 
 #: Pose and rotor-speed telemetry rate asked of the vehicle, Hz: the estimator interpolates
 #: rotor speeds between samples, which at 50 Hz already biases the refined estimate.
@@ -93,8 +97,13 @@ class DemoRound:
     plan: PlanResult
     flight_dir: Path
     flight: FlightData
-    estimate: ParameterEstimate
+    estimation: EstimationResult
     tracking_rms: float
+
+    @property
+    def estimate(self) -> ParameterEstimate:
+        """The filter's final θ and covariance (what the planner predicts), SI."""
+        return self.estimation.filtered
 
 
 @dataclass(frozen=True)
@@ -153,6 +162,12 @@ class _SimVehicle:
         self._out.close()
 
 
+def with_headroom(model: VehicleConfig) -> VehicleConfig:
+    """The model with `ROTOR_HEADROOM` taken off its top rotor speed, for planning."""
+    top = (1.0 - ROTOR_HEADROOM) * model.limits.rotor_speed_max
+    return replace(model, limits=replace(model.limits, rotor_speed_max=top))
+
+
 def trajectory_window(flight_dir: Path, model: VehicleConfig) -> FlightData:
     """The recorded flight while the plan was flown (the streamer's ``trajectory_window``):
     the ground, take-off and landing are not in the model and stay out of the estimate."""
@@ -182,7 +197,8 @@ def _fly(plan_file: Path, directory: Path, settings: DemoSettings, scale: np.nda
 
 
 def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
-             progress: bool = True, name: str | None = None) -> DemoResult:
+             progress: bool = True, name: str | None = None, record: bool = True
+             ) -> DemoResult:
     """Plan, fly over MAVLink and estimate, ``settings.iterations`` times."""
     say = say or (lambda _text: None)
     if settings.iterations < 1:
@@ -198,7 +214,7 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
     for iteration in range(1, settings.iterations + 1):
         tag = f"[{iteration}/{settings.iterations}]"
         say(f"{tag} planning for {settings.planning_time:g} s with the model θ")
-        plan = run_plan(model, PlannerSettings(budget=settings.budget,
+        plan = run_plan(with_headroom(model), PlannerSettings(budget=settings.budget,
                                                planning_time=settings.planning_time,
                                                seed=settings.seed + iteration - 1),
                         progress=progress)
@@ -212,9 +228,9 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
         flight = trajectory_window(flight_dir, model)
         # The filter's covariance is what the planner predicts; its σ is also the honest
         # one here (the batch refinement's σ run optimistic on these telemetry logs).
-        estimate = estimate_parameters(flight, model, EstimatorSettings(refine=False)).filtered
-        result.rounds.append(DemoRound(iteration, plan, flight_dir, flight, estimate, rms))
-        model = config.with_parameters(estimate.value)
+        estimation = estimate_parameters(flight, model, EstimatorSettings(refine=False))
+        result.rounds.append(DemoRound(iteration, plan, flight_dir, flight, estimation, rms))
+        model = config.with_parameters(estimation.filtered.value)
     result.files["estimate"] = directory / "estimate.json"
     write_json_atomic(result.files["estimate"], {
         "parameters": result.rounds[-1].estimate.as_dict(),
@@ -223,7 +239,31 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
                     "predicted_dopt": r.plan.predicted_dopt,
                     "reached_dopt": d_optimality(r.estimate.covariance),
                     "parameters": r.estimate.as_dict()} for r in result.rounds]})
+    if record:
+        say("writing the Rerun recording of every stage")
+        result.files["recording"] = directory / "demo.rrd"
+        write_demo_rrd(result.files["recording"], result)
     return result
+
+
+def write_demo_rrd(path: Path, result: DemoResult) -> None:
+    """One Rerun recording of every stage: the last round's plan and estimate, and each
+    round's planned and reached D-opt."""
+    import rerun as rr
+
+    from estimation.recording import log_estimation
+    from planner.recording import log_plan
+    from vehicle.rerun_file import atomic_recording
+
+    with atomic_recording(path, "mavsysid", f"demo-{result.directory.name}",
+                          f"demo {result.directory.name}") as rec:
+        last = result.rounds[-1]
+        log_plan(rec, last.plan)
+        log_estimation(rec, last.estimation, last.flight)
+        for r in result.rounds:
+            rec.set_time("round", sequence=r.iteration)
+            rec.log("rounds/dopt/planned", rr.Scalars(r.plan.predicted_dopt))
+            rec.log("rounds/dopt/reached", rr.Scalars(d_optimality(r.estimate.covariance)))
 
 
 def format_summary(result: DemoResult) -> str:

@@ -38,7 +38,7 @@ from planner.results import PlanResult
 from vehicle.config import PARAMETER_NAMES
 from vehicle.rerun_file import atomic_recording
 
-__all__ = ["APPLICATION_ID", "recording_id_for", "time_colors", "write_plan_rrd"]
+__all__ = ["APPLICATION_ID", "log_plan", "recording_id_for", "time_colors", "write_plan_rrd"]
 
 APPLICATION_ID = "mavsysid"
 
@@ -191,7 +191,12 @@ def write_plan_rrd(path: str | Path, result: PlanResult) -> None:
     """
     with atomic_recording(path, APPLICATION_ID, recording_id_for(result),
                           f"plan {result.kind} {result.config.name}", _blueprint()) as rec:
-        _log_graph(rec, result)
-        _log_path(rec, result)
-        _log_sigma(rec, result)
-        _log_inertia(rec, result)
+        log_plan(rec, result)
+
+
+def log_plan(rec: rr.RecordingStream, result: PlanResult) -> None:
+    """Log a plan's entities (module docstring) into an open recording, e.g. the demo's."""
+    _log_graph(rec, result)
+    _log_path(rec, result)
+    _log_sigma(rec, result)
+    _log_inertia(rec, result)
