@@ -149,7 +149,7 @@ def estimate_parameters(
     EstimationResult
     """
     settings = settings or EstimatorSettings()
-    return estimate_with_effects(flight, config, tuple(getattr(config, "effects", ())),
+    return estimate_with_effects(flight, config, config.effects,
                                  settings, fit_effects=settings.fit_effects)
 
 
