@@ -229,10 +229,13 @@ class _Flight:
         st = self.settings
         self.say(f"streaming the {duration:.1f} s trajectory at {st.rate:g} Hz")
         line = ProgressLine(duration, enabled=self.progress)
-        # A collection can stall the stream for milliseconds: collect now and pause the
-        # collector while streaming (reference counting still frees nearly everything;
-        # what reference cycles the flight leaves are collected afterwards).
-        gc.collect()
+        # A collection can stall the stream: pause the collector while streaming (reference
+        # counting still frees nearly everything; the flight's reference cycles are
+        # collected afterwards). What is alive now is frozen out of the collector rather
+        # than collected: a full collection of a large process (a caller's planner graph,
+        # freshly compiled kernels) took 0.9 s, long enough for the socket's receive
+        # buffer to overflow and lose a third of a second of telemetry.
+        gc.freeze()
         gc.disable()
         schedule = self.stream.start(lambda t: trajectory_setpoint(traj, t))
         self.s.note_trajectory_start(schedule.start)
@@ -249,6 +252,7 @@ class _Flight:
                 line.update(now - schedule.start, rate,
                             None if latest is None else latest.tracking_error, time.monotonic())
         finally:
+            gc.unfreeze()
             gc.enable()
             line.close()
             self.s.note_trajectory_end(clock.now(), schedule.statistics())
