@@ -79,9 +79,11 @@ def _difference_kernel(x, x_ref, out):
 
 
 @numba.njit(cache=True)
-def _shoot(nodes, theta, t, z, n, node_idx, mass, r, eps, scale, Qc, W, sig_p, sig_a,
+def _shoot(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p, sig_a,
            want_jac, want_q, res, rows, cols, vals, Q_out):
     """Residuals of the shooting problem (and its Jacobian in COO form if ``want_jac``).
+
+    w (N, 6) is the known effects' extra body force and torque per sample (as in the EKF).
 
     Column layout: node k's error at 12k … 12k+11, the θ error (scaled) at 12K … 12K+5.
     ``Q_out`` (K-1, 12, 12) receives the process noise accumulated over each interval.
@@ -125,7 +127,7 @@ def _shoot(nodes, theta, t, z, n, node_idx, mass, r, eps, scale, Qc, W, sig_p, s
                 transition_kernel(A, G, Qc, dt, F, Qs)
                 Phi = F @ Phi
                 Qacc = F @ Qacc @ F.T + Qs
-            _rk4_kernel(x, n[i], n[i + 1], theta, dt, mass, r, eps, x_next)
+            _rk4_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps, x_next)
             x[:] = x_next
         if k < K - 1:
             if want_q:
@@ -157,6 +159,7 @@ class _Problem:
     prior: ParameterEstimate
     sigma: tuple[float, float]
     W: np.ndarray
+    wrench: np.ndarray | None = None
 
     def evaluate(
         self, nodes: np.ndarray, theta: np.ndarray, want_jac: bool, want_q: bool = False
@@ -173,7 +176,7 @@ class _Problem:
         Q_out = np.empty((max(K - 1, 1), 12, 12))
         mass, r, eps, scale = self.model.kernel_args()
         Qc = self.model.process_noise_density()
-        _shoot(nodes, theta, self._t, self._z, self._n, self.node_idx, mass, r, eps, scale, Qc,
+        _shoot(nodes, theta, self._t, self._z, self._n, self._w, self.node_idx, mass, r, eps, scale, Qc,
                self.W, self.sigma[0], self.sigma[1], want_jac, want_q, res, rows, cols, vals,
                Q_out)
         # Prior on θ, in the scaled units of the error state.
@@ -193,6 +196,8 @@ class _Problem:
         self._t = np.ascontiguousarray(fl.t, dtype=float)
         self._z = np.ascontiguousarray(np.hstack([fl.position, fl.quaternion]))
         self._n = np.ascontiguousarray(fl.rotor_speeds, dtype=float)
+        self._w = (np.zeros((len(fl), 6)) if self.wrench is None
+                   else np.ascontiguousarray(self.wrench, dtype=float))
 
 
 def _solve_spd(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
@@ -231,7 +236,7 @@ def _apply(model: ErrorStateModel, nodes: np.ndarray, theta: np.ndarray, step: n
 def refine(
     flight: FlightData, filtered_states: np.ndarray, filtered: ParameterEstimate,
     model: ErrorStateModel, prior: ParameterEstimate, sigma: tuple[float, float],
-    node_interval: float = 0.0, max_iterations: int = 30,
+    node_interval: float = 0.0, max_iterations: int = 30, wrench: np.ndarray | None = None,
 ) -> BatchResult:
     """Refine the filter's result by batch MAP over the whole flight.
 
@@ -252,6 +257,10 @@ def refine(
         Time between shooting nodes, s; 0 (default) puts a node at every sample, which
         models the process noise inside every interval (full Gauss–Newton smoothing).
     max_iterations : int
+    wrench : ndarray, shape (N, 6), optional
+        Extra body force (N) and torque (N·m) of known model effects at every sample,
+        held fixed (as given to the filter); zeros by default. ``flight`` must already be
+        in the model's terms (`estimation.effect_channels.ModelTerms`).
     """
     dt = float(np.median(np.diff(flight.t)))
     step = max(1, round(node_interval / dt))
@@ -259,7 +268,8 @@ def refine(
     nodes = np.ascontiguousarray(filtered_states[node_idx[:-1]])
     theta = filtered.value.copy()
     K = nodes.shape[0]
-    problem = _Problem(flight, model, node_idx, prior, sigma, np.zeros((max(K - 1, 1), 12, 12)))
+    problem = _Problem(flight, model, node_idx, prior, sigma, np.zeros((max(K - 1, 1), 12, 12)),
+                       wrench)
     _, _, Q_int = problem.evaluate(nodes, theta, want_jac=False, want_q=True)
     problem.W = _whitening(Q_int)
 

@@ -74,30 +74,39 @@ class FilterRun:
 
 
 @numba.njit(cache=True)
-def _rk4_kernel(x, n0, n1, theta, dt, mass, r, eps, out):
-    """One RK4 step of the model state x (13,) with rotor speeds linear from n0 to n1."""
-    zero = np.zeros(3)
+def _rk4_kernel(x, n0, n1, w0, w1, theta, dt, mass, r, eps, out):
+    """One RK4 step of the model state x (13,) with rotor speeds linear from n0 to n1.
+
+    w0, w1 (6,) are the extra body force and torque [F_B, M_B] (N, N·m) of known model
+    effects at the step's ends, also linear in between; zeros leave the model unchanged
+    (0 + F is exact, so the no-effect path is bit-for-bit the plain model).
+    """
     nm = 0.5 * (n0 + n1)
+    wm = 0.5 * (w0 + w1)
     k1 = np.empty(13)
     k2 = np.empty(13)
     k3 = np.empty(13)
     k4 = np.empty(13)
-    derivative_kernel(x, n0, theta, mass, r, eps, zero, zero, k1)
-    derivative_kernel(x + 0.5 * dt * k1, nm, theta, mass, r, eps, zero, zero, k2)
-    derivative_kernel(x + 0.5 * dt * k2, nm, theta, mass, r, eps, zero, zero, k3)
-    derivative_kernel(x + dt * k3, n1, theta, mass, r, eps, zero, zero, k4)
+    derivative_kernel(x, n0, theta, mass, r, eps, w0[0:3], w0[3:6], k1)
+    derivative_kernel(x + 0.5 * dt * k1, nm, theta, mass, r, eps, wm[0:3], wm[3:6], k2)
+    derivative_kernel(x + 0.5 * dt * k2, nm, theta, mass, r, eps, wm[0:3], wm[3:6], k3)
+    derivative_kernel(x + dt * k3, n1, theta, mass, r, eps, w1[0:3], w1[3:6], k4)
     out[:] = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     out[6:10] /= np.sqrt(np.sum(out[6:10] ** 2))
 
 
 @numba.njit(cache=True)
-def _predict_kernel(x, P, n0, n1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
-    """Paper Eq. prior: x ← f-integrated, P ← F P Fᵀ + Q (F, Q at the step's start)."""
+def _predict_kernel(x, P, n0, n1, w0, w1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
+    """Paper Eq. prior: x ← f-integrated, P ← F P Fᵀ + Q (F, Q at the step's start).
+
+    The effects' wrench w0, w1 (6,) is a known input: it shifts the mean and does not
+    enter F (its state derivatives are second order for the small effects it models).
+    """
     theta = x[13:19]
     jacobian_kernel(x[:13], n0, theta, mass, r, eps, scale, A, G)
     transition_kernel(A, G, Qc, dt, F, Q)
     state = np.empty(13)
-    _rk4_kernel(x[:13], n0, n1, theta, dt, mass, r, eps, state)
+    _rk4_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
     x[:13] = state
     P[:] = F @ P @ F.T + Q
     P[:] = 0.5 * (P + P.T)
@@ -147,9 +156,11 @@ def _update_kernel(x, P, z, R, scale, y, S, SI, K):
 
 
 @numba.njit(cache=True)
-def _filter_kernel(t, z, n, x, P, mass, r, eps, scale, Qc, R,
+def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
                    out_x, out_sigma, out_innov, out_nis):
     """Filter samples 1..N-1 (sample 0 initialised x, P); histories into the out arrays.
+
+    w (N, 6) is the effects' extra body force and torque at every sample (zeros: none).
 
     Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k).
     """
@@ -168,8 +179,8 @@ def _filter_kernel(t, z, n, x, P, mass, r, eps, scale, Qc, R,
     out_innov[0] = 0.0
     out_nis[0] = np.nan
     for k in range(1, t.shape[0]):
-        _predict_kernel(x, P, n[k - 1], n[k], t[k] - t[k - 1], mass, r, eps, scale, Qc,
-                        A, G, F, Q)
+        _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], t[k] - t[k - 1], mass, r, eps,
+                        scale, Qc, A, G, F, Q)
         out_nis[k] = _update_kernel(x, P, z[k], R, scale, y, S, SI, K)
         log_det = 2.0 * np.sum(np.log(np.diag(np.linalg.cholesky(S))))
         log_likelihood -= 0.5 * (out_nis[k] + log_det + 6.0 * np.log(2.0 * np.pi))
@@ -230,13 +241,22 @@ class ParameterEKF(ExtendedKalmanFilter):
             self.P[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.eye(3) * sigma**2
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
 
-    def predict(self, u: np.ndarray, dt: float, u_next: np.ndarray | None = None) -> None:
-        """Propagate over ``dt`` s with rotor speeds ``u`` (k,) (linear to ``u_next``)."""
+    def predict(
+        self, u: np.ndarray, dt: float, u_next: np.ndarray | None = None,
+        wrench: np.ndarray | None = None, wrench_next: np.ndarray | None = None,
+    ) -> None:
+        """Propagate over ``dt`` s with rotor speeds ``u`` (k,) (linear to ``u_next``).
+
+        ``wrench`` (6,): extra body force (N) and torque (N·m) of known model effects at
+        the step's start (linear to ``wrench_next``); zero by default.
+        """
         u = np.ascontiguousarray(u, dtype=float)
         u1 = u if u_next is None else np.ascontiguousarray(u_next, dtype=float)
+        w0 = np.zeros(6) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
+        w1 = w0 if wrench_next is None else np.ascontiguousarray(wrench_next, dtype=float)
         mass, r, eps, scale = self._kernel_args
-        _predict_kernel(self.x, self.P, u, u1, float(dt), mass, r, eps, scale, self._Qc,
-                        self._A, self._G, self.F, self.Q)
+        _predict_kernel(self.x, self.P, u, u1, w0, w1, float(dt), mass, r, eps, scale,
+                        self._Qc, self._A, self._G, self.F, self.Q)
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 
     def update(self, z: np.ndarray, R: np.ndarray | None = None) -> None:  # type: ignore[override]
@@ -264,11 +284,17 @@ class ParameterEKF(ExtendedKalmanFilter):
         """Current θ covariance, SI, shape (6, 6)."""
         return self.model.parameter_covariance_si(self.P)
 
-    def run(self, flight: FlightData, state_sigma: tuple[float, float, float, float]) -> FilterRun:
+    def run(
+        self, flight: FlightData, state_sigma: tuple[float, float, float, float],
+        wrench: np.ndarray | None = None,
+    ) -> FilterRun:
         """Filter a whole flight: initialise from its first samples, then predict/update.
 
         The initial velocity and body rates come from finite differences of the first two
         poses; ``state_sigma`` gives their initial σ (position, velocity, attitude, rate).
+        ``wrench`` (N, 6): extra body force (N) and torque (N·m) of known model effects at
+        every sample (`estimation.effect_channels.ModelTerms`); zeros by default. ``flight`` must
+        already be in the model's terms (effects' pose and rotor-speed channels applied).
         """
         t = np.ascontiguousarray(flight.t, dtype=float)
         dt0 = t[1] - t[0]
@@ -285,8 +311,11 @@ class ParameterEKF(ExtendedKalmanFilter):
         out_innov = np.empty((N, MEAS_DIM))
         out_nis = np.empty(N)
         mass, r, eps, scale = self._kernel_args
-        log_likelihood = _filter_kernel(t, z, n, self.x, self.P, mass, r, eps, scale, self._Qc,
-                                        self.R, out_x, out_sigma, out_innov, out_nis)
+        w = np.zeros((N, 6)) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
+        if w.shape != (N, 6):
+            raise ValueError(f"wrench of shape ({N}, 6) expected, got {w.shape}")
+        log_likelihood = _filter_kernel(t, z, n, w, self.x, self.P, mass, r, eps, scale,
+                                        self._Qc, self.R, out_x, out_sigma, out_innov, out_nis)
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
         history = EstimationHistory(
             t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],

@@ -1,5 +1,10 @@
 """The estimation pipeline behind ``mavsysid estimate``: filter, fit noise, refine, report.
 
+0. Known model effects (the config's ``[effects.NAME]`` tables, or effects a caller such
+   as the discrepancy workflow passes) put the flight in the model's terms
+   (`estimation.effect_channels`); by default their parameters are fitted jointly with
+   θ and the noise level first (`estimation.effect_fit`). Without effects this step is
+   absent and the results are exactly the paper's model's.
 1. The parameter EKF runs over the flight with the vehicle config's noise (the paper's
    estimator): the *filter* estimate and its history over time.
 2. Refinement (optional, on by default): the process-noise level is fitted by maximum
@@ -14,17 +19,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from collections.abc import Sequence
+
 from estimation.batch import refine
+from estimation import effect_fit
+from estimation.effect_fit import EffectFit, reference_terms
 from estimation.ekf import ParameterEKF
 from estimation.flight_data import FlightData
 from estimation.noise_fit import fit_noise_scale
 from estimation.report import convergence_time
-from estimation.results import EstimationResult, ParameterEstimate
+from estimation.results import EstimationResult, FittedEffect, ParameterEstimate
 from vehicle.config import PARAMETER_NAMES, VehicleConfig
 from vehicle.errors import InputError
 from vehicle.linearization import initial_state_sigma
+from vehicle.model_effects import ModelEffect
 
-__all__ = ["EstimatorSettings", "estimate_parameters", "prior_from_config"]
+__all__ = ["EstimatorSettings", "estimate_parameters", "estimate_with_effects",
+           "prior_from_config"]
 
 #: Least flight the estimator accepts, s.
 MIN_DURATION = 2.0
@@ -45,6 +56,9 @@ class EstimatorSettings:
         estimator (filtered and lagged), instead of the config's motion-capture σ.
     c_D_scale : float
         Prior σ and units of c_D when the config's nominal c_D is 0, s/m.
+    fit_effects : bool
+        Fit the parameters of the config's model effects jointly with θ (else hold them
+        at the config's values); used by `estimate_parameters`.
     """
 
     prior_relative_sigma: float = 0.5
@@ -52,6 +66,7 @@ class EstimatorSettings:
     autopilot_position_sigma: float = 0.05
     autopilot_attitude_sigma: float = math.radians(1.0)
     c_D_scale: float = 0.01
+    fit_effects: bool = True
 
 
 def prior_from_config(config: VehicleConfig, settings: EstimatorSettings) -> ParameterEstimate:
@@ -79,17 +94,54 @@ def _initial_state_sigma(
     return initial_state_sigma(sigma[0], sigma[1], float(flight.t[1] - flight.t[0]))
 
 
+def _check_inputs(flight: FlightData, config: VehicleConfig,
+                  effects: Sequence[ModelEffect]) -> tuple[ModelEffect, ...]:
+    if flight.duration < MIN_DURATION:
+        raise InputError(f"{flight.source}: {flight.duration:.2f} s of data; the estimator "
+                         f"needs at least {MIN_DURATION:g} s")
+    if flight.rotor_count != config.rotor_count:
+        raise InputError(f"{flight.source}: {flight.rotor_count} rotor-speed columns, but "
+                         f"vehicle {config.name} has {config.rotor_count} rotors")
+    effects = tuple(effects)
+    for effect in effects:
+        if not isinstance(effect, ModelEffect):
+            raise InputError(f"model effect {effect!r}: expected a vehicle.model_effects "
+                             "ModelEffect")
+    names = [e.name for e in effects]
+    if len(set(names)) < len(names):
+        raise InputError(f"model effects {', '.join(names)}: each effect at most once")
+    return effects
+
+
+def _effect_note(fit: EffectFit) -> str:
+    parts = []
+    for fe in fit.effects:
+        values = ", ".join(f"{p.name} = {v:.4g} ± {s:.2g} {p.unit}" for p, v, s in
+                           zip(fe.effect.parameters, fe.value, fe.sigma, strict=True))
+        parts.append(f"{fe.name} ({values})")
+    return (f"model effects fitted jointly with θ by maximum likelihood: {'; '.join(parts)} "
+            f"[{fit.evaluations} filter passes]; θ's σ includes their uncertainty")
+
+
+def _with_increment(estimate: ParameterEstimate | None, increment: np.ndarray | None
+                    ) -> ParameterEstimate | None:
+    if estimate is None or increment is None:
+        return estimate
+    return ParameterEstimate(estimate.value, estimate.covariance + increment)
+
+
 def estimate_parameters(
     flight: FlightData, config: VehicleConfig, settings: EstimatorSettings | None = None
 ) -> EstimationResult:
-    """Estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a flight.
+    """Estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a flight, with the config's effects.
 
     Parameters
     ----------
     flight : FlightData
         Pose and rotor speeds (from `estimation.readers.load_flight`).
     config : VehicleConfig
-        The vehicle: known mass and geometry, nominal θ as the prior, noise.
+        The vehicle: known mass and geometry, nominal θ as the prior, noise, and its model
+        effects (``config.effects``; fitted unless ``settings.fit_effects`` is off).
     settings : EstimatorSettings, optional
 
     Returns
@@ -97,35 +149,87 @@ def estimate_parameters(
     EstimationResult
     """
     settings = settings or EstimatorSettings()
-    if flight.duration < MIN_DURATION:
-        raise InputError(f"{flight.source}: {flight.duration:.2f} s of data; the estimator "
-                         f"needs at least {MIN_DURATION:g} s")
-    if flight.rotor_count != config.rotor_count:
-        raise InputError(f"{flight.source}: {flight.rotor_count} rotor-speed columns, but "
-                         f"vehicle {config.name} has {config.rotor_count} rotors")
+    return estimate_with_effects(flight, config, config.effects,
+                                 settings, fit_effects=settings.fit_effects)
+
+
+def estimate_with_effects(
+    flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
+    settings: EstimatorSettings | None = None, fit_effects: bool = True,
+) -> EstimationResult:
+    """Estimate θ under the given model effects, fitting their parameters jointly.
+
+    Parameters
+    ----------
+    flight : FlightData
+        Pose and rotor speeds as logged.
+    config : VehicleConfig
+        Known mass and geometry, nominal θ as the prior, noise. Its own ``effects`` are
+        *not* added: ``effects`` is the complete list.
+    effects : sequence of ModelEffect
+        The effects the model includes, each at most once; their values are the start of
+        the fit (or the values used when ``fit_effects`` is False). Empty: the paper's
+        model, identical to the estimator without effects.
+    settings : EstimatorSettings, optional
+        ``settings.fit_effects`` is ignored here in favour of ``fit_effects``.
+    fit_effects : bool
+        Estimate the effects' parameters (maximum likelihood, `estimation.effect_fit`);
+        False holds them at the given values.
+
+    Returns
+    -------
+    EstimationResult
+        ``effects`` holds each effect with its (fitted) values and σ; θ's covariances
+        include the effects' uncertainty when fitted.
+    """
+    settings = settings or EstimatorSettings()
+    effects = _check_inputs(flight, config, effects)
     prior = prior_from_config(config, settings)
     sigma = _measurement_sigma(flight, config, settings)
     state_sigma = _initial_state_sigma(flight, sigma)
-    ekf = ParameterEKF(config, prior, sigma)
-    run = ekf.run(flight, state_sigma)
     notes = list(flight.warnings)
+
+    fit = None
+    used = tuple(FittedEffect(e, np.full(len(e.parameters), np.nan), False) for e in effects)
+    if fit_effects and any(e.parameters for e in effects):
+        fit = effect_fit.fit_effects(flight, config, effects, prior, sigma, state_sigma)
+        used = fit.effects
+        effects = tuple(fe.effect for fe in fit.effects)
+        notes.append(_effect_note(fit))
+    elif effects:
+        notes.append("model effects held at the given values: "
+                     + "; ".join(repr(e) for e in effects))
+    terms, run = reference_terms(flight, effects, config, prior, sigma, state_sigma)
+    log_likelihood = run.log_likelihood
 
     refined = None
     if settings.refine:
-        fit = fit_noise_scale(flight, config, prior, sigma, state_sigma)
-        nz = fit.config.noise
+        if fit is not None:
+            noise_cfg, scale, at_bound = fit.config, fit.noise_scale, fit.noise_at_bound
+            start, terms_r = fit.run, fit.terms
+        else:
+            nf = fit_noise_scale(terms.flight, config, prior, sigma, state_sigma,
+                                 wrench=terms.wrench)
+            noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
+                nf.run, terms
+        nz = noise_cfg.noise
         notes.append(
-            f"process noise fitted to the flight: {fit.scale:.3g} × the configured densities "
+            f"process noise fitted to the flight: {scale:.3g} × the configured densities "
             f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"
-            + ("; at the edge of the search range" if fit.at_bound else ""))
-        batch = refine(flight, fit.run.states, fit.run.estimate,
-                       ParameterEKF(fit.config, prior, sigma).model, prior, sigma)
+            + ("; at the edge of the search range" if at_bound else ""))
+        batch = refine(terms_r.flight, start.states, start.estimate,
+                       ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma,
+                       wrench=terms_r.wrench)
         refined = batch.estimate
+        log_likelihood = start.log_likelihood
         notes.append(f"batch refinement: {batch.iterations} iterations, cost "
                      f"{batch.cost_initial:.4g} → {batch.cost_final:.4g}")
+    increment = None if fit is None else fit.theta_covariance_increment()
+    filtered = _with_increment(run.estimate, increment)
+    refined = _with_increment(refined, increment)
 
     truth = flight.true_theta
-    final = refined if refined is not None else run.estimate
+    final = refined if refined is not None else filtered
     reference = truth if truth is not None else final.value
     history = run.history
     conv = convergence_time(history.t - history.t[0], history.theta, reference)
@@ -140,7 +244,8 @@ def estimate_parameters(
         notes.append(f"poorly identified (σ > 20 %): {', '.join(weak)}; the flight did not "
                      "excite them enough")
     return EstimationResult(
-        prior=prior, filtered=run.estimate, refined=refined, history=history,
+        prior=prior, filtered=filtered, refined=refined, history=history,
         convergence_time=conv, true_theta=truth, measurement_sigma=sigma,
-        pose_source=flight.pose_source, notes=tuple(notes),
+        pose_source=flight.pose_source, notes=tuple(notes), effects=used,
+        log_likelihood=log_likelihood,
     )

@@ -21,7 +21,10 @@ from estimation.flight_data import FlightData
 from estimation.results import ParameterEstimate
 from vehicle.config import VehicleConfig
 
-__all__ = ["NoiseFit", "fit_noise_scale", "scaled_noise"]
+__all__ = ["NOISE_SCALE_BOUNDS", "NoiseFit", "fit_noise_scale", "scaled_noise"]
+
+#: Range of the noise scale searched by default.
+NOISE_SCALE_BOUNDS = (1e-3, 30.0)
 
 
 @dataclass(frozen=True)
@@ -56,21 +59,22 @@ def scaled_noise(config: VehicleConfig, scale: float) -> VehicleConfig:
 def fit_noise_scale(
     flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     sigma: tuple[float, float], state_sigma: tuple[float, float, float, float],
-    bounds: tuple[float, float] = (1e-3, 30.0),
+    bounds: tuple[float, float] = NOISE_SCALE_BOUNDS, wrench: np.ndarray | None = None,
 ) -> NoiseFit:
     """Maximise the innovation likelihood over one common noise scale (log-space search).
 
     Parameters
     ----------
-    flight, config, prior, sigma, state_sigma
-        As for `ParameterEKF` and `ParameterEKF.run`.
+    flight, config, prior, sigma, state_sigma, wrench
+        As for `ParameterEKF` and `ParameterEKF.run` (``flight`` and ``wrench`` in the
+        model's terms when there are known effects, `estimation.effect_channels`).
     bounds : tuple of 2 float
         Range of the scale searched.
     """
 
     def run_at(log_scale: float) -> FilterRun:
         cfg = scaled_noise(config, 10.0**log_scale)
-        return ParameterEKF(cfg, prior, sigma).run(flight, state_sigma)
+        return ParameterEKF(cfg, prior, sigma).run(flight, state_sigma, wrench)
 
     lo, hi = np.log10(bounds[0]), np.log10(bounds[1])
     best = minimize_scalar(lambda s: -run_at(s).log_likelihood, bounds=(lo, hi),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -181,6 +182,20 @@ def _main_block(result: EstimationResult) -> list[str]:
     ]
 
 
+def _effects_block(result: EstimationResult) -> list[str]:
+    """One row per effect parameter: value, σ and 95 % interval (or "given")."""
+    header = ["effect", "parameter", "unit", "value", "σ", "95 % interval"]
+    rows = []
+    for fe in result.effects:
+        lo, hi = fe.ci95
+        for j, p in enumerate(fe.effect.parameters):
+            interval = (f"[{_fmt(float(lo[j]), '.4g')}, {_fmt(float(hi[j]), '.4g')}]"
+                        if fe.fitted else "given")
+            rows.append([fe.name, p.name, p.unit, _fmt(float(fe.value[j]), ".4g"),
+                         _fmt(float(fe.sigma[j]), ".2g", missing="—"), interval])
+    return ["Model effects", *_rows(header, rows, left=3)]
+
+
 def _refined_block(filtered: ParameterEstimate, refined: ParameterEstimate) -> list[str]:
     """Filter and refined estimates side by side, value and σ."""
     header = ["parameter", "filter", "σ", "refined", "σ"]
@@ -206,10 +221,13 @@ def format_table(result: EstimationResult, config: VehicleConfig, log_name: str)
     -------
     str
         Fixed-width text ending in a newline: header lines, one row per parameter,
-        the filter-vs-refined comparison when the result was refined, the result's notes
+        the model effects with their parameters when there are any, the filter-vs-refined
+        comparison when the result was refined, the result's notes
         and a reminder that mass and rotor geometry are taken as known.
     """
     lines = [*_header(result, config, log_name), "", *_main_block(result)]
+    if result.effects:
+        lines += ["", *_effects_block(result)]
     if result.refined is not None:
         lines += ["", *_refined_block(result.filtered, result.refined)]
     lines.append("")
@@ -269,7 +287,11 @@ def result_to_json(
     Returns
     -------
     dict
-        JSON-ready (no NaN; absent quantities are None). Keys: ``parameters`` (the final
+        JSON-ready (no NaN; absent quantities are None). Keys: ``effects``, a list of
+        ``{"name", "fitted", "parameters": {p: {"value", "sigma", "ci95", "unit"}}}`` in
+        the model's order (σ and ``ci95`` None for values given, not fitted; empty for the
+        paper's model), ``log_likelihood`` (the filter's innovation log-likelihood, see
+        `EstimationResult.log_likelihood`), ``parameters`` (the final
         estimate: refined if present, else the filter's), ``filter``, ``refined`` (or
         None) and ``prior``, each ``{name: {"value", "sigma", "relative_sigma",
         "convergence_time_s"}}`` plus ``"true_value"`` and ``"error_relative"`` (signed,
@@ -286,6 +308,8 @@ def result_to_json(
     convergence = result.convergence_time
     return {
         "parameters": _block(result.final, convergence, truth),
+        "effects": [fe.as_dict() for fe in result.effects],
+        "log_likelihood": _number(result.log_likelihood),
         "filter": _block(result.filtered, convergence, truth),
         "refined": None if result.refined is None else _block(result.refined, None, truth),
         "prior": _block(result.prior, None, truth),
@@ -312,5 +336,10 @@ def write_estimate_json(
 
 
 def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleConfig:
-    """`config` with the final estimate as its nominal θ (save with `save_vehicle`)."""
-    return config.with_parameters(np.asarray(result.final.value, dtype=float))
+    """`config` with the final estimate as its nominal θ and the result's effects.
+
+    The effects (with their fitted values) replace the config's ``[effects.NAME]`` tables,
+    so `estimate` and `sim` use them from then on (save with `save_vehicle`).
+    """
+    updated = config.with_parameters(np.asarray(result.final.value, dtype=float))
+    return replace(updated, effects=tuple(fe.effect for fe in result.effects))

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from vehicle.config import PARAMETER_NAMES
+from vehicle.model_effects import ModelEffect
 
-__all__ = ["EstimationHistory", "EstimationResult", "ParameterEstimate"]
+__all__ = ["EstimationHistory", "EstimationResult", "FittedEffect", "ParameterEstimate"]
+
+#: Two-sided 95 % quantile of the standard normal.
+Z95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
@@ -38,6 +43,58 @@ class ParameterEstimate:
         """``{"c_T": {"value": .., "sigma": ..}, ...}`` (DESIGN.md's estimate JSON)."""
         return {name: {"value": float(v), "sigma": float(s)}
                 for name, v, s in zip(PARAMETER_NAMES, self.value, self.sigma, strict=True)}
+
+
+@dataclass(frozen=True)
+class FittedEffect:
+    """A model effect as the estimator used it: its parameter values and their σ.
+
+    Attributes
+    ----------
+    effect : ModelEffect
+        The effect with the values used (the fitted ones when ``fitted``).
+    sigma : ndarray, shape (P,)
+        σ of each parameter, SI (the effect's parameter order); NaN when not fitted
+        (values taken as known).
+    fitted : bool
+        Whether the values were estimated from this flight (jointly with θ).
+    """
+
+    effect: ModelEffect
+    sigma: np.ndarray
+    fitted: bool
+
+    @property
+    def name(self) -> str:
+        """The effect's stable identifier (``motor_lag`` …)."""
+        return self.effect.name
+
+    @property
+    def value(self) -> np.ndarray:
+        """Parameter values, SI, shape (P,)."""
+        return self.effect.values
+
+    @property
+    def ci95(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper 95 % bounds (value ∓ 1.96 σ), SI, each shape (P,)."""
+        return self.value - Z95 * self.sigma, self.value + Z95 * self.sigma
+
+    def as_dict(self) -> dict:
+        """``{"name", "fitted", "parameters": {p: {"value", "sigma", "ci95", "unit"}}}``.
+
+        JSON-ready: σ and the interval are None when not fitted.
+        """
+        lo, hi = self.ci95
+
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        params = {
+            p.name: {"value": float(v), "sigma": num(s), "ci95": None if not math.isfinite(s)
+                     else [float(a), float(b)], "unit": p.unit}
+            for p, v, s, a, b in zip(self.effect.parameters, self.value, self.sigma, lo, hi,
+                                     strict=True)}
+        return {"name": self.name, "fitted": self.fitted, "parameters": params}
 
 
 @dataclass(frozen=True)
@@ -97,6 +154,12 @@ class EstimationResult:
         "motion_capture" or "autopilot".
     notes : tuple of str
         Lines to show the user (warnings from reading, assumptions made).
+    effects : tuple of FittedEffect
+        The model effects the estimate includes (config's or caller's), in their order;
+        empty for the paper's model.
+    log_likelihood : float
+        Innovation log-likelihood Σ log N(y_k; 0, S_k) of the filter at the fitted process
+        noise and effects (at the config's noise when refinement is off); NaN if unknown.
     """
 
     prior: ParameterEstimate
@@ -108,6 +171,8 @@ class EstimationResult:
     measurement_sigma: tuple[float, float]
     pose_source: str
     notes: tuple[str, ...] = ()
+    effects: tuple[FittedEffect, ...] = ()
+    log_likelihood: float = math.nan
 
     @property
     def final(self) -> ParameterEstimate:

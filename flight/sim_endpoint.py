@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from flight.autopilot_modes import Autopilot
+from flight.effects import config_truth_effects, effect_metadata, hidden_effect, motor_time_constant
 from flight.sim_autopilot import SimAutopilot
 from flight.sim_clock import ClockStats, SimClock
 from flight.sim_commands import CommandHandler
@@ -31,6 +32,7 @@ from flight.sim_services import ftp_refusal, mission_count, timesync_reply
 from flight.sim_telemetry import MessageScheduler, TelemetryBuilder, default_rates
 from flight.sim_vehicle import CONTROL_DT_US, SimVehicle, TruthLog
 from vehicle.config import PARAMETER_NAMES, VehicleConfig
+from vehicle.model_effects import ModelEffect
 
 __all__ = ["SimEndpoint", "SimSettings", "SimSummary"]
 
@@ -74,6 +76,8 @@ class SimSettings:
         At this sim time switch to this mode, as a pilot's switch would.
     silent_after : float or None
         At this sim time stop sending anything (a lost link).
+    hidden_effects : tuple of ModelEffect
+        Catalogue effects acting on the truth that the model does not know.
     """
 
     autopilot: Autopilot = Autopilot.ARDUPILOT
@@ -89,6 +93,7 @@ class SimSettings:
     deny_arm: bool = False
     pilot_mode: tuple[str, float] | None = None
     silent_after: float | None = None
+    hidden_effects: tuple[ModelEffect, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -145,7 +150,8 @@ class SimEndpoint:
             self.link.close()
             raise
         self.vehicle = SimVehicle(config, true_theta, s.start, seed=s.seed,
-                                  sensor_noise=s.sensor_noise, truth_log=truth)
+                                  sensor_noise=s.sensor_noise, truth_log=truth,
+                                  effects=[hidden_effect(e) for e in s.hidden_effects])
         self.params = default_parameters(s.autopilot, config)
         self.autopilot = SimAutopilot(self.vehicle, s.autopilot, self.params, s.ekf_delay,
                                       deny_arm=s.deny_arm)
@@ -337,6 +343,8 @@ class SimEndpoint:
 
     def _meta(self, connect: str, true_theta: np.ndarray) -> dict[str, Any]:
         s = self.settings
+        effects = [*config_truth_effects(self.config),
+                   *(hidden_effect(e) for e in s.hidden_effects)]
         return {
             "source": "mavsysid sim", "connect": connect, "autopilot": s.autopilot.name.lower(),
             "seed": s.seed, "speedup": s.speedup, "ekf_delay_s": s.ekf_delay,
@@ -348,9 +356,11 @@ class SimEndpoint:
             "truth": {
                 "parameters": dict(zip(PARAMETER_NAMES, map(float, true_theta), strict=True)),
                 "theta_scale": list(s.theta_scale),
-                "motor_time_constant_s": self.config.motor.time_constant,
-                "effects": [],
+                "motor_time_constant_s": motor_time_constant(
+                    effects, self.config.motor.time_constant),
+                "effects": [effect_metadata(e) for e in effects if e.hidden],
             },
+            "model_effects": [effect_metadata(e) for e in effects if not e.hidden],
         }
 
     def _summary_meta(self, summary: SimSummary) -> dict[str, Any]:

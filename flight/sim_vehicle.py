@@ -8,20 +8,34 @@ idling when armed), a flying one that touches it is stopped there. The published
 carries motion-capture-like noise (`flight.simulator._SensorNoise`), drawn once per tick.
 The truth log samples the true state at 200 Hz of sim time, between the two physics
 steps of a tick when needed (control runs at 500 Hz, so 5 ms falls mid-tick).
+
+Model effects (`flight.effects`): the config's ``[effects]`` and any hidden ones act on
+the truth as in the offline simulator — their wrench evaluated once per flying tick at
+the session's sim time, a motor_lag's tau replacing the motor time constant — and on
+what is published and logged (pose channel, commanded rotor speeds). The ground plane
+of a ground effect is z = 0, which is the ground only for a start height of 0.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from flight.controller import REFERENCE_DIM, GeometricController
+from flight.effects import (
+    TruthEffect,
+    applies_wrench,
+    config_truth_effects,
+    motor_time_constant,
+)
 from flight.flight_log import FlightRecorder
 from flight.sim_reference import LIMITS_DIM, SHAPER_DIM, TARGET_DIM, hold_target, shape_step
-from flight.simulator import _advance, _SensorNoise
+from flight.simulator import _advance, _effect_wrench, _SensorNoise
 from vehicle.config import VehicleConfig
 from vehicle.dynamics import STATE_DIM
 
@@ -84,10 +98,13 @@ class TruthLog:
         self._noise = _SensorNoise(config, seed + 1, enabled=noise)
         self.closed = False
 
-    def record(self, t: float, y: np.ndarray, n_cmd: np.ndarray, ref: np.ndarray) -> None:
-        """One row of each file at sim time ``t`` from the truth ``y = [x, n]``."""
+    def record(self, t: float, y: np.ndarray, n_cmd: np.ndarray, ref: np.ndarray,
+               effects: Sequence[TruthEffect] = ()) -> None:
+        """One row of each file at sim time ``t`` from the truth ``y = [x, n]``; ``effects``
+        change what ``pose.csv`` reports (pose and rotor-speed hooks)."""
         x, n = y[:STATE_DIM], y[STATE_DIM:]
-        pos, quat, speeds = self._noise.apply(x[0:3].copy(), x[6:10].copy(), n.copy())
+        pos, quat, speeds = _sensed(effects, t, y, n_cmd)
+        pos, quat, speeds = self._noise.apply(pos, quat, speeds)
         self.recorder.record(t, pos, quat, speeds, ref, x, n, n_cmd)
 
     def finish(self, status: str, summary: dict[str, Any]) -> None:
@@ -95,6 +112,17 @@ class TruthLog:
         if not self.closed:
             self.closed = True
             self.recorder.finish(status, summary)
+
+
+def _sensed(effects: Sequence[TruthEffect], t: float, y: np.ndarray, n_cmd: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the sensors report before noise: the effects' pose and rotor-speed hooks."""
+    position, quaternion = y[0:3].copy(), y[6:10].copy()
+    speeds = y[STATE_DIM:].copy()
+    for effect in effects:
+        position, quaternion = effect.measure_pose(t, position, quaternion)
+        speeds = effect.logged_rotor_speeds(t, speeds, n_cmd)
+    return position, quaternion, speeds
 
 
 class SimVehicle:
@@ -115,11 +143,15 @@ class SimVehicle:
     sensor_noise : bool
         Add motion-capture and rotor-speed noise to what is published.
     truth_log : TruthLog, optional
+    effects : sequence of TruthEffect
+        Hidden truth-side effects (`flight.effects.hidden_effect`); the config's own
+        ``effects`` are simulated too, before these.
     """
 
     def __init__(self, config: VehicleConfig, true_theta: np.ndarray, start=(0.0, 0.0, 0.0),
                  yaw: float = 0.0, seed: int = 0, sensor_noise: bool = True,
-                 truth_log: TruthLog | None = None) -> None:
+                 truth_log: TruthLog | None = None,
+                 effects: Sequence[TruthEffect] = ()) -> None:
         k = config.rotor_count
         self.config = config
         self.true_theta = np.asarray(true_theta, dtype=float).reshape(6)
@@ -138,7 +170,17 @@ class SimVehicle:
         self.ground_contact = 0.0  # s of uninterrupted contact while flying
         self.tick = 0
         self.truth_log = truth_log
-        self._tau = config.motor.time_constant
+        self.effects: list[TruthEffect] = [*config_truth_effects(config), *effects]
+        for effect in self.effects:
+            effect.bind(self.true_theta, config.rotor_positions)
+            effect.reset(_PHYSICS_DT_US * 1e-6)
+        self._tick_effects = [e for e in self.effects if applies_wrench(e)]
+        # A delayed pose interpolates a history: feed it every tick, not only when asked.
+        self._pose_history = any(e.name == "pose_delay" for e in self.effects)
+        # The truth log keeps its own copies: a delay's pose history is per consumer.
+        self._log_effects = copy.deepcopy(self.effects)
+        self._tau = motor_time_constant(self.effects, config.motor.time_constant)
+        self._wrench = (np.zeros(3), np.zeros(3))
         self._args = (self.true_theta, float(config.mass),
                       np.ascontiguousarray(config.rotor_positions),
                       np.ascontiguousarray(config.rotor_directions))
@@ -213,8 +255,8 @@ class SimVehicle:
     def measured(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Published (noisy) position ENU, attitude and rotor speeds at this tick."""
         if self._measured_tick != self.tick:
-            self._measured = self._noise.apply(self.y[0:3].copy(), self.y[6:10].copy(),
-                                               self.y[STATE_DIM:].copy())
+            sensed = _sensed(self.effects, self.time_us * 1e-6, self.y, self.n_cmd)
+            self._measured = self._noise.apply(*sensed)
             self._measured_tick = self.tick
         assert self._measured is not None
         return self._measured
@@ -264,6 +306,8 @@ class SimVehicle:
                 self.controller.command(self.y[:STATE_DIM], self.ref, self.n_cmd)
             else:
                 self.n_cmd[:] = 0.0
+        if self._tick_effects and not self.landed:
+            self._wrench = _effect_wrench(self._tick_effects, t_us * 1e-6, self.y)
         record = self.truth_log is not None
         sub = -1
         if record:
@@ -281,12 +325,14 @@ class SimVehicle:
             self._record(t_us + sub * _PHYSICS_DT_US)
             self._physics(PHYSICS_STEPS - sub)
         self.tick += 1
+        if self._pose_history:
+            self.measured()
 
     def _physics(self, steps: int) -> None:
         if steps <= 0:
             return
         _advance(self.y, self.n_cmd, _PHYSICS_DT_US * 1e-6, steps, self._tau, *self._args,
-                 self._zero, self._zero)
+                 *self._wrench)
         if self.y[2] <= self.ground_z:
             # Ground contact: no sinking in; a downward world velocity is stopped.
             self.y[2] = self.ground_z
@@ -309,4 +355,4 @@ class SimVehicle:
 
     def _record(self, t_us: int) -> None:
         assert self.truth_log is not None
-        self.truth_log.record(t_us * 1e-6, self.y, self.n_cmd, self.ref)
+        self.truth_log.record(t_us * 1e-6, self.y, self.n_cmd, self.ref, self._log_effects)

@@ -6,6 +6,20 @@ and any `TruthEffect` objects. The controller runs at its own rate with perfect 
 feedback, holding its commands between ticks. At the log rate the simulator records
 what a motion-capture system and ESC telemetry would report: pose with noise, and the
 actual (lagged) rotor speeds, into ``pose.csv``; and the true state into ``truth.csv``.
+
+Model effects (`vehicle.model_effects`) act on the truth in two ways: the vehicle
+config's ``[effects.NAME]`` tables are known physics, always simulated (meta.json
+``model_effects``); hidden ones are passed as ``effects`` (meta.json ``truth.effects``
+with ``"hidden": true``). A hidden-effect flight in three lines::
+
+    effect = hidden_effect(parse_effect("wind:x=2"))  # flight.effects, vehicle.model_effects
+    sim = Simulator(config, true_theta=theta, settings=SimulationSettings(seed=1),
+                    effects=[effect])
+    result = sim.run(trajectory, directory)  # pose.csv, truth.csv and meta.json
+
+Effect wrenches see t = time since the flight start (as in the logs), the true state,
+the actual rotor speeds and the true θ; catalogue wrenches are evaluated once per
+control tick and held over its physics steps, like the rotor commands.
 """
 
 from __future__ import annotations
@@ -19,7 +33,13 @@ import numba
 import numpy as np
 
 from flight.controller import GeometricController, reference_samples
-from flight.effects import TruthEffect, applies_wrench
+from flight.effects import (
+    TruthEffect,
+    applies_wrench,
+    config_truth_effects,
+    effect_metadata,
+    motor_time_constant,
+)
 from flight.flight_log import FlightRecorder
 from vehicle.config import VehicleConfig
 from vehicle.dynamics import ATT, POS, STATE_DIM, derivative_kernel
@@ -164,7 +184,8 @@ class Simulator:
     controller : GeometricController, optional
         Default: a `GeometricController` on the config's nominal θ.
     effects : sequence of TruthEffect
-        Extra truth-side effects.
+        Extra truth-side effects, hidden from the model (e.g. `flight.effects.hidden_effect`).
+        The config's own ``effects`` are simulated too, before these (`truth_effects`).
     """
 
     config: VehicleConfig
@@ -180,6 +201,8 @@ class Simulator:
         )
         if self.controller is None:
             self.controller = GeometricController(self.config)
+        self.truth_effects: list[TruthEffect] = [*config_truth_effects(self.config),
+                                                 *self.effects]
 
     def run(
         self,
@@ -217,11 +240,14 @@ class Simulator:
         y = np.concatenate([start.states()[0], start.rotor_speeds[0]])
         y[3:6] = 0.0
         n_cmd = start.rotor_speeds[0].copy()
-        tau = cfg.motor.time_constant if s.motor_lag else 0.0
+        effects = self.truth_effects
+        tau = self._motor_time_constant()
         args = (self.true_theta, float(cfg.mass), np.ascontiguousarray(cfg.rotor_positions),
                 np.ascontiguousarray(cfg.rotor_directions))
-        wrench_effects = [e for e in self.effects if applies_wrench(e)]
-        for effect in self.effects:
+        tick_effects = [e for e in effects if applies_wrench(e) and e.wrench_per_tick]
+        step_effects = [e for e in effects if applies_wrench(e) and not e.wrench_per_tick]
+        for effect in effects:
+            effect.bind(self.true_theta, cfg.rotor_positions)
             effect.reset(dt)
         zero = np.zeros(3)
         noise = _SensorNoise(cfg, s.seed, enabled=s.sensor_noise)
@@ -255,12 +281,15 @@ class Simulator:
                 if i == n_control:
                     break
                 saturated += self.controller.command(y[:STATE_DIM], ref, n_cmd)
-                if not wrench_effects:
-                    _advance(y, n_cmd, dt, per_control, tau, *args, zero, zero)
+                held = zero, zero
+                if tick_effects:
+                    held = _effect_wrench(tick_effects, t, y)
+                if not step_effects:
+                    _advance(y, n_cmd, dt, per_control, tau, *args, *held)
                     continue
                 for j in range(per_control):
-                    force, torque = self._effect_wrench(wrench_effects, t + j * dt, y, k)
-                    _advance(y, n_cmd, dt, 1, tau, *args, force, torque)
+                    force, torque = _effect_wrench(step_effects, t + j * dt, y)
+                    _advance(y, n_cmd, dt, 1, tau, *args, force + held[0], torque + held[1])
         except BaseException:
             if recorder is not None:
                 recorder.finish(status="aborted")
@@ -278,17 +307,10 @@ class Simulator:
             })
         return result
 
-    def _effect_wrench(
-        self, effects: list[TruthEffect], t: float, y: np.ndarray, k: int
-    ) -> tuple[np.ndarray, np.ndarray]:
-        force = np.zeros(3)
-        torque = np.zeros(3)
-        for effect in effects:
-            w = effect.wrench(t, y[:STATE_DIM], y[STATE_DIM:])
-            if w is not None:
-                force += w[0]
-                torque += w[1]
-        return force, torque
+    def _motor_time_constant(self) -> float:
+        """The truth's motor lag, s: an effect's (a motor_lag) or the config's."""
+        default = self.config.motor.time_constant if self.settings.motor_lag else 0.0
+        return motor_time_constant(self.truth_effects, default)
 
     def _record(
         self, recorder: FlightRecorder, noise: _SensorNoise, t: float, y: np.ndarray,
@@ -299,7 +321,7 @@ class Simulator:
         n = y[STATE_DIM:]
         position, quaternion = x[POS].copy(), x[ATT].copy()
         logged_n = n.copy()
-        for effect in self.effects:
+        for effect in self.truth_effects:
             position, quaternion = effect.measure_pose(t, position, quaternion)
             logged_n = effect.logged_rotor_speeds(t, logged_n, n_cmd)
         position, quaternion, logged_n = noise.apply(position, quaternion, logged_n)
@@ -318,10 +340,27 @@ class Simulator:
                     ("c_T", "c_D", "c_M", "j_x", "j_y", "j_z"),
                     (float(v) for v in self.true_theta), strict=True,
                 )),
-                "motor_time_constant_s": self.config.motor.time_constant if s.motor_lag else 0.0,
-                "effects": [{"name": e.name, "parameters": e.parameters()} for e in self.effects],
+                "motor_time_constant_s": self._motor_time_constant(),
+                # Hidden from the model: what a diagnosis should find. Estimation reads
+                # only truth.parameters, and only to report errors.
+                "effects": [effect_metadata(e) for e in self.truth_effects if e.hidden],
             },
+            "model_effects": [effect_metadata(e) for e in self.truth_effects if not e.hidden],
         }
+
+
+def _effect_wrench(
+    effects: list[TruthEffect], t: float, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Summed extra body force (N) and torque (N·m) of ``effects`` at truth y = [x, n]."""
+    force = np.zeros(3)
+    torque = np.zeros(3)
+    for effect in effects:
+        w = effect.wrench(t, y[:STATE_DIM], y[STATE_DIM:])
+        if w is not None:
+            force += w[0]
+            torque += w[1]
+    return force, torque
 
 
 class _LogBuffers:

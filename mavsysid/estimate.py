@@ -2,7 +2,9 @@
 
 A thin layer over `run_estimate` (which tests call directly): read the log, run the
 filter and the refinement, print the table, write the JSON, the updated vehicle config
-and the Rerun recording on request.
+and the Rerun recording on request. The vehicle config's model effects
+(``[effects.NAME]``) are part of the model; their parameters are fitted with θ (or held
+with ``--fixed-effects``), reported, and written back by ``--update-vehicle``.
 """
 
 from __future__ import annotations
@@ -75,12 +77,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(default: 0.5)")
     parser.add_argument("--no-refine", action="store_true",
                         help="report the filter only (skip noise fit and batch refinement)")
+    parser.add_argument("--fixed-effects", action="store_true",
+                        help="hold the vehicle config's model effects ([effects.NAME]) at "
+                        "their values instead of fitting their parameters with θ")
 
 
 def main(args: argparse.Namespace) -> int:
     """Run the command; returns the exit code."""
     settings = EstimatorSettings(prior_relative_sigma=args.prior_sigma,
-                                 refine=not args.no_refine)
+                                 refine=not args.no_refine, fit_effects=not args.fixed_effects)
     run = run_estimate(args.log, args.vehicle, args.pose, args.time_offset, settings)
     if args.output is not None:
         write_estimate_json(args.output, run.result, run.config, args.log)

@@ -17,6 +17,7 @@ from pathlib import Path
 from flight.autopilot_modes import Autopilot
 from flight.mavlink_setup import signing_key_from_file
 from flight.sim_endpoint import SimEndpoint, SimSettings
+from mavsysid.offline import parse_hidden_effects
 from mavsysid.plan import parse_numbers
 from vehicle.config import load_vehicle
 from vehicle.errors import InputError
@@ -56,6 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "j_x,j_y,j_z); the controller keeps the nominal θ (default: 1)")
     parser.add_argument("--no-noise", action="store_true",
                         help="publish the true pose and rotor speeds")
+    parser.add_argument("--hidden-effect", action="append", default=[], metavar="SPEC",
+                        help="add a model effect to the truth only, as NAME:KEY=VALUE,... "
+                        "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2 (names as in "
+                        "mavsysid simulate)")
     parser.add_argument("--fault", action="append", default=[], metavar="FAULT",
                         help="inject a fault (repeatable): deny-arm; mode:NAME@S (a pilot "
                         "switches to mode NAME at sim time S); silent@S (the link goes quiet)")
@@ -101,11 +106,13 @@ def settings_from_args(args: argparse.Namespace) -> SimSettings:
     if args.truth_log is not None and (args.truth_log / "pose.csv").exists():
         raise InputError(f"--truth-log {args.truth_log}: already holds a pose log; "
                          "choose a new directory")
+    hidden = parse_hidden_effects(args.hidden_effect)
     key = None if args.signing_key is None else signing_key_from_file(args.signing_key)
     return SimSettings(autopilot=autopilot, speedup=args.speedup, ekf_delay=args.ekf_delay,
                        start=start, seed=args.seed, theta_scale=scale,  # type: ignore[arg-type]
                        sensor_noise=not args.no_noise, duration=args.duration, signing_key=key,
-                       truth_log=args.truth_log, **_fault_settings(args.fault, autopilot))
+                       truth_log=args.truth_log, hidden_effects=hidden,
+                       **_fault_settings(args.fault, autopilot))
 
 
 def main(args: argparse.Namespace) -> int:

@@ -2,7 +2,9 @@
 
 A configuration holds what is known about a vehicle before a flight: its mass and
 rotor geometry (taken as known), the nominal (prior) physical parameters
-θ = [c_T, c_D, c_M, j_x, j_y, j_z], its limits, its motors and its noise.
+θ = [c_T, c_D, c_M, j_x, j_y, j_z], its limits, its motors, its noise, and the model
+effects beyond the paper's model that are known to act on it (``[effects.NAME]`` tables,
+`vehicle.model_effects`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 from vehicle.config_schema import check_vehicle, validate_document
 from vehicle.constants import GRAVITY
 from vehicle.errors import ConfigError
+from vehicle.model_effects import ModelEffect, effect_from_values
 
 __all__ = [
     "GRAVITY",
@@ -176,6 +179,9 @@ class VehicleConfig:
         Nominal (prior) values of θ.
     limits, motor, noise
         See the respective classes.
+    effects : tuple of ModelEffect
+        Known model effects (``[effects.NAME]``), part of the model everywhere: the
+        simulators' physics and the estimator's model. Empty by default.
     source : str
         Where the configuration came from (a path, or ``builtin:NAME``).
     """
@@ -188,6 +194,7 @@ class VehicleConfig:
     motor: MotorConfig = field(default_factory=MotorConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     source: str = ""
+    effects: tuple[ModelEffect, ...] = ()
 
     @property
     def rotor_count(self) -> int:
@@ -300,6 +307,7 @@ def _build(values: dict[str, Any], name: str, source: str) -> VehicleConfig:
         motor=MotorConfig(**values["motor"]),
         noise=NoiseConfig(**noise),
         source=source,
+        effects=tuple(effect_from_values(n, v) for n, v in values["effects"]),
     )
 
 
@@ -393,6 +401,9 @@ def vehicle_to_toml(config: VehicleConfig) -> str:
                            ("motor", config.motor), ("noise", config.noise)):
         lines += ["", f"[{table}]"]
         lines += [f"{f.name} = {_toml_value(getattr(section, f.name))}" for f in fields(section)]
+    for effect in config.effects:
+        lines += ["", f"[effects.{effect.name}]"]
+        lines += [f"{k} = {_toml_float(v)}" for k, v in effect.as_dict().items()]
     return "\n".join(lines) + "\n"
 
 

@@ -6,7 +6,12 @@ Validation runs in two phases. `validate_document` checks the parsed TOML key by
 consistency, a c_M that is really a ratio, rotor allocation rank, lift, limit order).
 
 Every problem raises `ConfigError` with one line ``"<file>: <key>: <expected>, got
-<found>"``, keys spelled ``mass``, ``[parameters].c_M``, ``[[rotors]][3].direction``.
+<found>"``, keys spelled ``mass``, ``[parameters].c_M``, ``[[rotors]][3].direction``,
+``[effects.motor_lag].tau``.
+
+Known model effects are optional tables ``[effects.NAME]`` (NAME from
+`vehicle.model_effects.EFFECTS`) of the effect's parameters in SI units; a parameter
+left out is 0.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import numpy as np
 
 from vehicle.constants import GRAVITY
 from vehicle.errors import ConfigError
+from vehicle.model_effects import EFFECTS
 
 if TYPE_CHECKING:
     from vehicle.config import VehicleConfig
@@ -84,6 +90,14 @@ _TOP_LEVEL: dict[str, str] = {
     "limits": "[limits]",
     "motor": "[motor]",
     "noise": "[noise]",
+    "effects": "[effects]",
+}
+# Parameters of effects that have a sign by their meaning (the rest may be negative).
+_EFFECT_SIGNS: dict[tuple[str, str], str] = {
+    ("motor_lag", "tau"): "nonnegative",
+    ("ground_effect", "rotor_radius"): "positive",
+    ("body_drag", "k"): "nonnegative",
+    ("rotor_drag_linear", "k"): "nonnegative",
 }
 
 # The RotorS Firefly inertia (the reference vehicle of DESIGN.md) has j_z 21 % above
@@ -266,6 +280,45 @@ def _rotors(file: str, doc: Mapping[str, Any]) -> list[tuple[tuple[float, ...], 
     return rotors
 
 
+def _unknown_name(file: str, spelled: str, name: str, known: list[str], what: str,
+                  spell) -> NoReturn:
+    """Reject an unknown effect or effect parameter, suggesting the closest known one."""
+    folded = {k.lower(): k for k in known}
+    close = ([folded[name.lower()]] if name.lower() in folded
+             else difflib.get_close_matches(name, known, n=1, cutoff=0.6))
+    hint = f" (did you mean {spell(close[0])}?)" if close else ""
+    _fail(file, spelled, f"one of the known {what}s ({', '.join(known)})",
+          f"an unknown {what}{hint}")
+
+
+def _effects(file: str, doc: Mapping[str, Any]) -> list[tuple[str, dict[str, float]]]:
+    """Validate the optional ``[effects.NAME]`` tables: known names, keys and numbers."""
+    raw = doc.get("effects")
+    if raw is None:
+        return []
+    if not isinstance(raw, Mapping):
+        _fail(file, "[effects]", "a table of [effects.NAME] tables", _describe(raw))
+    out = []
+    for name, table in raw.items():
+        if name not in EFFECTS:
+            _unknown_name(file, f"[effects.{name}]", name, list(EFFECTS), "effect",
+                          lambda n: f"[effects.{n}]")
+        if not isinstance(table, Mapping):
+            _fail(file, f"[effects.{name}]", "a table of the effect's parameters",
+                  _describe(table))
+        parameters = {p.name: p for p in EFFECTS[name].parameters}
+        values = {}
+        for key, value in table.items():
+            spelled = f"[effects.{name}].{key}"
+            if key not in parameters:
+                _unknown_name(file, spelled, key, list(parameters), "key",
+                              lambda k, n=name: f"[effects.{n}].{k}")
+            values[key] = _number(file, spelled, value, parameters[key].unit,
+                                  _EFFECT_SIGNS.get((name, key)))
+        out.append((name, values))
+    return out
+
+
 def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     """Check a parsed TOML document key by key and return normalised values.
 
@@ -282,7 +335,8 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
         ``name`` (str or None), ``mass`` (float, kg), ``rotors`` (list of
         (position tuple in m, direction int)), and ``parameters``, ``limits``, ``motor``,
         ``noise``: dicts holding only the keys present in the file, as floats (``J`` a
-        tuple of 3 floats).
+        tuple of 3 floats); ``effects``: list of (effect name, {parameter: float}) in
+        file order.
 
     Raises
     ------
@@ -300,7 +354,8 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     mass = _number(file, "mass", doc["mass"], "kg", "positive")
     rotors = _rotors(file, doc)
     tables = {section: _table(file, doc, section) for section in _TABLES}
-    return {"name": doc.get("name"), "mass": mass, "rotors": rotors, **tables}
+    return {"name": doc.get("name"), "mass": mass, "rotors": rotors, **tables,
+            "effects": _effects(file, doc)}
 
 
 def _rank_ok(rows: np.ndarray) -> bool:

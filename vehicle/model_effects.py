@@ -107,12 +107,27 @@ class EffectInputs:
 
     def hub_velocities(self) -> np.ndarray:
         """v_B + ω × r_i of every rotor hub, shape (N, k, 3), m/s."""
-        return self.velocity[:, None, :] + np.cross(self.rates[:, None, :],
+        return self.velocity[:, None, :] + _cross(self.rates[:, None, :],
                                                     self.rotor_positions[None, :, :])
 
     def rotor_thrusts(self) -> np.ndarray:
         """c_T n_i², shape (N, k), N."""
         return self.theta[0] * self.rotor_speeds**2
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis (size 3), broadcasting; shape of the broadcast.
+
+    np.cross's axis handling costs tens of µs a call, which dominates the simulator's
+    per-tick evaluation of one sample; this is the same formula without it.
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
 
 
 def _zero_wrench(inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
@@ -122,7 +137,7 @@ def _zero_wrench(inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
 
 def _rotor_wrench(inputs: EffectInputs, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sum of per-rotor body forces (N, k, 3) acting at the hubs: force and torque (N, 3)."""
-    torque = np.cross(inputs.rotor_positions[None, :, :], forces).sum(axis=1)
+    torque = _cross(inputs.rotor_positions[None, :, :], forces).sum(axis=1)
     return forces.sum(axis=1), torque
 
 
@@ -341,8 +356,8 @@ class CogOffset(ModelEffect):
         base = _paper_rotor_forces(inputs)
         moved = _paper_rotor_forces(shifted)
         force = (moved - base).sum(axis=1)
-        torque = (np.cross(shifted.rotor_positions[None], moved)
-                  - np.cross(inputs.rotor_positions[None], base)).sum(axis=1)
+        torque = (_cross(shifted.rotor_positions[None], moved)
+                  - _cross(inputs.rotor_positions[None], base)).sum(axis=1)
         return force, torque
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray

@@ -151,6 +151,9 @@ def test_signal_closes_the_truth_log_and_reports_rejected_signatures(tmp_path, s
     (["--theta-scale", "1,2"], "--theta-scale"),
     (["--signing-key", "/nonexistent/key"], "--signing-key"),
     (["--fault", "mode:NOPE@3"], "unknown ardupilot mode NOPE"),
+    (["--hidden-effect", "motor_lag:tau=0.04", "--hidden-effect", "windy:x=2"],
+     "--hidden-effect 'windy:x=2': unknown effect 'windy'; expected one of body_drag,"),
+    (["--hidden-effect", "wind:z=2"], "unknown parameter 'z'; expected one of x, y"),
 ])
 def test_bad_options_exit_2_with_one_line(options, message):
     """Malformed options are refused with exit code 2 and one line, before anything runs."""
