@@ -33,9 +33,9 @@ __all__ = [
 
 #: Search grids of the profile candidates (SI), physically plausible ranges.
 PROFILE_GRIDS: dict[str, np.ndarray] = {
-    "motor_lag": np.arange(0.0, 0.1201, 0.004),
-    "pose_delay": np.arange(0.0, 0.0801, 0.004),
-    "ground_effect": np.arange(0.0, 0.2501, 0.01),
+    "motor_lag": np.arange(0.0, 0.1201, 0.006),
+    "pose_delay": np.arange(0.0, 0.0801, 0.005),
+    "ground_effect": np.arange(0.0, 0.2501, 0.0125),
 }
 
 #: Relative step of the θ finite differences.

@@ -73,8 +73,8 @@ class DiagnosisSettings:
         Length of the time windows of the "where" report, s.
     """
 
-    smoother: SmootherSettings = SmootherSettings(window=0.6)
-    selection: SelectionSettings = SelectionSettings()
+    smoother: SmootherSettings = field(default_factory=lambda: SmootherSettings(window=0.6))
+    selection: SelectionSettings = field(default_factory=SelectionSettings)
     holdout: float = 0.3
     candidates: tuple[str, ...] | None = None
     window: float = 1.0

@@ -20,7 +20,7 @@ effect parameters, which is what `estimation.candidates` exploits.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.signal import savgol_coeffs, savgol_filter
@@ -69,7 +69,7 @@ class SmootherSettings:
 
     def samples(self, dt: float) -> int:
         """Odd window length in samples for sample time ``dt``."""
-        n = max(self.polyorder + 2, int(round(self.window / dt)))
+        n = max(self.polyorder + 2, round(self.window / dt))
         return n + 1 - n % 2
 
 
@@ -230,7 +230,7 @@ class ResidualProblem:
     flight: FlightData
     config: VehicleConfig
     theta: np.ndarray
-    settings: SmootherSettings = SmootherSettings()
+    settings: SmootherSettings = field(default_factory=SmootherSettings)
     known_effects: tuple[ModelEffect, ...] = ()
 
     def __post_init__(self) -> None:

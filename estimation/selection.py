@@ -320,7 +320,8 @@ def forward_select(
             if any(c.name == cand.name for c in chosen):
                 continue
             if cand.kind == "linear":
-                rss, beta, _ = reg.fit(*reg.stack(design.r0, [*base_cols, design.linear[cand.name]]))
+                cols = [*base_cols, design.linear[cand.name]]
+                rss, beta, _ = reg.fit(*reg.stack(design.r0, cols))
                 trial[cand.name] = (reg.bic(rss, k + cand.size) - current, beta[k:])
             else:
                 grid, rss = _profile(problem, reg, cand, design, base_cols, cand.grid)
@@ -328,7 +329,8 @@ def forward_select(
                 _, r_best = _profile(problem, reg, cand, design, base_cols, np.array([v]))
                 if r_best[0] > rss.min():
                     v = float(grid[int(np.argmin(rss))])
-                trial[cand.name] = (min(r_best[0], rss.min()) + reg.penalty(k + 1) - current, np.array([v]))
+                dev = min(r_best[0], rss.min())
+                trial[cand.name] = (dev + reg.penalty(k + 1) - current, np.array([v]))
         for name, (d, values) in trial.items():
             scores.append(CandidateScore(step, name, float(d), values))
         best = min(trial, key=lambda name: trial[name][0])
@@ -338,7 +340,8 @@ def forward_select(
                  if name != best and trial[name][0] < -settings.threshold
                  and trial[name][0] - trial[best][0] < settings.tie_margin]
         if close:
-            ties.append(Tie(step, best, tuple(c[0] for c in close), tuple(float(c[1]) for c in close)))
+            ties.append(Tie(step, best, tuple(c[0] for c in close),
+                            tuple(float(c[1]) for c in close)))
         cand = next(c for c in candidates if c.name == best)
         chosen.append(cand)
         gains[best] = float(trial[best][0])
@@ -395,9 +398,16 @@ def _final_fit(problem: ResidualProblem, reg: _Regression, chosen: list[Candidat
         d = _design(problem, others, linear)
         c_cols = [d.theta] + [d.linear[c.name] for c in linear]
         v = float(eff.values[0])
-        grid = np.union1d(cand.grid, np.linspace(max(v - 0.03, 0.0), v + 0.03, 61))
+        grid = np.union1d(cand.grid, np.linspace(max(v - 0.015, 0.0), v + 0.015, 25))
         grid, prss = _profile(problem, reg, cand, d, c_cols, grid)
         lo, hi = _profile_interval(grid, prss)
+        if cand.effect.parameters[0].unit == "s":
+            # Rotor speeds and poses are stamped to within a sample interval of each other
+            # (ESC telemetry carries no time stamp, FIELD-NOTES.md); a time-like parameter
+            # cannot be resolved better: uniform ±dt/2, σ = dt/√12, in quadrature.
+            extra = 1.96 * problem.dt / np.sqrt(12.0)
+            lo = v - float(np.hypot(v - lo, extra))
+            hi = v + float(np.hypot(hi - v, extra))
         fitted[cand.name] = FittedEffect(
             eff, np.array([(hi - lo) / (2 * 1.96)]), np.array([[lo, hi]]), gains[cand.name],
             _lr_p(float(prss[np.argmin(np.abs(grid))] - prss.min()), 1), "profile")

@@ -1,74 +1,29 @@
 """Hidden-truth flights for the diagnosis tests and bench.
 
 `hidden_flight` flies a trajectory in the simulator with catalogue effects
-(`vehicle.model_effects`) made true and returns the pose log as `FlightData`. A small
-adapter turns a `ModelEffect` into the simulator's `TruthEffect`: wrench effects through
-the wrench hook, pose effects through the measurement hook (with a pose history for
-the delay), motor lag by setting the truth's motor time constant and logging the
-commanded speeds (DESIGN.md: a hidden motor lag logs commands).
+(`vehicle.model_effects`) made true through `flight.effects.hidden_effect` and returns
+the pose log as `FlightData`; `ground_trajectory` is an excitation that also descends
+within one rotor diameter of the ground.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from estimation.flight_data import FlightData
-from flight.effects import TruthEffect
+from flight.effects import hidden_effect
 from flight.excitation import ExcitationSpec, excitation_trajectory
 from flight.simulator import SimulationSettings, Simulator
 from vehicle.config import VehicleConfig
 from vehicle.flight_dir import read_meta
-from vehicle.model_effects import EffectInputs, ModelEffect
+from vehicle.model_effects import ModelEffect
 from vehicle.poselog import read_pose_log
 from vehicle.trajectory import PiecewisePolynomial, Trajectory
 
-__all__ = ["CatalogueTruth", "ground_trajectory", "hidden_flight"]
-
-
-class CatalogueTruth(TruthEffect):
-    """A catalogue effect on the simulator's truth side."""
-
-    def __init__(self, effect: ModelEffect, config: VehicleConfig, theta: np.ndarray) -> None:
-        self.effect = effect
-        self.name = effect.name
-        self._r = config.rotor_positions
-        self._theta = np.asarray(theta, float)
-        self._hist_t: list[float] = []
-        self._hist_p: list[np.ndarray] = []
-        self._hist_q: list[np.ndarray] = []
-
-    def parameters(self) -> dict[str, float | list[float]]:
-        return self.effect.as_dict()
-
-    def reset(self, physics_dt: float) -> None:
-        self._hist_t, self._hist_p, self._hist_q = [], [], []
-
-    def wrench(self, t: float, x: np.ndarray, n: np.ndarray):  # noqa: ANN201
-        if "wrench" not in self.effect.channels:
-            return None
-        inputs = EffectInputs(np.array([t]), x[None, 0:3], x[None, 6:10], x[None, 3:6],
-                              x[None, 10:13], n[None, :], self._theta, self._r)
-        f, m = self.effect.wrench(inputs)
-        return f[0], m[0]
-
-    def measure_pose(self, t: float, position: np.ndarray, quaternion: np.ndarray):  # noqa: ANN201
-        if "pose" not in self.effect.channels:
-            return position, quaternion
-        self._hist_t.append(t)
-        self._hist_p.append(position.copy())
-        self._hist_q.append(quaternion.copy())
-        k = min(len(self._hist_t), 50)
-        tt = np.array(self._hist_t[-k:])
-        p, q = self.effect.measured_pose(tt, np.array(self._hist_p[-k:]),
-                                         np.array(self._hist_q[-k:]))
-        return p[-1], q[-1]
-
-    def logged_rotor_speeds(self, t: float, actual: np.ndarray, commanded: np.ndarray):  # noqa: ANN201
-        return commanded if "rotor_speeds" in self.effect.channels else actual
+__all__ = ["ground_trajectory", "hidden_flight"]
 
 
 def ground_trajectory(duration: float = 30.0, low: float = 0.17) -> PiecewisePolynomial:
@@ -124,15 +79,9 @@ def hidden_flight(
     trajectory : Trajectory, optional
     """
     theta = config.theta if true_theta is None else np.asarray(true_theta, float)
-    sim_config = config
-    for effect in effects:
-        if "rotor_speeds" in effect.channels:
-            sim_config = replace(config, motor=replace(config.motor,
-                                                       time_constant=float(effect.values[0])))
-    truths = [CatalogueTruth(e, config, theta) for e in effects]
     trajectory = trajectory or excitation_trajectory(ExcitationSpec(duration=duration))
-    Simulator(sim_config, true_theta=theta, settings=SimulationSettings(seed=seed),
-              effects=truths).run(trajectory, directory)
+    Simulator(config, true_theta=theta, settings=SimulationSettings(seed=seed),
+              effects=[hidden_effect(e) for e in effects]).run(trajectory, directory)
     log = read_pose_log(directory / "pose.csv", config.rotor_count)
     truth = read_meta(directory / "meta.json")["truth"]
     return FlightData(log.t, log.position, log.quaternion, log.rotor_speeds,
