@@ -102,11 +102,28 @@ def theta_columns(problem: ResidualProblem, fixed: Sequence[ModelEffect], r0: np
 
 
 def effect_columns(problem: ResidualProblem, candidate: Candidate,
-                   fixed: Sequence[ModelEffect], r0: np.ndarray) -> np.ndarray:
-    """Regressors of a linear candidate, shape (N, 6, P): r(0) ≈ A v, v in SI."""
+                   fixed: Sequence[ModelEffect], r0: np.ndarray,
+                   at: ModelEffect | None = None) -> np.ndarray:
+    """Regressors of a linear candidate, shape (N, 6, P): r(v₀) − r(v₀ + Δv) ≈ A Δv, SI.
+
+    Parameters
+    ----------
+    problem : ResidualProblem
+    candidate : Candidate
+    fixed : sequence of ModelEffect
+        The other effects in the model.
+    r0 : ndarray, shape (N, 6)
+        The residual with ``fixed`` (and ``at``).
+    at : ModelEffect, optional
+        The candidate's current values v₀ (zero when not given): the columns are the
+        sensitivity there, so a fit gives the increment Δv (Gauss–Newton).
+    """
     cls = candidate.effect
+    v0 = np.zeros(candidate.size) if at is None else np.asarray(at.values, float)
     cols = np.empty(r0.shape + (candidate.size,))
     for j, p in enumerate(cls.parameters):
-        effect = cls(**{p.name: p.scale})
+        v = v0.copy()
+        v[j] += p.scale
+        effect = cls(**dict(zip(cls.parameter_names(), map(float, v), strict=True)))
         cols[..., j] = -(problem.residual([*fixed, effect]) - r0) / p.scale
     return cols

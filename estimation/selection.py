@@ -53,11 +53,15 @@ class SelectionSettings:
         Candidates whose BIC is within this of the best one's are a tie.
     max_effects : int
         Most effects named.
+    wald_p : float
+        A linear candidate must also pass the joint Wald test of its parameters being
+        zero at this level (block-inflated covariance: the one behind the reported CIs).
     """
 
     threshold: float = 10.0
     tie_margin: float = 6.0
     max_effects: int = 4
+    wald_p: float = 1e-3
 
 
 @dataclass(frozen=True)
@@ -224,39 +228,106 @@ def fit_theta(problem: ResidualProblem, rows: np.ndarray, fixed: Sequence[ModelE
     return problem, weights
 
 
-@dataclass
-class _Design:
-    fixed: list[ModelEffect]
-    r0: np.ndarray
-    theta: np.ndarray
-    linear: dict[str, np.ndarray]
+class _Model:
+    """The current model: θ (in the problem) and the chosen effects at their values.
+
+    ``design`` evaluates the residual with every chosen effect in place and the columns of
+    θ, of the chosen linear effects (at their values: increments) and of the candidates
+    not chosen yet (at zero).
+    """
+
+    def __init__(self, problem: ResidualProblem, library: Sequence[Candidate]) -> None:
+        self.problem = problem
+        self.library = {c.name: c for c in library}
+        self.effects: list[ModelEffect] = []
+
+    def candidate(self, name: str) -> Candidate:
+        return self.library[name]
+
+    @property
+    def linear(self) -> list[ModelEffect]:
+        return [e for e in self.effects if self.library[e.name].kind == "linear"]
+
+    @property
+    def n_profile(self) -> int:
+        return len(self.effects) - len(self.linear)
+
+    def design(self, candidates: Sequence[Candidate] = ()
+               ) -> tuple[np.ndarray, list[np.ndarray], dict[str, np.ndarray]]:
+        """r0 (N, 6); [θ columns, chosen linear columns …]; candidate columns by name."""
+        p, effects = self.problem, self.effects
+        r0 = p.residual(effects)
+        cols = [theta_columns(p, effects, r0)]
+        for e in self.linear:
+            others = [o for o in effects if o is not e]
+            cols.append(effect_columns(p, self.library[e.name], others, r0, at=e))
+        extra = {c.name: effect_columns(p, c, effects, r0) for c in candidates
+                 if c.kind == "linear"}
+        return r0, cols, extra
+
+    def k(self) -> int:
+        """Number of fitted parameters: θ, linear effects' and one per profile effect."""
+        return 6 + sum(len(e.values) for e in self.effects)
+
+    def relinearise(self, reg: _Regression, iterations: int = 6) -> None:
+        """Damped Gauss–Newton on θ and the linear effects' values, profile effects held.
+
+        A step is halved until θ stays physical (c_T, J > 0) and the deviance does not
+        grow: from a θ that absorbed a large effect (a CoG offset's torque turns into a
+        wrong inertia) the full step overshoots.
+        """
+        r0, cols, _ = self.design()
+        dev0 = reg.deviance(reg.fit(*reg.stack(r0, cols))[0])
+        for _ in range(iterations):
+            _, beta, _ = reg.fit(*reg.stack(r0, cols))
+            start_problem, start_effects = self.problem, list(self.effects)
+            step = 1.0
+            while step > 1e-3:
+                theta = start_problem.theta + step * beta[:6]
+                if theta[0] > 0.0 and np.all(theta[3:] > 0.0):
+                    self.problem = replace(start_problem, theta=theta)
+                    self.effects = self._stepped(start_effects, step * beta)
+                    r1, cols1, _ = self.design()
+                    dev1 = reg.deviance(reg.fit(*reg.stack(r1, cols1))[0])
+                    if dev1 <= dev0 + 1e-9:
+                        break
+                step *= 0.5
+            else:
+                self.problem, self.effects = start_problem, start_effects
+                return
+            converged = dev0 - dev1 < 1e-6
+            r0, cols, dev0 = r1, cols1, dev1
+            if converged:
+                return
+
+    def _stepped(self, effects: list[ModelEffect], beta: np.ndarray) -> list[ModelEffect]:
+        out, offset = [], 6
+        for e in effects:
+            if self.library[e.name].kind == "linear":
+                n = len(e.values)
+                out.append(e.with_values(e.values + beta[offset:offset + n]))
+                offset += n
+            else:
+                out.append(e)
+        return out
+
+    def profile(self, reg: _Regression, cand: Candidate, grid: np.ndarray,
+                cols: list[np.ndarray], others: list[ModelEffect]) -> np.ndarray:
+        """Deviance over ``grid`` of a profile candidate, ``cols`` re-fitted at each value."""
+        name = cand.effect.parameters[0].name
+        dev = np.empty(grid.size)
+        for i, v in enumerate(grid):
+            r = self.problem.residual([*others, cand.effect(**{name: float(v)})])
+            dev[i] = reg.deviance(reg.fit(*reg.stack(r, cols))[0])
+        return dev
 
 
-def _design(problem: ResidualProblem, fixed: list[ModelEffect],
-            linear: Sequence[Candidate]) -> _Design:
-    r0 = problem.residual(fixed)
-    cols = {"theta": theta_columns(problem, fixed, r0)}
-    for cand in linear:
-        cols[cand.name] = effect_columns(problem, cand, fixed, r0)
-    return _Design(fixed, r0, cols.pop("theta"), cols)
-
-
-def _profile(problem: ResidualProblem, reg: _Regression, cand: Candidate, design: _Design,
-             base_cols: list[np.ndarray], grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Deviance over ``grid`` of a profile candidate, the other columns re-fitted at each value."""
-    dev = np.empty(grid.size)
-    for i, v in enumerate(grid):
-        r = problem.residual([*design.fixed, cand.effect(**{cand.effect.parameters[0].name: v})])
-        dev[i] = reg.deviance(reg.fit(*reg.stack(r, base_cols))[0])
-    return grid, dev
-
-
-def _refine_minimum(grid: np.ndarray, rss: np.ndarray) -> float:
+def _refine_minimum(grid: np.ndarray, dev: np.ndarray) -> float:
     """Vertex of the parabola through the grid minimum and its neighbours."""
-    i = int(np.argmin(rss))
+    i = int(np.argmin(dev))
     if i == 0 or i == grid.size - 1:
         return float(grid[i])
-    x, y = grid[i - 1:i + 2], rss[i - 1:i + 2]
+    x, y = grid[i - 1:i + 2], dev[i - 1:i + 2]
     a, b, _ = np.polyfit(x, y, 2)
     return float(np.clip(-b / (2 * a), x[0], x[2])) if a > 0 else float(grid[i])
 
@@ -303,120 +374,136 @@ def forward_select(
     """
     settings = settings or SelectionSettings()
     reg = _Regression(rows, weights, problem.window_samples)
-    linear_all = [c for c in candidates if c.kind == "linear"]
-    fixed: list[ModelEffect] = []
-    chosen: list[Candidate] = []
+    model = _Model(problem, candidates)
+    theta_base = problem.theta.copy()
     gains: dict[str, float] = {}
     scores: list[CandidateScore] = []
     ties: list[Tie] = []
-    design = _design(problem, fixed, linear_all)
-    rss0, _, _ = reg.fit(*reg.stack(design.r0, [design.theta]))
-    bic_before = current = reg.bic(rss0, 6)
+    r0, cols, extra = model.design(candidates)
+    bic_before = current = reg.bic(reg.fit(*reg.stack(r0, cols))[0], 6)
     for step in range(settings.max_effects):
-        base_cols = [design.theta] + [design.linear[c.name] for c in chosen if c.kind == "linear"]
-        k = sum(c.shape[-1] for c in base_cols)
+        remaining = [c for c in candidates if c.name not in {e.name for e in model.effects}]
+        if step > 0:
+            r0, cols, extra = model.design(remaining)
+        k = model.k()
         trial: dict[str, tuple[float, np.ndarray]] = {}
-        for cand in candidates:
-            if any(c.name == cand.name for c in chosen):
-                continue
+        weak: set[str] = set()
+        for cand in remaining:
             if cand.kind == "linear":
-                cols = [*base_cols, design.linear[cand.name]]
-                rss, beta, _ = reg.fit(*reg.stack(design.r0, cols))
-                trial[cand.name] = (reg.bic(rss, k + cand.size) - current, beta[k:])
+                rss, beta, cov = reg.fit(*reg.stack(r0, [*cols, extra[cand.name]]))
+                b, c = beta[-cand.size:], cov[-cand.size:, -cand.size:]
+                trial[cand.name] = (reg.bic(rss, k + cand.size) - current, b)
+                # The BIC counts the effective samples but not the systematic leftovers of
+                # the effects already named; the Wald test on the block-inflated covariance
+                # (the reported CIs) must agree, or the effect is not named.
+                wald = float(b @ np.linalg.solve(c, b))
+                if chi2.sf(wald, cand.size) > settings.wald_p:
+                    weak.add(cand.name)
             else:
-                grid, rss = _profile(problem, reg, cand, design, base_cols, cand.grid)
-                v = _refine_minimum(grid, rss)
-                _, r_best = _profile(problem, reg, cand, design, base_cols, np.array([v]))
-                if r_best[0] > rss.min():
-                    v = float(grid[int(np.argmin(rss))])
-                dev = min(r_best[0], rss.min())
-                trial[cand.name] = (dev + reg.penalty(k + 1) - current, np.array([v]))
+                dev = model.profile(reg, cand, cand.grid, cols, model.effects)
+                v = _refine_minimum(cand.grid, dev)
+                dev_v = model.profile(reg, cand, np.array([v]), cols, model.effects)[0]
+                if dev_v > dev.min():
+                    v, dev_v = float(cand.grid[int(np.argmin(dev))]), float(dev.min())
+                trial[cand.name] = (dev_v + reg.penalty(k + 1) - current, np.array([v]))
         for name, (d, values) in trial.items():
             scores.append(CandidateScore(step, name, float(d), values))
-        best = min(trial, key=lambda name: trial[name][0])
+        if not trial:
+            break
+        eligible = [name for name in trial if name not in weak]
+        if not eligible:
+            break
+        best = min(eligible, key=lambda name: trial[name][0])
         if trial[best][0] > -settings.threshold:
             break
-        close = [(name, trial[name][0] - trial[best][0]) for name in trial
+        close = [(name, trial[name][0] - trial[best][0]) for name in eligible
                  if name != best and trial[name][0] < -settings.threshold
                  and trial[name][0] - trial[best][0] < settings.tie_margin]
         if close:
             ties.append(Tie(step, best, tuple(c[0] for c in close),
                             tuple(float(c[1]) for c in close)))
-        cand = next(c for c in candidates if c.name == best)
-        chosen.append(cand)
+        cand = model.candidate(best)
+        values = trial[best][1]
+        model.effects.append(cand.effect(**dict(zip(cand.effect.parameter_names(),
+                                                    map(float, values), strict=True))))
         gains[best] = float(trial[best][0])
         if progress is not None:
             progress(f"step {step + 1}: {best} (ΔBIC {trial[best][0]:.1f})")
-        if cand.kind == "profile":
-            fixed.append(cand.effect(**{cand.effect.parameters[0].name: float(trial[best][1][0])}))
-            design = _design(problem, fixed, linear_all)
-        current += trial[best][0]
-    return _final_fit(problem, reg, chosen, fixed, gains, scores, ties, bic_before)
+        # Re-linearise at the joint optimum: the columns (and the effects' wrenches, which
+        # scale with c_T and c_D) depend on θ and on the effects' values, and a θ distorted
+        # by the unmodelled effect would leave an error for the next step to "explain".
+        model.relinearise(reg)
+        r_cur, cols_cur, _ = model.design()
+        current = reg.bic(reg.fit(*reg.stack(r_cur, cols_cur))[0], model.k())
+    return _final_fit(model, reg, gains, scores, ties, bic_before, theta_base)
 
 
-def _final_fit(problem: ResidualProblem, reg: _Regression, chosen: list[Candidate],
-               fixed: list[ModelEffect], gains: dict[str, float], scores: list[CandidateScore],
-               ties: list[Tie], bic_before: float) -> SelectionResult:
+def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
+               scores: list[CandidateScore], ties: list[Tie], bic_before: float,
+               theta_base: np.ndarray) -> SelectionResult:
     """Joint fit of θ and the chosen effects; intervals; likelihood-ratio p-values."""
-    linear = [c for c in chosen if c.kind == "linear"]
+    if not model.effects:
+        return SelectionResult((), tuple(ties), tuple(scores), theta_base, theta_base.copy(),
+                               float(bic_before), float(bic_before), reg.weights, reg.block)
+    profiles = [i for i, e in enumerate(model.effects) if model.library[e.name].kind == "profile"]
     # Re-profile each nonlinear effect with everything else in place (one pass).
-    for i, eff in enumerate(fixed):
-        cand = next(c for c in chosen if c.name == eff.name)
-        others = fixed[:i] + fixed[i + 1:]
-        design = _design(problem, others, linear)
-        cols = [design.theta] + [design.linear[c.name] for c in linear]
-        grid, rss = _profile(problem, reg, cand, design, cols, cand.grid)
-        fixed[i] = cand.effect(**{cand.effect.parameters[0].name: _refine_minimum(grid, rss)})
-    design = _design(problem, fixed, linear)
-    cols = [design.theta] + [design.linear[c.name] for c in linear]
-    y, X = reg.stack(design.r0, cols)
+    for i in profiles:
+        e = model.effects[i]
+        cand = model.library[e.name]
+        others = [o for j, o in enumerate(model.effects) if j != i]
+        _, cols, _ = model.design()
+        dev = model.profile(reg, cand, cand.grid, cols, others)
+        model.effects[i] = e.with_values(np.array([_refine_minimum(cand.grid, dev)]))
+    model.relinearise(reg)
+    r0, cols, _ = model.design()
+    y, X = reg.stack(r0, cols)
     norm = np.linalg.norm(X, axis=0)
+    norm[norm == 0.0] = 1.0
     ols = sm.OLS(y, X / norm).fit()
     beta = ols.params / norm
     rss = np.sum((y - X @ beta).reshape(-1, 6) ** 2, axis=0)
     # statsmodels' covariance assumes white rows; the block inflation makes it honest.
     cov = ols.cov_params() * reg.block / np.outer(norm, norm)
-    k = X.shape[1] + len(fixed)
-    bic_after = reg.bic(rss, k) if chosen else bic_before
+    dev_full = reg.deviance(rss)
     fitted: dict[str, FittedEffect] = {}
     offset = 6
-    for cand in linear:
-        P = cand.size
-        values = beta[offset:offset + P]
+    for col_index, e in enumerate(model.linear, start=1):
+        P = len(e.values)
+        values = e.values + beta[offset:offset + P]
         sigma = np.sqrt(np.diag(cov)[offset:offset + P])
-        without = [c for j, c in enumerate(cols) if j != 1 + linear.index(cand)]
-        rss_without = reg.fit(*reg.stack(design.r0, without))[0]
-        fitted[cand.name] = FittedEffect(
-            cand.effect(**dict(zip(cand.effect.parameter_names(), map(float, values),
-                                   strict=True))),
-            sigma, np.column_stack([values - 1.96 * sigma, values + 1.96 * sigma]),
-            gains[cand.name], _lr_p(reg.deviance(rss_without) - reg.deviance(rss), P), "linear")
+        others = [o for o in model.effects if o is not e]
+        r_without = model.problem.residual(others)
+        without = [c for j, c in enumerate(cols) if j != col_index]
+        dev_without = reg.deviance(reg.fit(*reg.stack(r_without, without))[0])
+        fitted[e.name] = FittedEffect(
+            e.with_values(values), sigma,
+            np.column_stack([values - 1.96 * sigma, values + 1.96 * sigma]),
+            gains[e.name], _lr_p(dev_without - dev_full, P), "linear")
         offset += P
-    for i, eff in enumerate(fixed):
-        cand = next(c for c in chosen if c.name == eff.name)
-        others = fixed[:i] + fixed[i + 1:]
-        d = _design(problem, others, linear)
-        c_cols = [d.theta] + [d.linear[c.name] for c in linear]
-        v = float(eff.values[0])
+    for i in profiles:
+        e = model.effects[i]
+        cand = model.library[e.name]
+        others = [o for j, o in enumerate(model.effects) if j != i]
+        v = float(e.values[0])
         grid = np.union1d(cand.grid, np.linspace(max(v - 0.015, 0.0), v + 0.015, 25))
-        grid, prss = _profile(problem, reg, cand, d, c_cols, grid)
-        lo, hi = _profile_interval(grid, prss)
+        dev = model.profile(reg, cand, grid, cols, others)
+        lo, hi = _profile_interval(grid, dev)
         if cand.effect.parameters[0].unit == "s":
             # Rotor speeds and poses are stamped to within a sample interval of each other
             # (ESC telemetry carries no time stamp, FIELD-NOTES.md); a time-like parameter
             # cannot be resolved better: uniform ±dt/2, σ = dt/√12, in quadrature.
-            extra = 1.96 * problem.dt / np.sqrt(12.0)
+            extra = 1.96 * model.problem.dt / np.sqrt(12.0)
             lo = v - float(np.hypot(v - lo, extra))
             hi = v + float(np.hypot(hi - v, extra))
-        fitted[cand.name] = FittedEffect(
-            eff, np.array([(hi - lo) / (2 * 1.96)]), np.array([[lo, hi]]), gains[cand.name],
-            _lr_p(float(prss[np.argmin(np.abs(grid))] - prss.min()), 1), "profile")
-    ordered = tuple(fitted[c.name] for c in chosen)
+        fitted[e.name] = FittedEffect(
+            e, np.array([(hi - lo) / (2 * 1.96)]), np.array([[lo, hi]]), gains[e.name],
+            _lr_p(float(dev[np.argmin(np.abs(grid))] - dev.min()), 1), "profile")
+    ordered = tuple(fitted[e.name] for e in model.effects)
     return SelectionResult(
         effects=ordered, ties=tuple(ties), scores=tuple(scores),
-        theta_before=problem.theta.copy(), theta_after=problem.theta + beta[:6],
-        bic_before=float(bic_before), bic_after=float(bic_after), weights=reg.weights,
-        block=reg.block,
+        theta_before=theta_base, theta_after=model.problem.theta + beta[:6],
+        bic_before=float(bic_before), bic_after=float(reg.bic(rss, model.k())),
+        weights=reg.weights, block=reg.block,
     )
 
 
