@@ -43,6 +43,7 @@ __all__ = [
     "Gap",
     "Where",
     "diagnose_flight",
+    "reestimate",
 ]
 
 #: DESIGN.md: why a wrong mass cannot be seen from pose and rotor speeds.
@@ -391,3 +392,20 @@ def diagnose_flight(
         residual_before=r_before, residual_after=r_after, pose=pose, used=used,
         split_time=split, notes=tuple(notes),
     )
+
+
+def reestimate(flight: FlightData, config: VehicleConfig, diagnosis: Diagnosis,
+               refine: bool = False):  # noqa: ANN201 - EstimationResult, imported lazily
+    """Step 3 with the estimator: θ and the named effects' parameters estimated jointly.
+
+    Runs `estimation.estimator.estimate_with_effects` (the EKF, and the batch refinement
+    if ``refine``) on the augmented model; the diagnosis' fitted values are the start.
+
+    Returns
+    -------
+    EstimationResult
+    """
+    from estimation.estimator import EstimatorSettings, estimate_with_effects
+
+    return estimate_with_effects(flight, config, diagnosis.augmented_effects,
+                                 EstimatorSettings(refine=refine), fit_effects=True)

@@ -20,7 +20,7 @@ effect parameters, which is what `estimation.candidates` exploits.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import savgol_coeffs, savgol_filter
@@ -61,11 +61,17 @@ class SmootherSettings:
         Degree of the local polynomial (≥ 2 for a second derivative).
     trim : float
         Time cut off each end of the flight, s: the smoother's edges are one-sided.
+    input_window : float
+        Window of the light smoother that gives the model its inputs (attitude, rates,
+        velocity), s. The model's force is rotated to the world frame with this attitude:
+        the long window's attitude lags the true one by a fraction of a milliradian,
+        which times g is a spurious force of a few mm/s² — the size of the effects.
     """
 
     window: float = 0.15
     polyorder: int = 3
     trim: float = 0.5
+    input_window: float = 0.1
 
     def samples(self, dt: float) -> int:
         """Odd window length in samples for sample time ``dt``."""
@@ -277,8 +283,9 @@ class ResidualProblem:
             # A delayed pose belongs to earlier times: the rotor speeds are read there.
             n = np.column_stack([np.interp(t, fl.t, n[:, i]) for i in range(n.shape[1])])
         pose = smooth_pose(t, p, q, self.settings)
-        model = model_accelerations(pose, n, theta, self.config, all_effects)
-        measured, model = _consistent_pair(pose, model, self.settings, self.dt)
+        inputs = smooth_pose(t, p, q, replace(self.settings, window=self.settings.input_window))
+        model = model_accelerations(inputs, n, theta, self.config, all_effects)
+        measured, model = _consistent_pair(pose, inputs, model, self.settings, self.dt)
         return measured, model, pose
 
     def residual(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
@@ -292,8 +299,8 @@ def _filter(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return np.column_stack([np.convolve(x[:, i], kernel, mode="same") for i in range(x.shape[1])])
 
 
-def _consistent_pair(pose: SmoothedPose, model: np.ndarray, settings: SmootherSettings,
-                     dt: float) -> tuple[np.ndarray, np.ndarray]:
+def _consistent_pair(pose: SmoothedPose, inputs: SmoothedPose, model: np.ndarray,
+                     settings: SmootherSettings, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Measured and model [f_B, ω̇] that went through the same (linear) smoother.
 
     Smoothing does not commute with the rotation to the body frame, so the comparison is
@@ -304,13 +311,13 @@ def _consistent_pair(pose: SmoothedPose, model: np.ndarray, settings: SmootherSe
     frame: f = Rᵀ(a − g), ω̇ = 2 Im(q* ⊗ q̈).
     """
     kernel = acceleration_kernel(settings, dt)
-    R = pose.rotation()
-    world_model = _filter(np.einsum("nij,nj->ni", R, model[:, :3]), kernel)
-    q = pose.quaternion
-    w2 = np.sum(pose.rates**2, axis=1)
+    world_model = _filter(np.einsum("nij,nj->ni", inputs.rotation(), model[:, :3]), kernel)
+    w2 = np.sum(inputs.rates**2, axis=1)
     inner = np.column_stack([-0.25 * w2, 0.5 * model[:, 3:]])
-    qdd_model = _filter(quat_multiply(q, inner), kernel)
-    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    qdd_model = _filter(quat_multiply(inputs.quaternion, inner), kernel)
+    # Read both in the long-window body frame (a rotation of the small difference only).
+    R = pose.rotation()
+    conj = pose.quaternion * np.array([1.0, -1.0, -1.0, -1.0])
     measured = np.hstack([pose.specific_force(), pose.angular_acceleration])
     model_b = np.hstack([np.einsum("nji,nj->ni", R, world_model),
                          2.0 * quat_multiply(conj, qdd_model)[:, 1:]])

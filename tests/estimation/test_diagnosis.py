@@ -34,7 +34,7 @@ CASES = {
     "motor_lag": {"tau": 0.04},
     "pose_delay": {"delay": 0.02},
     "body_drag": {"k": 0.05 * 1.56779 * 9.81 / 9.0},  # 5 % of the weight at 3 m/s
-    "rotor_drag_linear": {"k": 8e-5},  # about half the quadratic rotor drag in hover
+    "rotor_drag_linear": {"k": 3e-4},  # 2× the quadratic rotor drag in hover (see bench)
     "marker_offset": {"x": 0.02, "y": -0.02, "z": 0.01},  # 3 cm
     "cog_offset": {"x": 0.006, "y": -0.005, "z": 0.006},  # 1 cm
     "wind": {"x": 1.6, "y": 1.2},  # 2 m/s
@@ -80,7 +80,8 @@ def _theta_error(theta: np.ndarray, truth: np.ndarray) -> float:
 
 
 def test_smoother_recovers_accelerations_of_a_known_motion():
-    """A circle with a constant yaw rate: f = Rᵀ(a − g) and ω̇ = 0 within 1e-3."""
+    """A circle with a constant yaw rate: a within 0.5 % (the smoother's attenuation at
+    1.2 rad/s with a 0.3 s window is 0.25 %), ω exact and ω̇ = 0."""
     dt, w, rad = 0.01, 1.2, 1.0
     t = np.arange(0.0, 10.0, dt)
     p = np.column_stack([rad * np.cos(w * t), rad * np.sin(w * t), 1.0 + 0 * t])
@@ -89,7 +90,7 @@ def test_smoother_recovers_accelerations_of_a_known_motion():
     pose = smooth_pose(t, p, q, SmootherSettings(window=0.3))
     inner = slice(50, -50)
     a = -w**2 * p[:, :2]
-    np.testing.assert_allclose(pose.acceleration[inner, :2], a[inner], atol=2e-3)
+    np.testing.assert_allclose(pose.acceleration[inner, :2], a[inner], atol=5e-3 * w**2 * rad)
     np.testing.assert_allclose(pose.rates[inner, 2], yaw_rate, atol=1e-6)
     np.testing.assert_allclose(pose.angular_acceleration[inner], 0.0, atol=1e-6)
 
