@@ -31,7 +31,7 @@ from vehicle.model_effects import effect_from_values
 #: The issue's magnitudes: motor time constant 40 ms, pose delay 20 ms, body drag 5 % of
 #: the weight at 3 m/s, wind 2 m/s, marker offset 3 cm, CoG offset 1 cm, thrust −8 %
 #: over 30 s, ground effect (ρ = 0.1 m) near the ground; rotor drag linear in n at
-#: twice the paper's quadratic rotor drag in hover
+#: about 3.5× the paper's quadratic rotor drag in hover (c_T n c_D ≈ 8e-5)
 #: (at 8e-5 c_D absorbs most of it: named, but the held-out shrink stays ≈ 15 %).
 CASES = {
     "motor_lag": {"tau": 0.04},

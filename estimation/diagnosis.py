@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -394,18 +395,21 @@ def diagnose_flight(
     )
 
 
-def reestimate(flight: FlightData, config: VehicleConfig, diagnosis: Diagnosis,
-               refine: bool = False):  # noqa: ANN201 - EstimationResult, imported lazily
-    """Step 3 with the estimator: θ and the named effects' parameters estimated jointly.
+def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
+               refine: bool = False) -> Any:
+    """Step 3 with the estimator: θ and ``effects``' parameters estimated jointly.
 
     Runs `estimation.estimator.estimate_with_effects` (the EKF, and the batch refinement
-    if ``refine``) on the augmented model; the diagnosis' fitted values are the start.
+    if ``refine``) with ``effects`` as the model's complete list (a diagnosis'
+    ``augmented_effects``, or only the known ones for the comparison); their values
+    are the start of the fit.
 
     Returns
     -------
     EstimationResult
+        (`estimation.results`; imported lazily, as the estimator loads compiled kernels.)
     """
     from estimation.estimator import EstimatorSettings, estimate_with_effects
 
-    return estimate_with_effects(flight, config, diagnosis.augmented_effects,
+    return estimate_with_effects(flight, config, tuple(effects),
                                  EstimatorSettings(refine=refine), fit_effects=True)

@@ -5,6 +5,9 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from estimation.diagnosis import NIS_BAND, Diagnosis
 from estimation.residuals import AXIS_NAMES, AXIS_UNITS
@@ -16,6 +19,7 @@ __all__ = [
     "augmented_vehicle",
     "diagnosis_to_json",
     "format_diagnosis",
+    "format_reestimate",
     "write_diagnosis_json",
 ]
 
@@ -139,6 +143,33 @@ def format_diagnosis(diagnosis: Diagnosis, config: VehicleConfig, log_name: str)
     lines.append("")
     for note in d.notes:
         lines.append(f"Note: {note}.")
+    return "\n".join(lines)
+
+
+def format_reestimate(before: Any, after: Any) -> str:
+    """The estimator's θ without and with the named effects (``--reestimate``).
+
+    ``before`` and ``after`` are `EstimationResult` of the model without and with them.
+    """
+    def final(result: Any) -> Any:
+        return result.refined if result.refined is not None else result.filtered
+
+    b, a = final(before), final(after)
+    lines = ["", "Re-estimated by the EKF without → with the named effects:"]
+    for j, name in enumerate(PARAMETER_NAMES):
+        lines.append(f"  {name:4s} {b.value[j]:12.5g} → {a.value[j]:12.5g} ± {a.sigma[j]:.2g}")
+    for fe in getattr(after, "effects", ()):
+        for j, p in enumerate(fe.effect.parameters):
+            sigma = fe.sigma[j]
+            lines.append(f"  {fe.effect.name}.{p.name} = {fe.effect.values[j]:.4g} {p.unit}"
+                         + (f" ± {sigma:.2g}" if math.isfinite(sigma) else ""))
+    truth = after.true_theta
+    if truth is not None:
+        def err(theta: np.ndarray) -> float:
+            return float(np.mean(np.abs(theta / truth - 1.0)))
+
+        lines.append(f"  mean |θ error| against the simulated truth: {100 * err(b.value):.2f} % "
+                     f"→ {100 * err(a.value):.2f} %")
     return "\n".join(lines)
 
 

@@ -15,10 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation.diagnosis import MASS_NOTE, Diagnosis, DiagnosisSettings, diagnose_flight
+from estimation.diagnosis import (
+    MASS_NOTE,
+    Diagnosis,
+    DiagnosisSettings,
+    diagnose_flight,
+    reestimate,
+)
 from estimation.diagnosis_report import (
     augmented_vehicle,
     format_diagnosis,
+    format_reestimate,
     write_diagnosis_json,
 )
 from estimation.flight_data import FlightData
@@ -104,6 +111,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write a Rerun recording of the diagnosis")
     parser.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                         help="end of the flight kept out of all fitting (default: 0.3)")
+    parser.add_argument("--reestimate", action="store_true",
+                        help="also run the estimator (EKF) with the augmented model: θ and "
+                        "the effects' parameters estimated together")
     parser.add_argument("--mass-check", action="store_true",
                         help="say whether a wrong mass can be detected, and exit")
 
@@ -125,6 +135,13 @@ def main(args: argparse.Namespace) -> int:
         write_diagnosis_rrd(args.rrd, run.diagnosis, str(args.log))
     if args.verbosity >= 0:
         print(format_diagnosis(run.diagnosis, run.config, str(args.log)))
+    if args.reestimate and run.diagnosis.effects:
+        d = run.diagnosis
+        known = d.augmented_effects[:len(d.augmented_effects) - len(d.effects)]
+        before = reestimate(run.flight, run.config, known)
+        after = reestimate(run.flight, run.config, d.augmented_effects)
+        if args.verbosity >= 0:
+            print(format_reestimate(before, after))
     written = [f"{what} {path}" for what, path in (("diagnosis", args.output),
                ("vehicle", args.write_config), ("recording", args.rrd)) if path is not None]
     if written:

@@ -8,8 +8,6 @@ least 50 %, and θ re-fitted with the effect is closer to the truth than without
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.signal import savgol_filter
@@ -34,7 +32,7 @@ CASES = {
     "motor_lag": {"tau": 0.04},
     "pose_delay": {"delay": 0.02},
     "body_drag": {"k": 0.05 * 1.56779 * 9.81 / 9.0},  # 5 % of the weight at 3 m/s
-    "rotor_drag_linear": {"k": 3e-4},  # 2× the quadratic rotor drag in hover (see bench)
+    "rotor_drag_linear": {"k": 3e-4},  # ≈ 3.5× the quadratic one in hover (see bench)
     "marker_offset": {"x": 0.02, "y": -0.02, "z": 0.01},  # 3 cm
     "cog_offset": {"x": 0.006, "y": -0.005, "z": 0.006},  # 1 cm
     "wind": {"x": 1.6, "y": 1.2},  # 2 m/s
@@ -223,7 +221,3 @@ def test_results_are_reproducible(config, flights):
     b = diagnose_flight(flight, config, _start_theta(config, 0), with_nis=False)
     assert [f.effect for f in a.effects] == [f.effect for f in b.effects]
     np.testing.assert_array_equal(a.theta_after, b.theta_after)
-
-
-def _unused(path: Path) -> None:  # pragma: no cover - keeps Path imported for type hints
-    del path

@@ -68,6 +68,16 @@ def test_estimate_json_gives_the_theta(lag_log, tmp_path, capsys):
     assert json.loads(out.read_text())["effects"] == []
 
 
+def test_reestimate_moves_theta_towards_the_truth(lag_log, capsys):
+    """--reestimate: the EKF on the augmented model; θ closer to the simulated truth."""
+    assert main(["diagnose", str(lag_log), "--reestimate"]) == 0
+    text = capsys.readouterr().out
+    assert "Re-estimated by the EKF without → with the named effects" in text
+    line = next(x for x in text.splitlines() if "mean |θ error|" in x)
+    before, after = (float(v) for v in re.findall(r"(\d+\.\d+) %", line))
+    assert after < before
+
+
 def test_mass_check_says_why(capsys):
     assert main(["diagnose", "whatever.csv", "--mass-check"]) == 0
     assert "cannot be detected" in capsys.readouterr().out
