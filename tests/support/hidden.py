@@ -26,12 +26,12 @@ from vehicle.trajectory import PiecewisePolynomial, Trajectory
 __all__ = ["ground_trajectory", "hidden_flight"]
 
 
-def ground_trajectory(duration: float = 30.0, low: float = 0.17) -> PiecewisePolynomial:
+def ground_trajectory(duration: float = 30.0, low: float = 0.15) -> PiecewisePolynomial:
     """The excitation figure with two descents to ``low`` m (CoG height) above the ground.
 
     Hover-to-hover Hermite segments: 1.5 m → low (held 2 s) → 1.5 m, once in the first
     70 % of the flight and once in the last 30 %, so held-out data contains ground-near
-    flight. Rotor hubs sit 0.037 m above the CoG, so ``low`` = 0.17 puts them within one
+    flight. Rotor hubs sit 0.037 m above the CoG, so ``low`` = 0.15 puts them within one
     rotor diameter (0.2 m) of the ground.
     """
     spec = ExcitationSpec(duration=duration)
