@@ -14,7 +14,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -229,30 +229,17 @@ def _rms(r: np.ndarray) -> np.ndarray:
 
 
 def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect]
-         ) -> np.ndarray | None:
-    """The parameter EKF's NIS per sample on the flight corrected for pose/speed effects.
+         ) -> np.ndarray:
+    """The parameter EKF's NIS per sample with ``effects`` in the model at their values.
 
-    Wrench effects cannot enter the paper's EKF; with any of them the result is None.
+    The estimator's effect channels (`estimation.estimator.estimate_with_effects`, held
+    values, filter only) carry every catalogue effect, wrenches included.
     """
-    if any("wrench" in e.channels for e in effects):
-        return None
-    from estimation.ekf import ParameterEKF  # compiled kernels: load only when needed
-    from estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
+    from estimation.estimator import EstimatorSettings, estimate_with_effects
 
-    t, p, q, n = flight.t, flight.position, flight.quaternion, flight.rotor_speeds
-    for e in effects:
-        if "rotor_speeds" in e.channels:
-            n = e.acting_rotor_speeds(flight.t, n)
-    for e in effects:
-        if "pose" in e.channels:
-            t, p, q = e.corrected_pose(t, p, q)
-    if t is not flight.t:
-        n = np.column_stack([np.interp(t, flight.t, n[:, i]) for i in range(n.shape[1])])
-    fixed = replace(flight, t=t, position=p, quaternion=q, rotor_speeds=n)
-    sigma = (config.noise.position_sigma, config.noise.attitude_sigma)
-    prior = prior_from_config(config, EstimatorSettings())
-    run = ParameterEKF(config, prior, sigma).run(fixed, _initial_state_sigma(fixed, sigma))
-    return run.history.nis
+    result = estimate_with_effects(flight, config, tuple(effects),
+                                   EstimatorSettings(refine=False), fit_effects=False)
+    return result.history.nis
 
 
 def _nis_stats(nis: np.ndarray | None, rows: np.ndarray) -> tuple[float | None, float | None]:
@@ -383,9 +370,6 @@ def diagnose_flight(
     gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
     where = _where(base, pose, r_before, used, noise, train, settings.window)
     notes = [MASS_NOTE]
-    if nis_after is None and fitted and with_nis:
-        notes.append("NIS after: the paper's EKF cannot carry force or torque effects yet; "
-                     "not computed")
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
         where=where, theta_identified=theta0, theta_before=selection.theta_before,
