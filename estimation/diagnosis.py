@@ -23,13 +23,13 @@ from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from estimation.candidates import candidate_library
 from estimation.flight_data import FlightData
+from estimation.regression import fit_theta
 from estimation.residuals import ResidualProblem, SmoothedPose, SmootherSettings
 from estimation.selection import (
     CandidateScore,
     FittedEffect,
     SelectionSettings,
     Tie,
-    fit_theta,
     forward_select,
 )
 from vehicle.config import VehicleConfig

@@ -9,10 +9,8 @@ added; the best is kept if it lowers the BIC by more than ``threshold``; candida
 One-at-a-time ranking against the bare model is not used: correlated regressors would
 all look good (FIELD-NOTES.md).
 
-The smoothed residual is correlated over one smoother window (D samples), so the
-likelihood counts n/D effective samples (BIC_eff = Σ_axes n_eff log(RSS_a/n) + k log(6 n_eff)) and
-the least-squares covariance is inflated by D: the naive white-noise statistics would be
-overconfident and flag effects on clean flights.
+The statistics (effective samples, per-axis variances, block-inflated covariance) are
+`estimation.regression`'s: BIC_eff = Σ_axes n_eff log(RSS_a / n) + k log(6 n_eff).
 """
 
 from __future__ import annotations
@@ -25,6 +23,7 @@ import statsmodels.api as sm
 from scipy.stats import chi2
 
 from estimation.candidates import Candidate, effect_columns, theta_columns
+from estimation.regression import Regression, lr_p, profile_interval, refine_minimum
 from estimation.residuals import ResidualProblem
 from vehicle.model_effects import ModelEffect
 
@@ -34,12 +33,8 @@ __all__ = [
     "SelectionResult",
     "SelectionSettings",
     "Tie",
-    "fit_theta",
     "forward_select",
 ]
-
-_CHI2_95 = float(chi2.ppf(0.95, 1))
-
 
 @dataclass(frozen=True)
 class SelectionSettings:
@@ -156,78 +151,6 @@ class SelectionResult:
     block: int
 
 
-class _Regression:
-    """Weighted least squares on the training rows, with effective-sample statistics."""
-
-    def __init__(self, rows: np.ndarray, weights: np.ndarray, block: int) -> None:
-        self.rows = rows
-        self.weights = weights
-        self.block = block
-
-    def stack(self, r: np.ndarray, cols: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        y = (r[self.rows] * self.weights).ravel()
-        X = np.concatenate([c[self.rows] for c in cols], axis=-1) if cols else np.zeros(
-            (len(self.rows), 6, 0))
-        X = (X * self.weights[None, :, None]).reshape(y.size, -1)
-        return y, X
-
-    def fit(self, y: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per-axis RSS (6,), coefficients and covariance (inflated by the block) of y ≈ X β."""
-        if X.shape[1] == 0:
-            return np.sum(y.reshape(-1, 6) ** 2, axis=0), np.zeros(0), np.zeros((0, 0))
-        norm = np.linalg.norm(X, axis=0)
-        norm[norm == 0.0] = 1.0
-        Xn = X / norm
-        beta_n, *_ = np.linalg.lstsq(Xn, y, rcond=None)
-        e = y - Xn @ beta_n
-        rss = np.sum(e.reshape(-1, 6) ** 2, axis=0)
-        s2 = float(rss.sum()) / max(y.size - X.shape[1], 1)
-        cov_n = np.linalg.pinv(Xn.T @ Xn) * s2 * self.block
-        return rss, beta_n / norm, cov_n / np.outer(norm, norm)
-
-    def bic(self, rss: np.ndarray, k: int) -> float:
-        """Effective BIC with one noise variance per axis, concentrated out.
-
-        −2 log L = Σ_a n_eff log(RSS_a / n) (+ const), n the rows per axis and
-        n_eff = n / D; penalty k log(6 n_eff). The per-axis variances make the criterion
-        independent of the weights, which only steer the coefficient estimates.
-        """
-        return self.deviance(rss) + self.penalty(k)
-
-    def penalty(self, k: int) -> float:
-        """BIC penalty of k parameters: k log(6 n_eff)."""
-        return float(k * np.log(6 * len(self.rows) / self.block))
-
-    def deviance(self, rss: np.ndarray) -> float:
-        """−2 log L (up to a constant) over the effective samples, per-axis variances."""
-        n = len(self.rows)
-        return float(n / self.block * np.sum(np.log(np.asarray(rss) / n)))
-
-
-def fit_theta(problem: ResidualProblem, rows: np.ndarray, fixed: Sequence[ModelEffect] = (),
-              iterations: int = 4) -> tuple[ResidualProblem, np.ndarray]:
-    """Gauss–Newton equation-error fit of θ on the training rows (effects ``fixed``).
-
-    Returns the problem at the fitted θ and the axis weights 1/σ (σ the RMS of each
-    axis's final residual).
-    """
-    weights = np.ones(6)
-    for _ in range(iterations):
-        r0 = problem.residual(fixed)
-        weights = 1.0 / np.maximum(np.sqrt(np.mean(r0[rows] ** 2, axis=0)), 1e-9)
-        reg = _Regression(rows, weights, 1)
-        _, beta, _ = reg.fit(*reg.stack(r0, [theta_columns(problem, fixed, r0)]))
-        theta = problem.theta + beta
-        if np.any(theta[3:] <= 0.0) or theta[0] <= 0.0:
-            break  # a step to an unphysical θ: keep the last physical one
-        problem = replace(problem, theta=theta)
-        if np.all(np.abs(beta) <= 1e-6 * np.abs(theta) + 1e-12):
-            break
-    r0 = problem.residual(fixed)
-    weights = 1.0 / np.maximum(np.sqrt(np.mean(r0[rows] ** 2, axis=0)), 1e-9)
-    return problem, weights
-
-
 class _Model:
     """The current model: θ (in the problem) and the chosen effects at their values.
 
@@ -269,7 +192,7 @@ class _Model:
         """Number of fitted parameters: θ, linear effects' and one per profile effect."""
         return 6 + sum(len(e.values) for e in self.effects)
 
-    def relinearise(self, reg: _Regression, iterations: int = 6) -> None:
+    def relinearise(self, reg: Regression, iterations: int = 6) -> None:
         """Damped Gauss–Newton on θ and the linear effects' values, profile effects held.
 
         A step is halved until θ stays physical (c_T, J > 0) and the deviance does not
@@ -311,7 +234,7 @@ class _Model:
                 out.append(e)
         return out
 
-    def profile(self, reg: _Regression, cand: Candidate, grid: np.ndarray,
+    def profile(self, reg: Regression, cand: Candidate, grid: np.ndarray,
                 cols: list[np.ndarray], others: list[ModelEffect]) -> np.ndarray:
         """Deviance over ``grid`` of a profile candidate, ``cols`` re-fitted at each value."""
         name = cand.effect.parameters[0].name
@@ -320,32 +243,6 @@ class _Model:
             r = self.problem.residual([*others, cand.effect(**{name: float(v)})])
             dev[i] = reg.deviance(reg.fit(*reg.stack(r, cols))[0])
         return dev
-
-
-def _refine_minimum(grid: np.ndarray, dev: np.ndarray) -> float:
-    """Vertex of the parabola through the grid minimum and its neighbours."""
-    i = int(np.argmin(dev))
-    if i == 0 or i == grid.size - 1:
-        return float(grid[i])
-    x, y = grid[i - 1:i + 2], dev[i - 1:i + 2]
-    a, b, _ = np.polyfit(x, y, 2)
-    return float(np.clip(-b / (2 * a), x[0], x[2])) if a > 0 else float(grid[i])
-
-
-def _profile_interval(grid: np.ndarray, dev: np.ndarray) -> tuple[float, float]:
-    """95 % profile-likelihood interval: deviance(v) − min ≤ χ²₁(0.95)."""
-    stat = dev - dev.min()
-    inside = np.flatnonzero(stat <= _CHI2_95)
-    lo_i, hi_i = inside.min(), inside.max()
-
-    def cross(i: int, j: int) -> float:
-        if j < 0 or j >= grid.size:
-            return float(grid[i])
-        # Linear interpolation of the crossing between a point inside and one outside.
-        f = (_CHI2_95 - stat[i]) / (stat[j] - stat[i])
-        return float(grid[i] + f * (grid[j] - grid[i]))
-
-    return cross(lo_i, lo_i - 1), cross(hi_i, hi_i + 1)
 
 
 def forward_select(
@@ -373,7 +270,7 @@ def forward_select(
     SelectionResult
     """
     settings = settings or SelectionSettings()
-    reg = _Regression(rows, weights, problem.window_samples)
+    reg = Regression(rows, weights, problem.window_samples)
     model = _Model(problem, candidates)
     theta_base = problem.theta.copy()
     gains: dict[str, float] = {}
@@ -401,7 +298,7 @@ def forward_select(
                     weak.add(cand.name)
             else:
                 dev = model.profile(reg, cand, cand.grid, cols, model.effects)
-                v = _refine_minimum(cand.grid, dev)
+                v = refine_minimum(cand.grid, dev)
                 dev_v = model.profile(reg, cand, np.array([v]), cols, model.effects)[0]
                 if dev_v > dev.min():
                     v, dev_v = float(cand.grid[int(np.argmin(dev))]), float(dev.min())
@@ -438,7 +335,7 @@ def forward_select(
     return _final_fit(model, reg, gains, scores, ties, bic_before, theta_base)
 
 
-def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
+def _final_fit(model: _Model, reg: Regression, gains: dict[str, float],
                scores: list[CandidateScore], ties: list[Tie], bic_before: float,
                theta_base: np.ndarray) -> SelectionResult:
     """Joint fit of θ and the chosen effects; intervals; likelihood-ratio p-values."""
@@ -453,7 +350,7 @@ def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
         others = [o for j, o in enumerate(model.effects) if j != i]
         _, cols, _ = model.design()
         dev = model.profile(reg, cand, cand.grid, cols, others)
-        model.effects[i] = e.with_values(np.array([_refine_minimum(cand.grid, dev)]))
+        model.effects[i] = e.with_values(np.array([refine_minimum(cand.grid, dev)]))
     model.relinearise(reg)
     r0, cols, _ = model.design()
     y, X = reg.stack(r0, cols)
@@ -478,7 +375,7 @@ def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
         fitted[e.name] = FittedEffect(
             e.with_values(values), sigma,
             np.column_stack([values - 1.96 * sigma, values + 1.96 * sigma]),
-            gains[e.name], _lr_p(dev_without - dev_full, P), "linear")
+            gains[e.name], lr_p(dev_without - dev_full, P), "linear")
         offset += P
     for i in profiles:
         e = model.effects[i]
@@ -487,7 +384,7 @@ def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
         v = float(e.values[0])
         grid = np.union1d(cand.grid, np.linspace(max(v - 0.015, 0.0), v + 0.015, 25))
         dev = model.profile(reg, cand, grid, cols, others)
-        lo, hi = _profile_interval(grid, dev)
+        lo, hi = profile_interval(grid, dev)
         if cand.effect.parameters[0].unit == "s":
             # Rotor speeds and poses are stamped to within a sample interval of each other
             # (ESC telemetry carries no time stamp, FIELD-NOTES.md); a time-like parameter
@@ -497,7 +394,7 @@ def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
             hi = v + float(np.hypot(hi - v, extra))
         fitted[e.name] = FittedEffect(
             e, np.array([(hi - lo) / (2 * 1.96)]), np.array([[lo, hi]]), gains[e.name],
-            _lr_p(float(dev[np.argmin(np.abs(grid))] - dev.min()), 1), "profile")
+            lr_p(float(dev[np.argmin(np.abs(grid))] - dev.min()), 1), "profile")
     ordered = tuple(fitted[e.name] for e in model.effects)
     return SelectionResult(
         effects=ordered, ties=tuple(ties), scores=tuple(scores),
@@ -505,8 +402,3 @@ def _final_fit(model: _Model, reg: _Regression, gains: dict[str, float],
         bic_before=float(bic_before), bic_after=float(reg.bic(rss, model.k())),
         weights=reg.weights, block=reg.block,
     )
-
-
-def _lr_p(deviance_drop: float, dof: int) -> float:
-    """p-value of the likelihood-ratio statistic (the deviance drop) against χ²(dof)."""
-    return float(chi2.sf(max(deviance_drop, 0.0), dof))
