@@ -11,7 +11,9 @@ out by the filter under θ's prior. Its maximum over (ψ, s) is the joint ML est
 θ̂(ψ̂) is then θ's estimate under the fitted effects. σ(ψ) comes from the observed
 information: the inverse of −∂²ℓ/∂ψ² at the optimum (central differences at a step of
 about one σ, so it is the curvature of the likelihood over the confidence interval);
-the 95 % interval is ψ̂ ± 1.96 σ.
+the 95 % interval is ψ̂ ± 1.96 σ. Parameters that have a sign by their meaning (a time
+constant, a drag coefficient: the config schema's table) are kept in their range; an
+estimate at the bound gets its σ from the curvature just inside it.
 
 Why through the likelihood rather than an augmented filter state: the effects act
 through channels that are not smooth functions inside the filter — a pose delay re-times
@@ -48,6 +50,10 @@ from estimation.flight_data import FlightData
 from estimation.noise_fit import NOISE_SCALE_BOUNDS, scaled_noise
 from estimation.results import FittedEffect, ParameterEstimate
 from vehicle.config import VehicleConfig
+
+# The schema's table of parameters that have a sign (tau ≥ 0 …): fitted values must load
+# back from the config they are written to. One table, so it is borrowed, not copied.
+from vehicle.config_schema import _EFFECT_SIGNS
 from vehicle.model_effects import ModelEffect
 
 __all__ = ["EffectFit", "EffectFitSettings", "fit_effects", "reference_terms"]
@@ -119,6 +125,13 @@ class EffectFit:
         return J @ self.covariance @ J.T
 
 
+def _lower_bounds(effect: ModelEffect) -> np.ndarray:
+    """Least value of each parameter, SI: the config schema's signs (−inf: any sign)."""
+    signs = [_EFFECT_SIGNS.get((effect.name, p.name)) for p in effect.parameters]
+    return np.array([-np.inf if s is None else 0.0 if s == "nonnegative" else 1e-6 * p.scale
+                     for s, p in zip(signs, effect.parameters, strict=True)])
+
+
 def _filter(config: VehicleConfig, prior: ParameterEstimate, sigma: tuple[float, float],
             state_sigma: _StateSigma, terms: ModelTerms) -> FilterRun:
     return ParameterEKF(config, prior, sigma).run(terms.flight, state_sigma, terms.wrench)
@@ -179,9 +192,14 @@ class _Derivatives:
 
 
 def _derivatives(f: _Objective, u: np.ndarray, v: float, h: np.ndarray, h_v: float,
-                 fit_noise: bool) -> _Derivatives:
-    """Central differences of ℓ: gradient, Hessian over u (with cross terms), v block."""
+                 fit_noise: bool, lower: np.ndarray) -> _Derivatives:
+    """Central differences of ℓ: gradient, Hessian over u (with cross terms), v block.
+
+    A parameter within h of its lower bound is differenced about bound + h instead: the
+    stencil must not leave the range where the effect is defined.
+    """
     P = u.size
+    u = np.maximum(u, lower + h)
     ll0, _ = f(u, v)
     g, H, dtheta = np.zeros(P), np.zeros((P, P)), np.zeros((6, P))
     E = np.eye(P) * h
@@ -209,7 +227,8 @@ def _information(H: np.ndarray, floor: float = 1e-2) -> np.ndarray:
 
 
 def _newton(f: _Objective, u: np.ndarray, v: float, v_bounds: tuple[float, float],
-            settings: EffectFitSettings) -> tuple[np.ndarray, float, _Derivatives]:
+            lower: np.ndarray, settings: EffectFitSettings
+            ) -> tuple[np.ndarray, float, _Derivatives]:
     """Maximise ℓ from (u, v); returns the optimum and the derivatives there.
 
     v stops moving once it reaches a bound with the gradient pointing outward (a flight
@@ -219,10 +238,11 @@ def _newton(f: _Objective, u: np.ndarray, v: float, v_bounds: tuple[float, float
     fit_noise = True
     for iteration in range(settings.max_iterations + 1):
         fit_noise = fit_noise and v_bounds[0] < v < v_bounds[1]
-        d = _derivatives(f, u, v, h, h_v, fit_noise)
+        d = _derivatives(f, u, v, h, h_v, fit_noise, lower)
         info = _information(d.H)
         step = np.linalg.solve(info, d.g)
         step *= min(1.0, settings.max_step / max(np.max(np.abs(step)), 1e-300))
+        step = np.maximum(u + step, lower) - u
         step_v = 0.0
         if fit_noise:
             step_v = d.gv / -d.hv if d.hv < 0.0 else math.copysign(0.5, d.gv)
@@ -284,7 +304,8 @@ def fit_effects(
         run = _filter(scaled_noise(config, 10.0**v), prior, sigma, state_sigma, terms)
         return run.log_likelihood, run.estimate.value
 
-    u = np.concatenate([e.values for e in effects]) / scales
+    lower = np.concatenate([_lower_bounds(e) for e in effects]) / scales
+    u = np.maximum(np.concatenate([e.values for e in effects]) / scales, lower)
     terms, run = reference_terms(flight, effects, config, prior, sigma, state_sigma,
                                  EffectFitSettings(reference_passes=1))
     if has_wrench(effects):
@@ -293,7 +314,7 @@ def fit_effects(
     v = 0.0
     for _ in range(max(settings.reference_passes, 1)):
         f = _Objective(evaluate)
-        u, v, d = _newton(f, u, v, v_bounds, settings)
+        u, v, d = _newton(f, u, v, v_bounds, lower, settings)
         if not has_wrench(effects):
             break
         terms = model_terms(flight, at(u * scales), config, reference[0])

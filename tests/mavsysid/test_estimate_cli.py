@@ -79,3 +79,27 @@ def test_missing_and_corrupt_logs_exit_2(tmp_path, capsys):
     assert main(["estimate", str(tmp_path / "bad.tlog")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 2 and "Traceback" not in err
+
+
+def test_config_effects_are_fitted_reported_and_written_back(flight_dir, tmp_path, capsys):
+    """A config with [effects.motor_lag]: fitted tau with σ in JSON and table, and in the new config."""
+    from dataclasses import replace
+
+    from vehicle.config import save_vehicle
+    from vehicle.model_effects import MotorLag
+
+    vehicle = tmp_path / "lagged.toml"
+    save_vehicle(replace(load_vehicle("firefly"), effects=(MotorLag(tau=0.02),)), vehicle)
+    out, toml = tmp_path / "est.json", tmp_path / "new.toml"
+    code = main(["estimate", str(flight_dir / "pose.csv"), "--vehicle", str(vehicle),
+                 "--no-refine", "-o", str(out), "--update-vehicle", str(toml)])
+    text = capsys.readouterr().out
+    assert code == 0 and "Model effects" in text and "motor_lag" in text
+    (entry,) = json.loads(out.read_text())["effects"]
+    tau = entry["parameters"]["tau"]
+    assert entry["name"] == "motor_lag" and entry["fitted"] is True
+    assert tau["sigma"] > 0.0 and tau["ci95"][0] < tau["value"] < tau["ci95"][1]
+    # The log holds the actual speeds, so the extra lag found is small (≠ the 20 ms start).
+    assert abs(tau["value"]) < 0.01
+    (written,) = load_vehicle(toml).effects
+    assert written == MotorLag(tau=tau["value"])
