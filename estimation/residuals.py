@@ -161,7 +161,9 @@ def smooth_pose(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
     q[flips == 1] *= -1.0
 
     def sg(x: np.ndarray, d: int) -> np.ndarray:
-        return savgol_filter(x, w, settings.polyorder, deriv=d, delta=dt, axis=0, mode="interp")
+        # Edge handling does not matter (the edges are trimmed, `ResidualProblem.keep`), so
+        # the cheap mirror mode rather than the default per-edge polynomial fits.
+        return savgol_filter(x, w, settings.polyorder, deriv=d, delta=dt, axis=0, mode="mirror")
 
     qs, qd, qdd = sg(q, 0), sg(q, 1), sg(q, 2)
     norm = np.linalg.norm(qs, axis=1, keepdims=True)
@@ -282,11 +284,28 @@ class ResidualProblem:
         if t is not fl.t:
             # A delayed pose belongs to earlier times: the rotor speeds are read there.
             n = np.column_stack([np.interp(t, fl.t, n[:, i]) for i in range(n.shape[1])])
-        pose = smooth_pose(t, p, q, self.settings)
-        inputs = smooth_pose(t, p, q, replace(self.settings, window=self.settings.input_window))
+        if p is fl.position and q is fl.quaternion and t is fl.t:
+            pose, inputs = self._smoothed_log()
+        else:
+            pose, inputs = self._smooth(t, p, q)
         model = model_accelerations(inputs, n, theta, self.config, all_effects)
         measured, model = _consistent_pair(pose, inputs, model, self.settings, self.dt)
         return measured, model, pose
+
+    def _smooth(self, t: np.ndarray, p: np.ndarray, q: np.ndarray
+                ) -> tuple[SmoothedPose, SmoothedPose]:
+        light = replace(self.settings, window=self.settings.input_window)
+        return smooth_pose(t, p, q, self.settings), smooth_pose(t, p, q, light)
+
+    def _smoothed_log(self) -> tuple[SmoothedPose, SmoothedPose]:
+        """The logged pose smoothed (long and light windows), computed once per problem."""
+        cached = self.__dict__.get("_smoothed")
+        if cached is None:
+            fl = self.flight
+            cached = self._smooth(fl.t, fl.position, fl.quaternion)
+            # A cache on a frozen dataclass: the value is a pure function of its fields.
+            object.__setattr__(self, "_smoothed", cached)
+        return cached
 
     def residual(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
                  ) -> np.ndarray:
