@@ -221,3 +221,19 @@ def test_results_are_reproducible(config, flights):
     b = diagnose_flight(flight, config, _start_theta(config, 0), with_nis=False)
     assert [f.effect for f in a.effects] == [f.effect for f in b.effects]
     np.testing.assert_array_equal(a.theta_after, b.theta_after)
+
+
+def test_motor_lag_filter_matches_its_recursion():
+    """The catalogue's IIR fast path (uniform steps) equals the first-order-hold recursion."""
+    from vehicle.model_effects import MotorLag
+
+    t = np.arange(0.0, 5.0, 0.01)
+    x = np.random.default_rng(0).normal(500.0, 30.0, (t.size, 6))
+    tau = 0.04
+    a = np.exp(-0.01 / tau)
+    b = 1.0 - tau / 0.01 * (1.0 - a)
+    ref = np.empty_like(x)
+    ref[0] = x[0]
+    for i in range(1, t.size):
+        ref[i] = a * ref[i - 1] + (1.0 - a) * x[i - 1] + b * (x[i] - x[i - 1])
+    np.testing.assert_allclose(MotorLag(tau=tau).acting_rotor_speeds(t, x), ref, rtol=1e-12)
