@@ -6,10 +6,12 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mavsysid.cli import main
 from tests.support.hidden import hidden_flight
+from tests.support.rrd import series, temporal_rows
 from vehicle.config import load_vehicle
 from vehicle.model_effects import MotorLag
 
@@ -51,7 +53,12 @@ def test_report_text_json_config_and_recording(lag_log, tmp_path, capsys):
     augmented = load_vehicle(toml)
     assert [e.name for e in augmented.effects] == ["motor_lag"]
     assert augmented.effects[0].values[0] == pytest.approx(tau["value"])
-    assert rrd.stat().st_size > 1000
+    rows = temporal_rows(rrd)
+    for axis in ("f_x", "dw_z"):
+        assert rows[f"/residual/{axis}/before"] == rows[f"/residual/{axis}/after"] > 1000
+    t, after = series(rrd, "/residual/f_z/after")
+    _, before = series(rrd, "/residual/f_z/before")
+    assert np.sqrt(np.mean(after**2)) < np.sqrt(np.mean(before**2))
 
 
 def test_estimate_json_gives_the_theta(lag_log, tmp_path, capsys):
