@@ -56,7 +56,7 @@ def test_report_text_json_config_and_recording(lag_log, tmp_path, capsys):
     rows = temporal_rows(rrd)
     for axis in ("f_x", "dw_z"):
         assert rows[f"/residual/{axis}/before"] == rows[f"/residual/{axis}/after"] > 1000
-    t, after = series(rrd, "/residual/f_z/after")
+    _, after = series(rrd, "/residual/f_z/after")
     _, before = series(rrd, "/residual/f_z/before")
     assert np.sqrt(np.mean(after**2)) < np.sqrt(np.mean(before**2))
 
