@@ -75,7 +75,7 @@ class DiagnosisSettings:
         Length of the time windows of the "where" report, s.
     """
 
-    smoother: SmootherSettings = field(default_factory=lambda: SmootherSettings(window=0.6))
+    smoother: SmootherSettings = field(default_factory=SmootherSettings)
     selection: SelectionSettings = field(default_factory=SelectionSettings)
     holdout: float = 0.3
     candidates: tuple[str, ...] | None = None

@@ -55,8 +55,9 @@ class SmootherSettings:
     Attributes
     ----------
     window : float
-        Window length, s. 0.15 s passes the controller's and the motors' bandwidth (a few
-        Hz) while taking the 0.5 mm / 0.1° motion-capture noise down to a few cm/s².
+        Window length, s. 0.6 s (cubic) takes the 0.5 mm / 0.1° motion-capture noise of
+        the second derivatives down to ≈ 5 mm/s² and 0.02 rad/s² and still passes the
+        rotors' influence up to ≈ 2 Hz (0.15 s: 0.15 m/s², too noisy for the effects).
     polyorder : int
         Degree of the local polynomial (≥ 2 for a second derivative).
     trim : float
@@ -68,7 +69,7 @@ class SmootherSettings:
         which times g is a spurious force of a few mm/s² — the size of the effects.
     """
 
-    window: float = 0.15
+    window: float = 0.6
     polyorder: int = 3
     trim: float = 0.5
     input_window: float = 0.1
