@@ -176,9 +176,9 @@ class _Problem:
         Q_out = np.empty((max(K - 1, 1), 12, 12))
         mass, r, eps, scale = self.model.kernel_args()
         Qc = self.model.process_noise_density()
-        _shoot(nodes, theta, self._t, self._z, self._n, self._w, self.node_idx, mass, r, eps, scale, Qc,
-               self.W, self.sigma[0], self.sigma[1], want_jac, want_q, res, rows, cols, vals,
-               Q_out)
+        _shoot(nodes, theta, self._t, self._z, self._n, self._w, self.node_idx, mass, r, eps,
+               scale, Qc, self.W, self.sigma[0], self.sigma[1], want_jac, want_q, res, rows,
+               cols, vals, Q_out)
         # Prior on θ, in the scaled units of the error state.
         prior_sigma = np.sqrt(np.diag(self.prior.covariance))
         res[m:] = (theta - self.prior.value) / prior_sigma

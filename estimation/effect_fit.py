@@ -293,7 +293,8 @@ def fit_effects(
     starts = np.cumsum([0, *sizes])
 
     def at(psi: np.ndarray) -> tuple[ModelEffect, ...]:
-        return tuple(e.with_values(psi[a:b]) for e, a, b in zip(effects, starts, starts[1:]))
+        return tuple(e.with_values(psi[a:b])
+                     for e, a, b in zip(effects, starts, starts[1:], strict=False))
 
     reference: list[WrenchReference | None] = [None]
     passes = [0]
@@ -327,7 +328,7 @@ def fit_effects(
     covariance = np.linalg.inv(_information(d.H)) * np.outer(scales, scales)
     sigma_psi = np.sqrt(np.diag(covariance))
     fitted = tuple(FittedEffect(e, sigma_psi[a:b], fitted=True)
-                   for e, a, b in zip(at(psi), starts, starts[1:]))
+                   for e, a, b in zip(at(psi), starts, starts[1:], strict=False))
     cfg = scaled_noise(config, 10.0**v)
     terms = model_terms(flight, at(psi), config, reference[0])
     run = _filter(cfg, prior, sigma, state_sigma, terms)

@@ -15,14 +15,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from collections.abc import Sequence
-
-from estimation.batch import refine
 from estimation import effect_fit
+from estimation.batch import refine
 from estimation.effect_fit import EffectFit, reference_terms
 from estimation.ekf import ParameterEKF
 from estimation.flight_data import FlightData

@@ -278,6 +278,16 @@ class MotorLag(ModelEffect):
         # Exact response of the lag to an input linear between samples (first-order hold).
         a = np.exp(-dt / tau)
         b = 1.0 - tau / dt * (1.0 - a)
+        if np.ptp(dt) <= 1e-9 * dt[0]:
+            # Uniform steps: the same recursion, y_i = a y_(i-1) + b x_i + (1 - a - b) x_(i-1),
+            # as one IIR filter (the loop below costs ~25 ms per call on a 30 s log).
+            from scipy.signal import lfilter
+
+            x = np.asarray(logged, dtype=float)
+            a0, b0 = a[0], b[0]
+            zi = ((a0 + 1.0 - a0 - b0) * x[0])[None, ...]
+            out[1:] = lfilter([b0, 1.0 - a0 - b0], [1.0, -a0], x[1:], axis=0, zi=zi)[0]
+            return out
         for i in range(1, len(t)):
             out[i] = (a[i - 1] * out[i - 1] + (1.0 - a[i - 1]) * logged[i - 1]
                       + b[i - 1] * (logged[i] - logged[i - 1]))

@@ -20,7 +20,6 @@ from vehicle.poselog import read_pose_log
 HERE = Path(__file__).parent
 BAD_VEHICLES = HERE.parent / "data" / "bad_vehicles"
 EXPECTED_KEYS = json.loads((BAD_VEHICLES / "expected.json").read_text())
-PLANNED = ["diagnose"]
 
 
 def _normalise(text: str, logs: Path) -> str:
@@ -59,15 +58,8 @@ def test_malformed_vehicle_file_exits_2_naming_the_key(filename, tmp_path, capsy
     assert not any(tmp_path.iterdir()), "nothing is written for bad input"
 
 
-@pytest.mark.parametrize("command", PLANNED)
-def test_planned_commands_say_not_implemented(command, capsys):
-    """Commands still to come exit 2 with a clear 'not implemented yet', whatever the options."""
-    assert main([command, "--vehicle", "firefly", "x.json"]) == 2
-    assert capsys.readouterr().err == f"mavsysid {command}: not implemented yet\n"
-
-
-@pytest.mark.parametrize("command", ["demo", "simulate", "estimate", "plan", "sim", "stream",
-                                     "evaluate", *PLANNED])
+@pytest.mark.parametrize("command", ["demo", "simulate", "estimate", "diagnose", "plan", "sim",
+                                     "stream", "evaluate"])
 def test_every_command_has_help(command, capsys):
     """--help works on every subcommand and exits 0."""
     with pytest.raises(SystemExit) as exit_info:

@@ -82,7 +82,7 @@ def test_missing_and_corrupt_logs_exit_2(tmp_path, capsys):
 
 
 def test_config_effects_are_fitted_reported_and_written_back(flight_dir, tmp_path, capsys):
-    """A config with [effects.motor_lag]: fitted tau with σ in JSON and table, and in the new config."""
+    """A config's [effects.motor_lag]: fitted tau with σ in JSON and table and the new config."""
     from dataclasses import replace
 
     from vehicle.config import save_vehicle
