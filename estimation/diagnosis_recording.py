@@ -24,7 +24,7 @@ from estimation.diagnosis import Diagnosis
 from estimation.residuals import AXIS_NAMES
 from vehicle.rerun_file import atomic_recording
 
-__all__ = ["recording_id_for", "write_diagnosis_rrd"]
+__all__ = ["log_diagnosis", "recording_id_for", "write_diagnosis_rrd"]
 
 _NAMESPACE = uuid.UUID("5b1e0c7a-2f3d-4e8b-9a6c-1d2e3f4a5b6c")
 _BEFORE = (214, 39, 40)
@@ -60,9 +60,6 @@ def write_diagnosis_rrd(path: str | Path, diagnosis: Diagnosis, log_name: str) -
     log_name : str
         Names the recording and fixes its id.
     """
-    d = diagnosis
-    used = d.used
-    t = d.t[used]
     blueprint = rrb.Blueprint(rrb.Horizontal(
         rrb.Grid(*[rrb.TimeSeriesView(origin=f"residual/{a}", name=a) for a in AXIS_NAMES],
                  grid_columns=2, name="residuals"),
@@ -71,24 +68,32 @@ def write_diagnosis_rrd(path: str | Path, diagnosis: Diagnosis, log_name: str) -
     ), collapse_panels=True)
     with atomic_recording(path, "mavsysid", recording_id_for(log_name),
                           f"diagnose {log_name}", blueprint) as rec:
-        for a, axis in enumerate(AXIS_NAMES):
-            _series(rec, f"residual/{axis}/before", t, d.residual_before[used, a],
-                    f"{axis} before", _BEFORE)
-            _series(rec, f"residual/{axis}/after", t, d.residual_after[used, a],
-                    f"{axis} after", _AFTER)
-        rec.log("residual/heldout_start",
-                rr.TextDocument(f"held-out data from t = {d.split_time:.2f} s"), static=True,
+        log_diagnosis(rec, diagnosis)
+
+
+def log_diagnosis(rec: rr.RecordingStream, diagnosis: Diagnosis) -> None:
+    """Log a diagnosis's entities (module docstring) into an open recording, e.g. the demo's."""
+    d = diagnosis
+    used = d.used
+    t = d.t[used]
+    for a, axis in enumerate(AXIS_NAMES):
+        _series(rec, f"residual/{axis}/before", t, d.residual_before[used, a],
+                f"{axis} before", _BEFORE)
+        _series(rec, f"residual/{axis}/after", t, d.residual_after[used, a],
+                f"{axis} after", _AFTER)
+    rec.log("residual/heldout_start",
+            rr.TextDocument(f"held-out data from t = {d.split_time:.2f} s"), static=True,
+            strict=True)
+    steps = sorted({s.step for s in d.scores})
+    for step in steps:
+        scores = [s for s in d.scores if s.step == step]
+        rec.log(f"candidates/step{step}",
+                rr.BarChart(np.array([s.delta_bic for s in scores])), static=True,
                 strict=True)
-        steps = sorted({s.step for s in d.scores})
-        for step in steps:
-            scores = [s for s in d.scores if s.step == step]
-            rec.log(f"candidates/step{step}",
-                    rr.BarChart(np.array([s.delta_bic for s in scores])), static=True,
-                    strict=True)
-            rec.log(f"candidates/step{step}/names",
-                    rr.TextDocument(", ".join(s.name for s in scores)), static=True, strict=True)
-        z = np.sqrt(np.mean((d.residual_before[used] / d.where.noise) ** 2, axis=1))
-        position = d.pose.position[used]
-        rec.log("world/trajectory", rr.Points3D(position, colors=_colours(z), radii=0.01),
-                static=True, strict=True)
-        _series(rec, "world/residual_norm", t, z, "residual / noise", _BEFORE)
+        rec.log(f"candidates/step{step}/names",
+                rr.TextDocument(", ".join(s.name for s in scores)), static=True, strict=True)
+    z = np.sqrt(np.mean((d.residual_before[used] / d.where.noise) ** 2, axis=1))
+    position = d.pose.position[used]
+    rec.log("world/trajectory", rr.Points3D(position, colors=_colours(z), radii=0.01),
+            static=True, strict=True)
+    _series(rec, "world/residual_norm", t, z, "residual / noise", _BEFORE)

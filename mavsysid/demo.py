@@ -5,9 +5,12 @@
    from the nominal by a seeded, hidden factor — and stream the plan to it over MAVLink
    on UDP loopback, recording ``pose.csv``, ``flight.tlog`` and ``meta.json``.
 3. **Estimate** θ with the paper's EKF from the part of the recorded pose log where the
-   plan was flown; with
-   ``iterations > 1`` re-plan with the updated model and fly again (the paper's future
-   work).
+   plan was flown.
+4. **Diagnose** the identified model on the last flight (`estimation.diagnosis`): does a
+   named physical effect explain what the model still gets wrong?
+
+With
+``iterations > 1`` steps 1–3 repeat with the updated model (the paper's future work).
 
 Everything goes into one run folder (``logs/demo-<time>/``): the plans, the flight
 directories, the simulator's truth logs, ``estimate.json`` and ``demo.rrd`` (one Rerun
@@ -27,12 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation.diagnosis import Diagnosis, diagnose_flight
+from estimation.diagnosis_report import write_diagnosis_json
 from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.flight_data import FlightData
 from estimation.readers import load_flight
 from estimation.results import EstimationResult, ParameterEstimate
 from flight.stream_session import StreamSettings
 from mavsysid.experiment import d_optimality
+from mavsysid.offline import parse_hidden_effects
 from mavsysid.plan import run_plan
 from mavsysid.stream import run_stream
 from planner.results import PlannerSettings, PlanResult
@@ -78,6 +84,9 @@ class DemoSettings:
         Simulated time per wall second of the MAVLink flight.
     logs : Path
         Folder that receives the run folder.
+    hidden_effects : tuple of str
+        Effects the simulated vehicle has and the model does not (``NAME:KEY=VALUE,…``,
+        as ``mavsysid sim --hidden-effect``), for the diagnosis to find.
     """
 
     vehicle: str = "firefly"
@@ -87,6 +96,7 @@ class DemoSettings:
     seed: int = 0
     speedup: float = 2.0
     logs: Path = Path("logs")
+    hidden_effects: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -115,6 +125,7 @@ class DemoResult:
     true_theta: np.ndarray
     rounds: list[DemoRound] = field(default_factory=list)
     files: dict[str, Path] = field(default_factory=dict)
+    diagnosis: Diagnosis | None = None
 
 
 def hidden_scale(config: VehicleConfig, seed: int) -> np.ndarray:
@@ -141,13 +152,15 @@ class _SimVehicle:
     """``mavsysid sim`` in its own process, sending to a loopback port."""
 
     def __init__(self, directory: Path, vehicle: str, scale: np.ndarray, port: int,
-                 speedup: float, seed: int) -> None:
+                 speedup: float, seed: int, hidden: tuple[str, ...] = ()) -> None:
         self.directory = directory
         directory.mkdir(parents=True, exist_ok=True)
         self._out = open(directory / "sim.out", "wb")  # noqa: SIM115 - the child writes it
         args = ["sim", "--connect", f"udpout:127.0.0.1:{port}", "--vehicle", vehicle,
                 "--speedup", f"{speedup:g}", "--seed", str(seed), "--truth-log",
                 str(directory / "truth"), "--theta-scale", ",".join(f"{v:.12g}" for v in scale)]
+        for text in hidden:
+            args += ["--hidden-effect", text]
         self.process = subprocess.Popen([sys.executable, "-m", "mavsysid", *args],
                                         stdout=self._out, stderr=subprocess.STDOUT)
 
@@ -183,7 +196,8 @@ def _fly(plan_file: Path, directory: Path, settings: DemoSettings, scale: np.nda
          seed: int, say: Callable[[str], None], progress: bool) -> tuple[Path, float]:
     """Start the simulated vehicle, stream the plan to it, stop it; the flight directory."""
     port = _free_udp_port()
-    sim = _SimVehicle(directory / "sim", settings.vehicle, scale, port, settings.speedup, seed)
+    sim = _SimVehicle(directory / "sim", settings.vehicle, scale, port, settings.speedup, seed,
+                      settings.hidden_effects)
     try:
         time.sleep(0.2)
         if sim.process.poll() is not None:
@@ -206,6 +220,7 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
     if not settings.planning_time > 0.0:
         raise InputError(f"--time {settings.planning_time:g}: expected > 0 s")
     config = load_vehicle(settings.vehicle)
+    parse_hidden_effects(settings.hidden_effects)  # refuse a bad one before flying
     scale = hidden_scale(config, settings.seed)
     truth = config.theta * scale
     directory = new_flight_dir(settings.logs, name or None)
@@ -231,6 +246,13 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
         estimation = estimate_parameters(flight, model, EstimatorSettings(refine=False))
         result.rounds.append(DemoRound(iteration, plan, flight_dir, flight, estimation, rms))
         model = config.with_parameters(estimation.filtered.value)
+    last = result.rounds[-1]
+    say(f"diagnosing the identified model on {last.flight_dir / 'pose.csv'}")
+    diagnosis = diagnose_flight(last.flight, config, theta=last.estimate.value,
+                                known_effects=config.effects, progress=say)
+    result = replace(result, diagnosis=diagnosis)
+    result.files["diagnosis"] = directory / "diagnosis.json"
+    write_diagnosis_json(result.files["diagnosis"], diagnosis, config, str(last.flight.source))
     result.files["estimate"] = directory / "estimate.json"
     write_json_atomic(result.files["estimate"], {
         "parameters": result.rounds[-1].estimate.as_dict(),
@@ -251,6 +273,7 @@ def write_demo_rrd(path: Path, result: DemoResult) -> None:
     round's planned and reached D-opt."""
     import rerun as rr
 
+    from estimation.diagnosis_recording import log_diagnosis
     from estimation.recording import log_estimation
     from planner.recording import log_plan
     from vehicle.rerun_file import atomic_recording
@@ -260,6 +283,8 @@ def write_demo_rrd(path: Path, result: DemoResult) -> None:
         last = result.rounds[-1]
         log_plan(rec, last.plan)
         log_estimation(rec, last.estimation, last.flight)
+        if result.diagnosis is not None:
+            log_diagnosis(rec, result.diagnosis)
         for r in result.rounds:
             rec.set_time("round", sequence=r.iteration)
             rec.log("rounds/dopt/planned", rr.Scalars(r.plan.predicted_dopt))
@@ -285,9 +310,28 @@ def format_summary(result: DemoResult) -> str:
             lines.append(f"  {n:<10}{truth[j]:>12.4g}{r.estimate.value[j]:>12.4g}"
                          f"{100 * error[j]:>8.2f}%{100 * planned[j]:>10.3f}%"
                          f"{100 * achieved[j]:>10.3f}%")
+    if result.diagnosis is not None:
+        lines += ["", *diagnosis_lines(result.diagnosis)]
     lines.append("")
     lines += [f"  {k:<10} {v}" for k, v in result.files.items()]
     return "\n".join(lines)
+
+
+def diagnosis_lines(diagnosis: Diagnosis) -> list[str]:
+    """The diagnosis in a few lines: the named effects and the gap, or that there is none."""
+    rms = diagnosis.gap.before.rms
+    if not diagnosis.effects:
+        return ["diagnosis: no significant discrepancy between the identified model and the "
+                "flight (no candidate effect explains the residual; held-out residual RMS "
+                f"force {np.linalg.norm(rms[:3]):.3g} m/s², angular acceleration "
+                f"{np.linalg.norm(rms[3:]):.3g} rad/s²)"]
+    lines = ["diagnosis: the model misses " + ", ".join(e.effect.name for e in
+                                                         diagnosis.effects)]
+    for e in diagnosis.effects:
+        values = ", ".join(f"{k} = {v:.4g}" for k, v in e.effect.as_dict().items())
+        lines.append(f"  {e.effect.name}: {values}")
+    lines.append(f"  adding it shrinks the held-out gap by {100 * diagnosis.gap.shrink:.0f} %")
+    return lines
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -308,6 +352,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--logs", type=Path, default=Path("logs"),
                         help="folder for the run folder (default: logs)")
     parser.add_argument("--name", help="run folder name (default: a timestamp)")
+    parser.add_argument("--hidden-effect", action="append", default=[],
+                        metavar="NAME:KEY=VALUE,...",
+                        help="give the simulated vehicle an effect the model lacks, for the "
+                        "diagnosis to find (repeatable), e.g. motor_lag:tau=0.04")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -320,7 +368,7 @@ def main(args: argparse.Namespace) -> int:
 
     settings = DemoSettings(vehicle=args.vehicle, planning_time=args.time, budget=args.budget,
                             iterations=args.iterations, seed=args.seed, speedup=args.speedup,
-                            logs=args.logs)
+                            logs=args.logs, hidden_effects=tuple(args.hidden_effect))
     result = run_demo(settings, say, progress=verbose, name=args.name)
     print(format_summary(result))
     return 0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mavsysid.cli import main
-from mavsysid.demo import DemoSettings, hidden_scale, run_demo
+from mavsysid.demo import DemoSettings, format_summary, hidden_scale, run_demo
 from tests.support.rrd import temporal_rows
 from vehicle.config import PARAMETER_NAMES, load_vehicle
 from vehicle.poselog import read_pose_log
@@ -63,9 +63,21 @@ def test_demo_writes_one_recording_of_every_stage(demo_run):
     assert rows["/rounds/dopt/reached"] == 1
 
 
-def test_demo_bad_input_exits_2(tmp_path, capsys):
+def test_demo_diagnoses_a_faithful_model_as_such(demo_run):
+    """Without a hidden effect the diagnosis finds no significant discrepancy, and says so."""
+    assert demo_run.diagnosis is not None and not demo_run.diagnosis.effects
+    doc = json.loads((demo_run.directory / "diagnosis.json").read_text())
+    assert doc["effects"] == []
+    assert "no significant discrepancy" in format_summary(demo_run)
+
+
+@pytest.mark.parametrize(("argv", "fragment"), [
+    (["--iterations", "0"], "--iterations 0"),
+    (["--hidden-effect", "warp:x=1"], "unknown effect 'warp'"),
+])
+def test_demo_bad_input_exits_2(argv, fragment, tmp_path, capsys):
     """A bad option is one line and exit 2, before anything flies."""
-    assert main(["demo", "--iterations", "0", "--logs", str(tmp_path)]) == 2
+    assert main(["demo", "--logs", str(tmp_path), *argv]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--iterations 0" in err
+    assert err.count("\n") == 1 and fragment in err
     assert not any(tmp_path.iterdir())
