@@ -40,8 +40,8 @@ __all__ = [
     "propagate_steps",
     "riccati_final",
     "segments_samples",
-    "steps_transfer",
     "star",
+    "steps_transfer",
 ]
 
 
@@ -173,7 +173,7 @@ def segments_samples(
     flat = flat_to_state(joined, config, theta)
     states, speeds = flat.states(), flat.rotor_speeds
     out, start = [], 0
-    for count, dt in zip(counts, steps):
+    for count, dt in zip(counts, steps, strict=True):
         out.append((states[start:start + count], speeds[start:start + count], dt))
         start += count
     return out

@@ -117,7 +117,8 @@ def split_path(path: RefinablePath, pieces: int, feasible: Callable[[Segment], b
     if pieces < 1:
         raise ValueError(f"pieces must be ≥ 1, got {pieces}")
     vertices, segments, transfers = [path.vertices[0]], [], []
-    for segment, end, transfer in zip(path.segments, path.vertices[1:], path.transfers):
+    for segment, end, transfer in zip(path.segments, path.vertices[1:], path.transfers,
+                                      strict=True):
         cut, inner = [], vertices[-1]
         for k in range(1, pieces + 1):
             vertex = end if k == pieces else segment.state_at(k / pieces)

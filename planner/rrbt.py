@@ -195,7 +195,7 @@ class _Search:
             return sigma
         rate = self.settings.propagation_rate
         for segment, (states, n, dt) in zip(
-                segments, segments_samples(segments, self.config, self.theta, rate)):
+                segments, segments_samples(segments, self.config, self.theta, rate), strict=True):
             F, Q = self.search_model.discrete(states[:-1], n[:-1], self.theta, dt)
             self._steps[id(segment)] = (segment, F, Q)
             sigma = riccati_final(self.search_model, sigma, F, Q)

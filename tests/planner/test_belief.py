@@ -132,7 +132,7 @@ def test_batched_samples_equal_per_segment_samples():
     segments = [connect_fixed(start, middle, 1.7), connect_fixed(middle, start, 2.23)]
     batched = segments_samples(segments, cfg, cfg.theta, 25.0)
     assert len(batched) == 2
-    for segment, (states, n, dt) in zip(segments, batched):
+    for segment, (states, n, dt) in zip(segments, batched, strict=True):
         s0, n0, dt0 = edge_samples(to_piecewise([segment]), cfg, cfg.theta, 25.0)
         assert states.shape == s0.shape and dt == dt0
         np.testing.assert_allclose(states, s0, atol=1e-9)
