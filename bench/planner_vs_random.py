@@ -112,6 +112,9 @@ def main() -> None:
     print(f"  speed (seed 0): {st.edges_attempted / st.elapsed:.0f} edges tried/s, "
           f"{st.edges / st.edge_time:.0f} feasible edges built per s of edge time, "
           f"{st.beliefs_propagated / max(st.propagation_time, 1e-9):.0f} beliefs propagated/s")
+    steps = np.array([r["dopt"][0].stats.refine_steps for r in rows])
+    kept = np.array([r["dopt"][0].stats.refine_accepted for r in rows])
+    print(f"  refinement: median {np.median(steps):.0f} steps per plan, {np.median(kept):.0f} kept")
 
 
 if __name__ == "__main__":

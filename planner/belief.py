@@ -27,7 +27,7 @@ import numpy as np
 from vehicle.config import VehicleConfig
 from vehicle.flatness import flat_to_state
 from vehicle.linearization import E_ATT, E_POS, ERROR_DIM, ErrorStateModel
-from vehicle.trajectory import Trajectory
+from vehicle.trajectory import FlatOutputs, Trajectory
 
 __all__ = [
     "EdgeTransfer",
@@ -36,8 +36,12 @@ __all__ = [
     "edge_samples",
     "edge_transfer",
     "identity_transfer",
+    "propagate_final",
     "propagate_steps",
+    "riccati_final",
+    "segments_samples",
     "star",
+    "steps_transfer",
 ]
 
 
@@ -141,6 +145,78 @@ def edge_samples(
     return flat.states(), flat.rotor_speeds, T / K
 
 
+def segments_samples(
+    segments: list, config: VehicleConfig, theta: np.ndarray, rate: float
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """`edge_samples` of several segments with one flatness call (its overhead dominates).
+
+    Parameters
+    ----------
+    segments : list of planner.segments.Segment
+        Segments (any object with ``duration`` and ``flat_outputs(tau)``).
+    config, theta, rate
+        As for `edge_samples`.
+
+    Returns
+    -------
+    list of (states (K + 1, 13), rotor_speeds (K + 1, k), dt s), one per segment
+    """
+    flats, counts, steps = [], [], []
+    for segment in segments:
+        T = segment.duration
+        K = max(1, round(T * rate))
+        flats.append(segment.flat_outputs(np.linspace(0.0, T, K + 1)))
+        counts.append(K + 1)
+        steps.append(T / K)
+    fields = FlatOutputs.__dataclass_fields__
+    joined = FlatOutputs(**{f: np.concatenate([getattr(x, f) for x in flats]) for f in fields})
+    flat = flat_to_state(joined, config, theta)
+    states, speeds = flat.states(), flat.rotor_speeds
+    out, start = [], 0
+    for count, dt in zip(counts, steps, strict=True):
+        out.append((states[start:start + count], speeds[start:start + count], dt))
+        start += count
+    return out
+
+
+@numba.njit(cache=True)
+def _riccati_kernel(Sigma, F, Q, H, R):
+    """The EKF covariance recursion (Joseph form) over the steps of F and Q: final Σ."""
+    n = Sigma.shape[0]
+    eye = np.eye(n)
+    P = Sigma.copy()
+    for k in range(F.shape[0]):
+        P = F[k] @ P @ F[k].T + Q[k]
+        PHt = P @ H.T
+        S = H @ PHt + R
+        K = np.linalg.solve(S, PHt.T).T
+        IKH = eye - K @ H
+        P = IKH @ P @ IKH.T + K @ R @ K.T
+        P = 0.5 * (P + P.T)
+    return P
+
+
+def riccati_final(model: ErrorStateModel, sigma0: np.ndarray, F: np.ndarray,
+                  Q: np.ndarray) -> np.ndarray:
+    """`propagate_steps`' final covariance from the steps' F and Q, compiled, (18, 18).
+
+    For one known starting belief this is several times cheaper than building the
+    edge's transfer and applying it; the refinement prices each candidate segment this
+    way and builds transfers (`steps_transfer`, same F and Q) only for the ones it keeps.
+    """
+    return _riccati_kernel(np.ascontiguousarray(sigma0, dtype=float), F, Q,
+                           model.measurement_jacobian(), model.measurement_covariance())
+
+
+def propagate_final(
+    model: ErrorStateModel, sigma0: np.ndarray, states: np.ndarray, rotor_speeds: np.ndarray,
+    theta: np.ndarray, dt: float,
+) -> np.ndarray:
+    """`riccati_final` along samples as returned by `edge_samples`, shape (18, 18)."""
+    F, Q = model.discrete(states[:-1], rotor_speeds[:-1], theta, dt)
+    return riccati_final(model, sigma0, F, Q)
+
+
 def _measurement_information(model: ErrorStateModel) -> np.ndarray:
     H = model.measurement_jacobian()
     return H.T @ np.linalg.solve(model.measurement_covariance(), H)
@@ -156,6 +232,11 @@ def edge_transfer(
     measurement at sample k.
     """
     F, Q = model.discrete(states[:-1], rotor_speeds[:-1], theta, dt)
+    return steps_transfer(model, F, Q)
+
+
+def steps_transfer(model: ErrorStateModel, F: np.ndarray, Q: np.ndarray) -> EdgeTransfer:
+    """The transfer of K steps with transitions F and process noises Q, each (K, 18, 18)."""
     return EdgeTransfer(*_chain_kernel(F, Q, _measurement_information(model)))
 
 

@@ -32,10 +32,14 @@ from planner.belief import (
     edge_samples,
     edge_transfer,
     identity_transfer,
+    propagate_final,
     propagate_steps,
+    riccati_final,
+    segments_samples,
+    steps_transfer,
 )
 from planner.feasibility import check_segment
-from planner.refine import PathRefiner, RefinablePath, StopChoice
+from planner.refine import FlightPricing, PathRefiner, RefinablePath, StopChoice, split_path
 from planner.results import (
     PlannerGraph,
     PlannerSettings,
@@ -138,6 +142,8 @@ class _Search:
         self.samples = self.edges_attempted = self.edges = self.propagations = 0
         self.edge_time = self.propagation_time = self.transfer_time = 0.0
         self.refined_steps = self.refined_accepted = 0
+        #: F and Q of the segments last priced by `propagate_segments`, by id.
+        self._steps: dict[int, tuple[Segment, np.ndarray, np.ndarray]] = {}
         self.best: tuple[float, _Belief] | None = None
         self.history: list[tuple[float, float]] = []
         self.first_solution: float | None = None
@@ -182,11 +188,34 @@ class _Search:
                                      self.settings.propagation_rate)
         return edge_transfer(self.search_model, states, n, self.theta, dt)
 
+    def propagate_segments(self, sigma: np.ndarray, segments: list[Segment]) -> np.ndarray:
+        """Σ after flying ``segments`` in order, by the EKF recursion at the search's rate."""
+        self._steps.clear()
+        if not segments:
+            return sigma
+        rate = self.settings.propagation_rate
+        for segment, (states, n, dt) in zip(
+                segments, segments_samples(segments, self.config, self.theta, rate), strict=True):
+            F, Q = self.search_model.discrete(states[:-1], n[:-1], self.theta, dt)
+            self._steps[id(segment)] = (segment, F, Q)
+            sigma = riccati_final(self.search_model, sigma, F, Q)
+        return sigma
+
+    def kept_transfer(self, segment: Segment) -> EdgeTransfer:
+        """`transfer_of`, reusing F and Q when ``segment`` was just priced."""
+        hit = self._steps.get(id(segment))
+        if hit is not None and hit[0] is segment:
+            return steps_transfer(self.search_model, hit[1], hit[2])
+        return self.transfer_of(segment)
+
     def feasible(self, segment: Segment) -> bool:
         return check_segment(segment, self.config, self.box).feasible
 
-    def stop_at(self, state: VertexState) -> StopChoice | None:
-        """The shortest feasible stopping segment from ``state``; None if there is none."""
+    def stop_at(self, state: VertexState, with_transfer: bool = True) -> StopChoice | None:
+        """The shortest feasible stopping segment from ``state``; None if there is none.
+
+        Without ``with_transfer`` a moving state's stop comes without its transfer.
+        """
         if np.all(np.abs(state.position[1:]) <= 1e-12) and np.all(np.abs(state.yaw[1:]) <= 1e-12):
             return StopChoice(None, identity_transfer())
         inner_lo, inner_hi = self.box[:3] + _STOP_MARGIN, self.box[3:] - _STOP_MARGIN
@@ -196,7 +225,8 @@ class _Search:
                           inner_lo, inner_hi)
             candidate = stop_segment(state, duration, end)
             if self.feasible(candidate):
-                return StopChoice(candidate, self.transfer_of(candidate))
+                return StopChoice(candidate,
+                                  self.transfer_of(candidate) if with_transfer else None)
         return None
 
     def add_vertex(self, state: VertexState) -> int:
@@ -390,27 +420,47 @@ class _Search:
         return self.dopt(sigma)
 
     def best_path(self) -> RefinablePath | None:
-        """The best candidate flight found by the search."""
+        """The best candidate flight found by the search, its yaw made continuous.
+
+        An edge ends at its destination's yaw shifted by 2πk (`_nearest_yaw_branch`), and
+        the next edge starts from the unshifted vertex. Each segment (and the stop) is
+        shifted by whole turns to start where the previous one ended, so that the path's
+        vertices are its segments' own boundary states and a re-solved segment turns the
+        way the searched one did (else the refinement would see 2π yaw jumps).
+        """
         if self.best is None:
             return None
         belief = self.best[1]
         edges = belief.path_edges()
         end = self.vertices[belief.vertex]
-        stop = StopChoice(end.stop, end.stop_transfer)
         transfers = tuple(self.edge_transfer(e) for e in edges)
-        return RefinablePath(
-            (self.vertices[0].state, *(self.vertices[e.dst].state for e in edges)),
-            tuple(e.segment for e in edges), transfers, stop,
-            self.flight_dopt([*transfers, stop.transfer]))
+        vertices, segments = [self.vertices[0].state], []
+        for edge in edges:
+            segment = _shift_yaw(edge.segment, float(vertices[-1].yaw[0])
+                                 - float(edge.segment.yaw_coeffs[0]))
+            segments.append(segment)
+            dst = self.vertices[edge.dst].state
+            vertices.append(_shift_vertex_yaw(dst, float(segment.end_state().yaw[0])
+                                              - float(dst.yaw[0])))
+        stop_segment_ = None if end.stop is None else _shift_yaw(
+            end.stop, float(vertices[-1].yaw[0]) - float(end.stop.yaw_coeffs[0]))
+        stop = StopChoice(stop_segment_, end.stop_transfer)
+        return RefinablePath(tuple(vertices), tuple(segments), transfers, stop,
+                             self.flight_dopt([*transfers, stop.transfer]))
 
     def refine(self) -> RefinablePath | None:
         """Spend the rest of the planning time refining the best flight (`planner.refine`)."""
         path = self.best_path()
         if path is None or self.refine_steps == 0:
             return path
-        refiner = PathRefiner(path, self.feasible, self.transfer_of, self.stop_at,
-                              self.flight_dopt, self.box, self.settings.budget,
-                              np.random.default_rng([self.settings.seed, 1]))
+        pricing = FlightPricing(self.sigma0, self.propagate_segments, self.kept_transfer,
+                                apply_transfer, self.dopt, identity_transfer())
+        path = split_path(path, self.settings.refine_split, self.feasible, self.transfer_of)
+        refiner = PathRefiner(path, self.feasible,
+                              lambda state: self.stop_at(state, with_transfer=False), pricing,
+                              self.box, self.settings.budget,
+                              np.random.default_rng([self.settings.seed, 1]),
+                              self.config.limits.segment_time_max)
         while refiner.steps < self.refine_steps and self.elapsed() < self.settings.planning_time:
             if refiner.step():
                 self.history.append((self.elapsed(), refiner.path.dopt))
@@ -435,6 +485,29 @@ def _nearest_yaw_branch(state: VertexState, yaw: float) -> VertexState:
     if shift == 0.0:
         return state
     return VertexState(state.position, state.yaw + np.array([shift, 0.0, 0.0]))
+
+
+def _whole_turns(angle: float) -> float:
+    """``angle`` rounded to a multiple of 2π (it is one up to rounding), rad."""
+    return 2.0 * np.pi * round(angle / (2.0 * np.pi))
+
+
+def _shift_yaw(segment: Segment, shift: float) -> Segment:
+    """The same segment with its yaw shifted by the whole turns nearest ``shift`` (rad)."""
+    turns = _whole_turns(shift)
+    if turns == 0.0:
+        return segment
+    yaw = segment.yaw_coeffs.copy()
+    yaw[0] += turns
+    return Segment(segment.duration, segment.position_coeffs, yaw)
+
+
+def _shift_vertex_yaw(state: VertexState, shift: float) -> VertexState:
+    """The same vertex with its yaw shifted by the whole turns nearest ``shift`` (rad)."""
+    turns = _whole_turns(shift)
+    if turns == 0.0:
+        return state
+    return VertexState(state.position, state.yaw + np.array([turns, 0.0, 0.0]))
 
 
 def _as_trajectory(segment: Segment) -> PiecewisePolynomial:
@@ -475,6 +548,7 @@ def _warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
                                  settings.propagation_rate)
     transfer = edge_transfer(model, states, n, config.theta, dt)
     apply_transfer_logdet(np.eye(ERROR_DIM), transfer)
+    propagate_final(model, np.eye(ERROR_DIM), states, n, config.theta, dt)
 
 
 def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
@@ -484,9 +558,11 @@ def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
                          "with each min below its max")
     if not settings.budget > 0.0:
         raise InputError(f"budget {settings.budget:g} s: expected a positive flight time")
-    if not 0.0 <= settings.refine_share < 1.0 or settings.refine_steps < 0:
-        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1) and "
-                         f"steps {settings.refine_steps} must be ≥ 0")
+    if (not 0.0 <= settings.refine_share < 1.0 or settings.refine_steps < 0
+            or settings.refine_split < 1):
+        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1), "
+                         f"steps {settings.refine_steps} must be ≥ 0 and split "
+                         f"{settings.refine_split} ≥ 1")
     start = settings.start_pose
     if np.any(start[:3] < box[:3]) or np.any(start[:3] > box[3:]):
         raise InputError(f"start {list(start[:3])} lies outside the box {list(box)}")

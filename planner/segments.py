@@ -225,17 +225,18 @@ class Segment:
             pos[:, 0], pos[:, 1], pos[:, 2], pos[:, 3], pos[:, 4], yaw[:, 0], yaw[:, 1], yaw[:, 2]
         )
 
-    def _state_at(self, s: float) -> VertexState:
+    def state_at(self, s: float) -> VertexState:
+        """Flat state at unit time s = τ/T ∈ [0, 1]."""
         v = self._values(np.array([s]))[0]
         return VertexState(v[: 3 * _POS_DERIVS].reshape(_POS_DERIVS, 3), v[3 * _POS_DERIVS :])
 
     def start_state(self) -> VertexState:
         """Flat state at τ = 0."""
-        return self._state_at(0.0)
+        return self.state_at(0.0)
 
     def end_state(self) -> VertexState:
         """Flat state at τ = T."""
-        return self._state_at(1.0)
+        return self.state_at(1.0)
 
 
 def _trusted_segment(duration: float, position_b: np.ndarray, yaw_b: np.ndarray) -> Segment:

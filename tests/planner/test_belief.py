@@ -10,9 +10,14 @@ from planner.belief import (
     edge_samples,
     edge_transfer,
     identity_transfer,
+    propagate_final,
     propagate_steps,
+    riccati_final,
+    segments_samples,
     star,
+    steps_transfer,
 )
+from planner.segments import VertexState, connect_fixed, to_piecewise
 from vehicle.config import load_vehicle
 from vehicle.linearization import E_THETA, ErrorStateModel, initial_state_sigma
 from vehicle.trajectory import PiecewisePolynomial, hermite_coefficients
@@ -100,3 +105,35 @@ def test_identity_transfer_leaves_a_belief_unchanged():
     cfg = load_vehicle("quad_x")
     sigma0 = _start_covariance(cfg)
     np.testing.assert_allclose(apply_transfer(sigma0, identity_transfer()), sigma0)
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_compiled_recursion_and_steps_transfer_equal_the_step_by_step_ekf(seed):
+    """`propagate_final` and the transfer built from the same F and Q match `propagate_steps`."""
+    cfg = load_vehicle("firefly")
+    model = ErrorStateModel.for_vehicle(cfg)
+    sigma0 = _start_covariance(cfg)
+    for segment in _random_segments(3, seed):
+        states, n, dt = edge_samples(segment, cfg, cfg.theta, 25.0)
+        reference = propagate_steps(model, sigma0, states, n, cfg.theta, dt)[-1]
+        assert _theta_error(propagate_final(model, sigma0, states, n, cfg.theta, dt),
+                            reference) < 1e-9
+        F, Q = model.discrete(states[:-1], n[:-1], cfg.theta, dt)
+        assert _theta_error(riccati_final(model, sigma0, F, Q), reference) < 1e-9
+        assert _theta_error(apply_transfer(sigma0, steps_transfer(model, F, Q)), reference) < 1e-9
+
+
+def test_batched_samples_equal_per_segment_samples():
+    """One flatness call over several segments gives each segment's own samples."""
+    cfg = load_vehicle("firefly")
+    start = VertexState.hover(np.array([0.0, 0.0, 1.5]), 0.0)
+    middle = VertexState(np.array([[1.0, 0.5, 1.8], [0.5, 1.5, 0.0], [0.0, -1.0, 0.5],
+                                   [1.0, 0.0, 0.0], [0.0, 3.0, 1.0]]), np.array([1.0, 0.2, -1.0]))
+    segments = [connect_fixed(start, middle, 1.7), connect_fixed(middle, start, 2.23)]
+    batched = segments_samples(segments, cfg, cfg.theta, 25.0)
+    assert len(batched) == 2
+    for segment, (states, n, dt) in zip(segments, batched, strict=True):
+        s0, n0, dt0 = edge_samples(to_piecewise([segment]), cfg, cfg.theta, 25.0)
+        assert states.shape == s0.shape and dt == dt0
+        np.testing.assert_allclose(states, s0, atol=1e-9)
+        np.testing.assert_allclose(n, n0, rtol=1e-9)
