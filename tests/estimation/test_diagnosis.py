@@ -138,6 +138,7 @@ def test_linear_candidate_columns_reproduce_the_effect(config, flights):
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_hidden_effect_is_named_fitted_and_closes_the_gap(config, flights, name):
+    """Named first, 95 % CI holds the truth, held-out gap shrinks ≥ 50 %, θ moves closer."""
     flight = flights((name,), 0)
     d = diagnose_flight(flight, config, _start_theta(config, 0), with_nis=False)
     named = [f.effect.name for f in d.effects]
@@ -153,6 +154,7 @@ def test_hidden_effect_is_named_fitted_and_closes_the_gap(config, flights, name)
 
 @pytest.mark.parametrize("pair", PAIRS, ids=["+".join(p) for p in PAIRS])
 def test_two_hidden_effects_are_both_named(config, flights, pair):
+    """Two effects hidden at once are both named."""
     flight = flights(pair, 0)
     d = diagnose_flight(flight, config, _start_theta(config, 1), with_nis=False)
     named = {f.effect.name for f in d.effects}
@@ -161,6 +163,7 @@ def test_two_hidden_effects_are_both_named(config, flights, pair):
 
 @pytest.mark.parametrize("seed", [10, 11, 12])
 def test_no_effect_no_discrepancy(config, flights, seed):
+    """With nothing hidden the diagnosis names nothing."""
     flight = flights((), seed)
     d = diagnose_flight(flight, config, _start_theta(config, seed), with_nis=False)
     assert d.effects == ()
@@ -189,12 +192,14 @@ def test_nis_before_and_after_for_a_pose_channel_effect(config, flights):
 
 
 def test_short_flight_is_refused(config, flights):
+    """A flight too short to hold out 30 % is refused with one line."""
     flight = flights((), 0).time_slice(0.0, 4.0)
     with pytest.raises(InputError, match="too short"):
         diagnose_flight(flight, config, with_nis=False)
 
 
 def test_wrong_rotor_count_and_bad_theta_are_refused(config, flights):
+    """A log for another rotor count, or an unphysical θ, is refused with one line."""
     flight = flights((), 0)
     quad = load_vehicle("quad_x")
     with pytest.raises(InputError, match="rotor"):
@@ -207,6 +212,7 @@ def test_wrong_rotor_count_and_bad_theta_are_refused(config, flights):
 
 
 def test_non_uniform_sampling_is_refused(config, flights):
+    """The smoother needs uniform samples: a jittered log is refused."""
     flight = flights((), 0)
     t = flight.t.copy()
     t[100:] += 0.004
@@ -216,6 +222,7 @@ def test_non_uniform_sampling_is_refused(config, flights):
 
 
 def test_results_are_reproducible(config, flights):
+    """The same flight gives the same diagnosis."""
     flight = flights(("body_drag",), 0)
     a = diagnose_flight(flight, config, _start_theta(config, 0), with_nis=False)
     b = diagnose_flight(flight, config, _start_theta(config, 0), with_nis=False)
