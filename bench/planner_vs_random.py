@@ -27,11 +27,6 @@ from planner.rrbt import plan
 from vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 
 
-def dopt(cov: np.ndarray) -> float:
-    """det(Σ)^(1/6) via log-eigenvalues (DESIGN.md)."""
-    return float(np.exp(np.mean(np.log(np.linalg.eigvalsh(cov)))))
-
-
 def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanResult,
                      directory: Path, seed: int, process_noise: bool = False):
     """Fly the plan with the true θ (the controller knows only the prior) and filter the log.
@@ -81,10 +76,10 @@ def main() -> None:
             rows.append(row)
             (p, e), (rp, re) = row["dopt"], row["random"]
             print(f"seed {seed:2d}: dopt predicted {p.predicted_dopt:.3g} reached "
-                  f"{dopt(e.filtered.covariance):.3g} | random predicted {rp.predicted_dopt:.3g} "
-                  f"reached {dopt(re.filtered.covariance):.3g} | vertices {p.stats.vertices}, "
+                  f"{e.filtered.d_optimality:.3g} | random predicted {rp.predicted_dopt:.3g} "
+                  f"reached {re.filtered.d_optimality:.3g} | vertices {p.stats.vertices}, "
                   f"edges {p.stats.edges}, beliefs {p.stats.beliefs}", flush=True)
-    reached = {k: np.array([dopt(r[k][1].filtered.covariance) for r in rows]) for k in rows[0]}
+    reached = {k: np.array([r[k][1].filtered.d_optimality for r in rows]) for k in rows[0]}
     predicted = {k: np.array([r[k][0].predicted_dopt for r in rows]) for k in rows[0]}
     print(f"\n{args.seeds} seeds, budget {args.budget:g} s, planning {args.time:g} s, "
           f"{args.vehicle}, priors ±50 %")

@@ -39,6 +39,11 @@ class ParameterEstimate:
         """σ / |value|, shape (6,)."""
         return self.sigma / np.abs(self.value)
 
+    @property
+    def d_optimality(self) -> float:
+        """det(Σ)^(1/6) via log-eigenvalues (paper Eq. dopt, DESIGN.md), SI."""
+        return float(np.exp(np.mean(np.log(np.linalg.eigvalsh(self.covariance)))))
+
     def as_dict(self) -> dict[str, dict[str, float]]:
         """``{"c_T": {"value": .., "sigma": ..}, ...}`` (DESIGN.md's estimate JSON)."""
         return {name: {"value": float(v), "sigma": float(s)}

@@ -37,7 +37,6 @@ from estimation.flight_data import FlightData
 from estimation.readers import load_flight
 from estimation.results import EstimationResult, ParameterEstimate
 from flight.stream_session import StreamSettings
-from mavsysid.experiment import d_optimality
 from mavsysid.offline import parse_hidden_effects
 from mavsysid.plan import run_plan
 from mavsysid.stream import run_stream
@@ -275,7 +274,7 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
         "true_parameters": dict(zip(PARAMETER_NAMES, truth.tolist(), strict=True)),
         "rounds": [{"iteration": r.iteration, "flight": str(r.flight_dir),
                     "predicted_dopt": r.plan.predicted_dopt,
-                    "reached_dopt": d_optimality(r.estimate.covariance),
+                    "reached_dopt": r.estimate.d_optimality,
                     "parameters": r.estimate.as_dict()} for r in result.rounds]})
     if record:
         say("writing the Rerun recording of every stage")
@@ -304,7 +303,7 @@ def write_demo_rrd(path: Path, result: DemoResult) -> None:
         for r in result.rounds:
             rec.set_time("round", sequence=r.iteration)
             rec.log("rounds/dopt/planned", rr.Scalars(r.plan.predicted_dopt))
-            rec.log("rounds/dopt/reached", rr.Scalars(d_optimality(r.estimate.covariance)))
+            rec.log("rounds/dopt/reached", rr.Scalars(r.estimate.d_optimality))
 
 
 def format_summary(result: DemoResult) -> str:
@@ -319,7 +318,7 @@ def format_summary(result: DemoResult) -> str:
         lines.append(f"round {r.iteration}: flew {r.plan.trajectory.duration:.1f} s, tracking "
                      f"RMS {100 * r.tracking_rms:.1f} cm, D-opt planned "
                      f"{r.plan.predicted_dopt:.3g}, reached "
-                     f"{d_optimality(r.estimate.covariance):.3g}")
+                     f"{r.estimate.d_optimality:.3g}")
         lines.append(f"  {'parameter':<10}{'truth':>12}{'estimate':>12}{'error':>9}"
                      f"{'σ planned':>11}{'σ reached':>11}")
         for j, n in enumerate(PARAMETER_NAMES):

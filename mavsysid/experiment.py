@@ -38,7 +38,7 @@ from planner.rrbt import plan
 from vehicle.config import VehicleConfig, load_vehicle
 from vehicle.linearization import initial_state_sigma
 
-__all__ = ["KINDS", "ExperimentSpec", "d_optimality", "draw_prior", "run_experiment"]
+__all__ = ["KINDS", "ExperimentSpec", "draw_prior", "run_experiment"]
 
 #: Planner kinds, in the paper's names: DOPT-COV (ours) and RAND.
 KINDS: tuple[str, ...] = ("dopt", "random")
@@ -93,11 +93,6 @@ class ExperimentSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def d_optimality(covariance: np.ndarray) -> float:
-    """det(Σ)^(1/6) via log-eigenvalues (paper Eq. dopt, DESIGN.md), SI."""
-    return float(np.exp(np.mean(np.log(np.linalg.eigvalsh(covariance)))))
-
-
 def draw_prior(truth: VehicleConfig, seed: int) -> np.ndarray:
     """The unknown parameters drawn uniformly ±50 % around the truth, shape (6,)."""
     rng = np.random.default_rng([seed, 20_000])
@@ -147,7 +142,7 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
         "iteration": iteration,
         "flight_time": float(result.trajectory.duration),
         "predicted_dopt": float(result.predicted_dopt),
-        "reached_dopt": d_optimality(est.covariance),
+        "reached_dopt": est.d_optimality,
         "estimate": est.value.tolist(),
         "covariance": est.covariance.tolist(),
         "relative_sigma": (est.sigma / truth.theta).tolist(),
