@@ -145,3 +145,23 @@ def test_vehicle_too_weak_for_the_figure_exits_3(tmp_path, capsys):
     assert code == 3
     assert "weak.toml" in err and "620" in err and err.count("\n") == 1
     assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.parametrize(("cause", "expected"), [(KeyboardInterrupt, 130), (ValueError, None)])
+def test_interrupt_inside_numba_kernel_exits_130(cause, expected, monkeypatch, capsys):
+    """A SystemError chained on Ctrl-C exits 130; any other SystemError still propagates."""
+    import mavsysid.evaluate
+
+    def run(args):
+        try:
+            raise cause
+        except cause as inner:
+            raise SystemError("returned a result with an exception set") from inner
+
+    monkeypatch.setattr(mavsysid.evaluate, "main", run)
+    if expected is None:
+        with pytest.raises(SystemError):
+            main(["evaluate", "--n", "1"])
+        return
+    assert main(["evaluate", "--n", "1"]) == expected
+    assert capsys.readouterr().err == "mavsysid evaluate: interrupted\n"
