@@ -21,9 +21,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property, lru_cache
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
+from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs
 
 from estimation.flight_data import FlightData
 from vehicle.config import GRAVITY, VehicleConfig
@@ -112,7 +114,14 @@ class SmoothedPose:
 
     def rotation(self) -> np.ndarray:
         """R(q) body → world, shape (N, 3, 3)."""
-        return quat_to_matrix(self.quaternion)
+        return self._rotation
+
+    @cached_property
+    def _rotation(self) -> np.ndarray:
+        # Read by every residual evaluation of the cached log smoothing.
+        rotation = quat_to_matrix(self.quaternion)
+        rotation.setflags(write=False)
+        return rotation
 
     def velocity_body(self) -> np.ndarray:
         """v_B = Rᵀ v, shape (N, 3), m/s."""
@@ -161,20 +170,28 @@ def smooth_pose(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
     flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2
     q[flips == 1] *= -1.0
 
-    def sg(x: np.ndarray, d: int) -> np.ndarray:
-        # Edge handling does not matter (the edges are trimmed, `ResidualProblem.keep`), so
-        # the cheap mirror mode rather than the default per-edge polynomial fits.
-        return savgol_filter(x, w, settings.polyorder, deriv=d, delta=dt, axis=0, mode="mirror")
-
-    qs, qd, qdd = sg(q, 0), sg(q, 1), sg(q, 2)
+    signal = np.hstack([q, np.asarray(position, float)])
+    # savgol_filter(mode="mirror") with the kernels computed once. Edge handling does not
+    # matter (the edges are trimmed, `ResidualProblem.keep`), so the cheap mirror mode
+    # rather than the default per-edge polynomial fits.
+    smooth, first, second = (convolve1d(signal, _savgol_kernel(w, settings.polyorder, d, dt),
+                                        axis=0, mode="mirror") for d in (0, 1, 2))
+    qs, qd, qdd = smooth[:, :4], first[:, :4], second[:, :4]
     norm = np.linalg.norm(qs, axis=1, keepdims=True)
     qs, qd, qdd = qs / norm, qd / norm, qdd / norm
     conj = qs * np.array([1.0, -1.0, -1.0, -1.0])
     rates = 2.0 * quat_multiply(conj, qd)[:, 1:]
     angular_acceleration = 2.0 * quat_multiply(conj, qdd)[:, 1:]
-    return SmoothedPose(t=np.asarray(t, float), position=sg(position, 0), quaternion=qs,
-                        velocity=sg(position, 1), acceleration=sg(position, 2), rates=rates,
+    return SmoothedPose(t=np.asarray(t, float), position=smooth[:, 4:], quaternion=qs,
+                        velocity=first[:, 4:], acceleration=second[:, 4:], rates=rates,
                         angular_acceleration=angular_acceleration)
+
+
+@lru_cache(maxsize=64)
+def _savgol_kernel(window: int, polyorder: int, deriv: int, dt: float) -> np.ndarray:
+    kernel = savgol_coeffs(window, polyorder, deriv=deriv, delta=dt)
+    kernel.setflags(write=False)
+    return kernel
 
 
 def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.ndarray,
@@ -316,7 +333,8 @@ class ResidualProblem:
 
 
 def _filter(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    return np.column_stack([np.convolve(x[:, i], kernel, mode="same") for i in range(x.shape[1])])
+    # np.convolve(mode="same") per column: zero padding, an odd kernel centred.
+    return convolve1d(x, kernel, axis=0, mode="constant", cval=0.0)
 
 
 def _consistent_pair(pose: SmoothedPose, inputs: SmoothedPose, model: np.ndarray,
@@ -352,11 +370,17 @@ def acceleration_kernel(settings: SmootherSettings, dt: float) -> np.ndarray:
     Δ²p / dt² is the acceleration to O(dt²). Filtering the model's acceleration with h
     reproduces what the smoother does to the measured one, bias included.
     """
-    w = settings.samples(dt)
-    c = savgol_coeffs(w, settings.polyorder, deriv=2, delta=dt, use="conv")
+    return _acceleration_kernel(settings.samples(dt), settings.polyorder, dt)
+
+
+@lru_cache(maxsize=16)
+def _acceleration_kernel(window: int, polyorder: int, dt: float) -> np.ndarray:
+    c = savgol_coeffs(window, polyorder, deriv=2, delta=dt, use="conv")
     h = np.cumsum(np.cumsum(c))[:-1] * dt**2
     # Centre h (length w − 1 after the double sum drops its zero tail) on w taps.
-    return np.concatenate([[0.0], h]) if len(h) % 2 == 0 else h
+    h = np.concatenate([[0.0], h]) if len(h) % 2 == 0 else h
+    h.setflags(write=False)
+    return h
 
 
 def noise_gain(settings: SmootherSettings, dt: float) -> float:

@@ -205,7 +205,7 @@ def test_wrong_signing_key_is_rejected(tmp_path, trajectory):
                     SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key")) as sim:
         result = run_stream(trajectory, *_stream_args(port, tmp_path / "logs"),
                             "--signing-key", str(tmp_path / "other.key"),
-                            "--heartbeat-timeout", "10", cwd=tmp_path, timeout=60)
+                            "--heartbeat-timeout", "4", cwd=tmp_path, timeout=60)
         sim_output = sim.stop()
     assert result.returncode == 3
     assert "no vehicle heartbeat" in result.stderr and "wrong signature" in result.stderr
