@@ -29,18 +29,15 @@ from vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 
 def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanResult,
                      directory: Path, seed: int, process_noise: bool = False):
-    """Fly the plan with the true vehicle and filter the log from the prior.
-
-    The controller is tuned to the true vehicle, as a real autopilot is (the paper: "most
-    controllers are tuned independently of the estimated system parameters").
+    """Fly the plan with the true θ (the controller knows only the prior) and filter the log.
 
     With ``process_noise`` the world carries the force and moment noise the filter assumes,
     so that its σ can be compared with the spread of its errors.
     """
     effects = [ProcessNoise(prior.noise.force_density, prior.noise.moment_density,
                             seed=seed)] if process_noise else []
-    Simulator(truth, settings=SimulationSettings(seed=seed), effects=effects).run(
-        result.trajectory, directory)
+    Simulator(prior, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
+              effects=effects).run(result.trajectory, directory)
     flight = load_flight(directory / "pose.csv", prior)
     return estimate_parameters(flight, prior, EstimatorSettings(refine=False))
 

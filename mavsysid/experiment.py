@@ -4,17 +4,11 @@ Experiments"), and the iterative identification the paper names as future work.
 An experiment draws the unknown parameters ±50 % around the truth; that draw is the
 planner's model and the EKF's initial guess. For each planner kind (the D-optimal planner
 and the random baseline) it plans a flight within the budget, flies it in the offline
-simulator with the true θ, runs the paper's EKF on
+simulator with the true θ (the controller knows only the guess), runs the paper's EKF on
 the pose log and keeps what the evaluation reports: final σ, relative error, D-opt,
 per-parameter convergence time and the estimate over flight time. With ``iterations > 1``
 the flight is planned again with the updated model and flown again; the filter of each
 iteration starts from the previous iteration's estimate and covariance.
-
-The simulated position controller is tuned to the true vehicle, as a real autopilot is
-tuned on the real airframe: the paper notes that "most controllers are tuned
-independently of the estimated system parameters" and assumes the flight follows the
-plan closely. (A controller built on the ±50 % guess tracks worse, and its corrections
-excite the vehicle in ways no planner predicted.)
 
 `run_experiment` is a pure function of its `ExperimentSpec` (every random choice is
 seeded by it), so any executor — a local process pool or a Dask cluster — gives the same
@@ -138,7 +132,8 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
     planner = plan if kind == "dopt" else plan_random
     result = planner(model, _planner_settings(spec, seed))
     directory = workdir / f"{kind}-{iteration}"
-    Simulator(truth, settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
+    Simulator(model, true_theta=truth.theta,
+              settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
     run = _filter(directory, model, prior)
     est = run.estimate
     h = run.history

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -32,20 +31,21 @@ from planner.belief import (
     edge_samples,
     edge_transfer,
     identity_transfer,
-    propagate_final,
-    propagate_steps,
     riccati_final,
     segments_samples,
     steps_transfer,
 )
 from planner.feasibility import check_segment
+from planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
+from planner.plan_result import plan_result
 from planner.refine import FlightPricing, PathRefiner, RefinablePath, StopChoice, split_path
-from planner.results import (
-    PlannerGraph,
-    PlannerSettings,
-    PlannerStats,
-    PlanProgress,
-    PlanResult,
+from planner.results import PlannerSettings, PlanProgress, PlanResult
+from planner.search_setup import (
+    initial_covariance,
+    search_model,
+    segment_trajectory,
+    validate_settings,
+    warm_up,
 )
 from planner.segments import (
     Segment,
@@ -55,15 +55,17 @@ from planner.segments import (
     duration_range,
     stop_segment,
 )
+from planner.yaw_branch import (
+    nearest_yaw_branch,
+    shift_segment_yaw,
+    shift_vertex_yaw,
+    wrap_angle,
+)
 from vehicle.config import VehicleConfig
-from vehicle.errors import InputError, JobFailedError
-from vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
-from vehicle.trajectory import PiecewisePolynomial
+from vehicle.linearization import E_THETA, ErrorStateModel
 
-__all__ = ["plan", "search_graph"]
+__all__ = ["GraphSearch", "plan", "search_graph"]
 
-#: Stopping-segment durations tried for every vertex, shortest feasible wins, s.
-_STOP_DURATIONS = (1.0, 1.5, 2.0, 3.0, 4.0)
 #: Stops end at least this far inside the box, m.
 _STOP_MARGIN = 0.2
 _PROGRESS_PERIOD = 0.25
@@ -71,62 +73,7 @@ _PROGRESS_PERIOD = 0.25
 _NEAREST_TRIES = 5
 
 
-@dataclass(eq=False)
-class _Edge:
-    src: int
-    dst: int
-    segment: Segment
-    _transfer: EdgeTransfer | None = None
-
-
-@dataclass(eq=False)
-class _Vertex:
-    """A graph vertex. ``can_stop`` is False where no stopping segment is feasible: the
-    vertex is a pass-through point and no flight may end there."""
-
-    state: VertexState
-    stop: Segment | None
-    stop_transfer: EdgeTransfer
-    can_stop: bool
-    out_edges: list[_Edge] = field(default_factory=list)
-    beliefs: list[_Belief] = field(default_factory=list)
-
-    @property
-    def stop_time(self) -> float:
-        """Stop duration here, or the shortest stop still to come (pass-through), s."""
-        if not self.can_stop:
-            return _STOP_DURATIONS[0]
-        return 0.0 if self.stop is None else self.stop.duration
-
-
-@dataclass(eq=False)
-class _Belief:
-    sigma: np.ndarray
-    cost: float
-    vertex: int
-    parent: _Belief | None
-    edge: _Edge | None
-    logdet: float
-    logdet_theta: float
-    distinct: int
-    is_open: bool
-    expanded: int = 0
-    pruned: bool = False
-
-    def path_edges(self) -> list[_Edge]:
-        edges, b = [], self
-        while b.edge is not None:
-            edges.append(b.edge)
-            b = b.parent  # type: ignore[assignment]
-        return edges[::-1]
-
-
-def _logdet(m: np.ndarray) -> float:
-    sign, value = np.linalg.slogdet(m)
-    return float(value) if sign > 0 else np.inf
-
-
-class _Search:
+class GraphSearch:
     """Graph, beliefs and the best candidate of one planning run."""
 
     def __init__(self, config: VehicleConfig, settings: PlannerSettings, objective: str,
@@ -135,22 +82,22 @@ class _Search:
         self.progress = progress
         self.theta = config.theta
         self.model = ErrorStateModel.for_vehicle(config)
-        self.search_model = _search_model(config, settings)
+        self.search_model = search_model(config, settings)
         self.rng = np.random.default_rng(settings.seed)
         self.box = np.asarray(settings.box, dtype=float)
-        self.vertices: list[_Vertex] = []
+        self.vertices: list[Vertex] = []
         self.samples = self.edges_attempted = self.edges = self.propagations = 0
         self.edge_time = self.propagation_time = self.transfer_time = 0.0
         self.refined_steps = self.refined_accepted = 0
         #: F and Q of the segments last priced by `propagate_segments`, by id.
         self._steps: dict[int, tuple[Segment, np.ndarray, np.ndarray]] = {}
-        self.best: tuple[float, _Belief] | None = None
+        self.best: tuple[float, Belief] | None = None
         self.history: list[tuple[float, float]] = []
         self.first_solution: float | None = None
         self.t0 = time.perf_counter()
         self._last_progress = -np.inf
         self._log_scale = float(np.sum(np.log(self.model.theta_scale)))
-        self.sigma0 = _initial_covariance(self.model, config, settings)
+        self.sigma0 = initial_covariance(self.model, config, settings)
         refines = objective == "dopt" and settings.refine_steps > 0
         self.search_deadline = settings.planning_time * (
             1.0 - settings.refine_share if refines else 1.0)
@@ -184,7 +131,7 @@ class _Search:
         return float(self.rng.uniform(*rng))
 
     def transfer_of(self, segment: Segment) -> EdgeTransfer:
-        states, n, dt = edge_samples(_as_trajectory(segment), self.config, self.theta,
+        states, n, dt = edge_samples(segment_trajectory(segment), self.config, self.theta,
                                      self.settings.propagation_rate)
         return edge_transfer(self.search_model, states, n, self.theta, dt)
 
@@ -219,7 +166,7 @@ class _Search:
         if np.all(np.abs(state.position[1:]) <= 1e-12) and np.all(np.abs(state.yaw[1:]) <= 1e-12):
             return StopChoice(None, identity_transfer())
         inner_lo, inner_hi = self.box[:3] + _STOP_MARGIN, self.box[3:] - _STOP_MARGIN
-        for duration in _STOP_DURATIONS:
+        for duration in STOP_DURATIONS:
             # Where a smooth stop would end, kept inside the box.
             end = np.clip(state.position[0] + 0.5 * duration * state.position[1],
                           inner_lo, inner_hi)
@@ -233,12 +180,12 @@ class _Search:
         """A vertex with its stopping segment, when one is feasible."""
         stop = self.stop_at(state)
         if stop is None:
-            self.vertices.append(_Vertex(state, None, identity_transfer(), False))
+            self.vertices.append(Vertex(state, None, identity_transfer(), False))
         else:
-            self.vertices.append(_Vertex(state, stop.segment, stop.transfer, True))
+            self.vertices.append(Vertex(state, stop.segment, stop.transfer, True))
         return len(self.vertices) - 1
 
-    def edge_transfer(self, edge: _Edge) -> EdgeTransfer:
+    def edge_transfer(self, edge: Edge) -> EdgeTransfer:
         """The edge's transfer, computed the first time a belief crosses it (many never are)."""
         if edge._transfer is None:
             start = time.perf_counter()
@@ -246,14 +193,14 @@ class _Search:
             self.transfer_time += time.perf_counter() - start
         return edge._transfer
 
-    def add_edge(self, src: int, dst: int, segment: Segment) -> _Edge:
-        edge = _Edge(src, dst, segment)
+    def add_edge(self, src: int, dst: int, segment: Segment) -> Edge:
+        edge = Edge(src, dst, segment)
         self.vertices[src].out_edges.append(edge)
         self.edges += 1
         return edge
 
-    def try_fixed(self, src: int, dst: int, budget_left: float) -> _Edge | None:
-        a, b = self.vertices[src].state, _nearest_yaw_branch(
+    def try_fixed(self, src: int, dst: int, budget_left: float) -> Edge | None:
+        a, b = self.vertices[src].state, nearest_yaw_branch(
             self.vertices[dst].state, float(self.vertices[src].state.yaw[0]))
         duration = self.sample_duration(a, b.position[0], budget_left)
         if duration is None:
@@ -264,18 +211,18 @@ class _Search:
 
     # -- beliefs --------------------------------------------------------------------------
 
-    def belief(self, sigma: np.ndarray, cost: float, vertex: int, parent: _Belief | None,
-               edge: _Edge | None, logdets: tuple[float, float] | None = None) -> _Belief:
+    def belief(self, sigma: np.ndarray, cost: float, vertex: int, parent: Belief | None,
+               edge: Edge | None, logdets: tuple[float, float] | None = None) -> Belief:
         stop_time = self.vertices[vertex].stop_time
         distinct = 0
         if parent is not None and self.objective == "random":
             distinct = parent.distinct + all(e is not edge for e in parent.path_edges())
         if logdets is None:
-            logdets = (_logdet(sigma), _logdet(sigma[E_THETA, E_THETA]))
-        return _Belief(sigma, cost, vertex, parent, edge, logdets[0], logdets[1], distinct,
+            logdets = (logdet(sigma), logdet(sigma[E_THETA, E_THETA]))
+        return Belief(sigma, cost, vertex, parent, edge, logdets[0], logdets[1], distinct,
                        is_open=cost + stop_time < self.settings.budget)
 
-    def append(self, belief: _Belief) -> bool:
+    def append(self, belief: Belief) -> bool:
         """Keep a belief unless another at its vertex dominates it (paper Eq. compare)."""
         kept = self.vertices[belief.vertex].beliefs
         for other in kept:
@@ -289,12 +236,12 @@ class _Search:
         self.consider(belief)
         return True
 
-    def _dominates(self, a: _Belief, b: _Belief) -> bool:
+    def _dominates(self, a: Belief, b: Belief) -> bool:
         if self.objective == "random":  # no information in the baseline's choices
             return a.cost <= b.cost and a.distinct >= b.distinct
         return a.cost <= b.cost and a.logdet <= b.logdet and a.logdet_theta <= b.logdet_theta
 
-    def consider(self, belief: _Belief) -> None:
+    def consider(self, belief: Belief) -> None:
         """Track the best candidate flight: the belief with its stop, inside the budget."""
         vertex = self.vertices[belief.vertex]
         if (belief.edge is None or not vertex.can_stop
@@ -311,9 +258,9 @@ class _Search:
 
     def dopt(self, sigma: np.ndarray) -> float:
         """det(Σ_θ)^(1/6) in SI units (paper Eq. dopt), computed in log space."""
-        return float(np.exp((_logdet(sigma[E_THETA, E_THETA]) + 2.0 * self._log_scale) / 6.0))
+        return float(np.exp((logdet(sigma[E_THETA, E_THETA]) + 2.0 * self._log_scale) / 6.0))
 
-    def propagate(self, queue: list[_Belief]) -> None:
+    def propagate(self, queue: list[Belief]) -> None:
         """Phase 2: push open beliefs through the edges they have not crossed yet."""
         start = time.perf_counter()
         transfers0 = self.transfer_time
@@ -349,7 +296,7 @@ class _Search:
 
     # -- phase 1 --------------------------------------------------------------------------
 
-    def grow(self) -> list[_Belief]:
+    def grow(self) -> list[Belief]:
         """One sample: a new vertex connected to the graph; returns beliefs to propagate.
 
         The free-end connection is tried from the nearest vertices with open beliefs, up
@@ -361,7 +308,7 @@ class _Search:
         start = time.perf_counter()
         positions = np.array([v.state.position[0] for v in self.vertices])
         order = np.argsort(np.linalg.norm(positions - pose[:3], axis=1))
-        queue: list[_Belief] = []
+        queue: list[Belief] = []
         tries = 0
         for nearest in order:
             nearest = int(nearest)
@@ -374,7 +321,8 @@ class _Search:
                                             self.settings.budget - min(open_costs))
             if duration is not None:
                 self.edges_attempted += 1
-                yaw = float(near_state.yaw[0]) + _wrap(float(pose[3]) - float(near_state.yaw[0]))
+                yaw0 = float(near_state.yaw[0])
+                yaw = yaw0 + wrap_angle(float(pose[3]) - yaw0)
                 segment = connect_free_end(near_state, pose[:3], yaw, duration)
                 if self.feasible(segment):
                     queue = self._connect_all(nearest, self.add_vertex(segment.end_state()),
@@ -385,7 +333,7 @@ class _Search:
         self.edge_time += time.perf_counter() - start
         return queue
 
-    def _connect_all(self, nearest: int, new: int, segment: Segment) -> list[_Belief]:
+    def _connect_all(self, nearest: int, new: int, segment: Segment) -> list[Belief]:
         """Edges nearest → new (free end), new → nearest, and to and from every vertex."""
         self.add_edge(nearest, new, segment)
         queue = [b for b in self.vertices[nearest].beliefs if b.is_open]
@@ -422,7 +370,7 @@ class _Search:
     def best_path(self) -> RefinablePath | None:
         """The best candidate flight found by the search, its yaw made continuous.
 
-        An edge ends at its destination's yaw shifted by 2πk (`_nearest_yaw_branch`), and
+        An edge ends at its destination's yaw shifted by 2πk (`nearest_yaw_branch`), and
         the next edge starts from the unshifted vertex. Each segment (and the stop) is
         shifted by whole turns to start where the previous one ended, so that the path's
         vertices are its segments' own boundary states and a re-solved segment turns the
@@ -436,13 +384,13 @@ class _Search:
         transfers = tuple(self.edge_transfer(e) for e in edges)
         vertices, segments = [self.vertices[0].state], []
         for edge in edges:
-            segment = _shift_yaw(edge.segment, float(vertices[-1].yaw[0])
+            segment = shift_segment_yaw(edge.segment, float(vertices[-1].yaw[0])
                                  - float(edge.segment.yaw_coeffs[0]))
             segments.append(segment)
             dst = self.vertices[edge.dst].state
-            vertices.append(_shift_vertex_yaw(dst, float(segment.end_state().yaw[0])
+            vertices.append(shift_vertex_yaw(dst, float(segment.end_state().yaw[0])
                                               - float(dst.yaw[0])))
-        stop_segment_ = None if end.stop is None else _shift_yaw(
+        stop_segment_ = None if end.stop is None else shift_segment_yaw(
             end.stop, float(vertices[-1].yaw[0]) - float(end.stop.yaw_coeffs[0]))
         stop = StopChoice(stop_segment_, end.stop_transfer)
         return RefinablePath(tuple(vertices), tuple(segments), transfers, stop,
@@ -470,168 +418,14 @@ class _Search:
         return refiner.path
 
 
-def _wrap(angle: float) -> float:
-    """Angle in [-π, π)."""
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def _nearest_yaw_branch(state: VertexState, yaw: float) -> VertexState:
-    """The same vertex with its yaw shifted by 2πk to lie within π of ``yaw``.
-
-    Flatness and control use only cos ψ and sin ψ, so the shifted state is the same
-    physical state, and a segment to it turns the short way round.
-    """
-    shift = yaw + _wrap(float(state.yaw[0]) - yaw) - float(state.yaw[0])
-    if shift == 0.0:
-        return state
-    return VertexState(state.position, state.yaw + np.array([shift, 0.0, 0.0]))
-
-
-def _whole_turns(angle: float) -> float:
-    """``angle`` rounded to a multiple of 2π (it is one up to rounding), rad."""
-    return 2.0 * np.pi * round(angle / (2.0 * np.pi))
-
-
-def _shift_yaw(segment: Segment, shift: float) -> Segment:
-    """The same segment with its yaw shifted by the whole turns nearest ``shift`` (rad)."""
-    turns = _whole_turns(shift)
-    if turns == 0.0:
-        return segment
-    yaw = segment.yaw_coeffs.copy()
-    yaw[0] += turns
-    return Segment(segment.duration, segment.position_coeffs, yaw)
-
-
-def _shift_vertex_yaw(state: VertexState, shift: float) -> VertexState:
-    """The same vertex with its yaw shifted by the whole turns nearest ``shift`` (rad)."""
-    turns = _whole_turns(shift)
-    if turns == 0.0:
-        return state
-    return VertexState(state.position, state.yaw + np.array([turns, 0.0, 0.0]))
-
-
-def _as_trajectory(segment: Segment) -> PiecewisePolynomial:
-    return PiecewisePolynomial(np.array([segment.duration]), segment.position_coeffs[None],
-                               segment.yaw_coeffs[None])
-
-
-def _search_model(config: VehicleConfig, settings: PlannerSettings) -> ErrorStateModel:
-    """The model for search steps at the propagation rate: each step's measurement carries
-    the information of measurement_rate / propagation_rate measurements."""
-    weight = settings.measurement_rate / settings.propagation_rate
-    nz = config.noise
-    lumped = replace(config, noise=replace(nz, position_sigma=nz.position_sigma / np.sqrt(weight),
-                                           attitude_sigma=nz.attitude_sigma / np.sqrt(weight)))
-    return ErrorStateModel.for_vehicle(lumped)
-
-
-def _initial_covariance(model: ErrorStateModel, config: VehicleConfig,
-                        settings: PlannerSettings) -> np.ndarray:
-    """The estimator's initial covariance: state from the first poses, θ from the prior."""
-    s = initial_state_sigma(config.noise.position_sigma, config.noise.attitude_sigma,
-                            1.0 / settings.measurement_rate)
-    diag = np.concatenate([np.full(3, v**2) for v in s] + [np.full(6, 0.0)])
-    sigma = np.diag(diag)
-    sigma[E_THETA, E_THETA] = np.eye(6) * settings.prior_relative_sigma**2
-    assert sigma.shape == (ERROR_DIM, ERROR_DIM)
-    return sigma
-
-
-def _warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
-    """Load (or compile) the numba kernels before the planning clock starts."""
-    pose = settings.start_pose
-    state = VertexState.hover(pose[:3], float(pose[3]))
-    segment = connect_free_end(state, pose[:3] + [0.1, 0.0, 0.0], float(pose[3]), 1.0)
-    check_segment(segment, config, np.asarray(settings.box, dtype=float))
-    model = _search_model(config, settings)
-    states, n, dt = edge_samples(_as_trajectory(segment), config, config.theta,
-                                 settings.propagation_rate)
-    transfer = edge_transfer(model, states, n, config.theta, dt)
-    apply_transfer_logdet(np.eye(ERROR_DIM), transfer)
-    propagate_final(model, np.eye(ERROR_DIM), states, n, config.theta, dt)
-
-
-def _validate(config: VehicleConfig, settings: PlannerSettings) -> None:
-    box = np.asarray(settings.box, dtype=float)
-    if box.shape != (6,) or np.any(box[:3] >= box[3:]):
-        raise InputError(f"box {list(settings.box)}: expected x_min,y_min,z_min,x_max,y_max,z_max "
-                         "with each min below its max")
-    if not settings.budget > 0.0:
-        raise InputError(f"budget {settings.budget:g} s: expected a positive flight time")
-    if (not 0.0 <= settings.refine_share < 1.0 or settings.refine_steps < 0
-            or settings.refine_split < 1):
-        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1), "
-                         f"steps {settings.refine_steps} must be ≥ 0 and split "
-                         f"{settings.refine_split} ≥ 1")
-    start = settings.start_pose
-    if np.any(start[:3] < box[:3]) or np.any(start[:3] > box[3:]):
-        raise InputError(f"start {list(start[:3])} lies outside the box {list(box)}")
-    lim = config.limits
-    if lim.thrust_min_ratio > 1.0 or lim.thrust_max_ratio < 1.0:
-        raise InputError(f"{config.source}: [limits] thrust ratios [{lim.thrust_min_ratio:g}, "
-                         f"{lim.thrust_max_ratio:g}] × m g exclude hover (1.0)")
-
-
-def _result(search: _Search, kind: str, path: RefinablePath | None) -> PlanResult:
-    """The chosen flight: the (refined) best path plus its stop, with σ over time."""
-    if path is None:
-        raise JobFailedError(
-            f"no feasible trajectory found in {search.elapsed():.1f} s of planning "
-            f"({search.samples} samples, {len(search.vertices)} vertices, {search.edges} edges)")
-    segments = list(path.segments)
-    if path.stop.segment is not None:
-        segments.append(path.stop.segment)
-    trajectory = PiecewisePolynomial(
-        np.array([s.duration for s in segments]),
-        np.array([s.position_coeffs for s in segments]),
-        np.array([s.yaw_coeffs for s in segments]))
-    model, theta, rate = search.model, search.theta, search.settings.measurement_rate
-    sigma = _initial_covariance(model, search.config, search.settings)
-    times, sig = [0.0], [np.sqrt(np.diag(model.parameter_covariance_si(sigma)))]
-    t_offset = 0.0
-    for segment in segments:
-        states, n, dt = edge_samples(_as_trajectory(segment), search.config, theta, rate)
-        history = propagate_steps(model, sigma, states, n, theta, dt)
-        sigma = history[-1]
-        si = model.parameter_covariance_si(history[1:])
-        sig.extend(np.sqrt(np.diagonal(si, axis1=1, axis2=2)))
-        times.extend(t_offset + dt * np.arange(1, len(history)))
-        t_offset += segment.duration
-    final_cov = model.parameter_covariance_si(sigma)
-    stats = PlannerStats(
-        samples=search.samples, vertices=len(search.vertices), edges=search.edges,
-        beliefs=sum(len(v.beliefs) for v in search.vertices),
-        edges_attempted=search.edges_attempted, beliefs_propagated=search.propagations,
-        elapsed=search.elapsed(), time_to_first_solution=search.first_solution,
-        edge_time=search.edge_time + search.transfer_time,
-        propagation_time=search.propagation_time,
-        best_history=np.array(search.history, dtype=float).reshape(-1, 2),
-        refine_steps=search.refined_steps, refine_accepted=search.refined_accepted)
-    assert search.best is not None
-    search_path = [0] + [e.dst for e in search.best[1].path_edges()]
-    edge_list = [e for v in search.vertices for e in v.out_edges]
-    graph = PlannerGraph(
-        vertices=np.array([v.state.pose for v in search.vertices]),
-        edges=np.array([(e.src, e.dst) for e in edge_list], dtype=int).reshape(-1, 2),
-        edge_paths=[e.segment.flat_outputs(np.linspace(0.0, e.segment.duration, 12)).position
-                    for e in edge_list],
-        path=search_path)
-    return PlanResult(
-        kind=kind, trajectory=trajectory,
-        predicted_dopt=float(np.exp(_logdet(final_cov) / 6.0)),
-        predicted_covariance=final_cov, sigma_times=np.array(times),
-        predicted_sigma=np.array(sig), config=search.config, settings=search.settings,
-        stats=stats, graph=graph)
-
-
 def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: str,
                  progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
     """Run the graph search with an objective: "dopt" or "random" (most distinct segments)."""
-    _validate(config, settings)
-    _warm_up(config, settings)
-    search = _Search(config, settings, objective, progress)
+    validate_settings(config, settings)
+    warm_up(config, settings)
+    search = GraphSearch(config, settings, objective, progress)
     search.run()
-    return _result(search, objective, search.refine())
+    return plan_result(search, objective, search.refine())
 
 
 def plan(config: VehicleConfig, settings: PlannerSettings | None = None,

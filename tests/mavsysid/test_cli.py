@@ -165,3 +165,16 @@ def test_interrupt_inside_numba_kernel_exits_130(cause, expected, monkeypatch, c
         return
     assert main(["evaluate", "--n", "1"]) == expected
     assert capsys.readouterr().err == "mavsysid evaluate: interrupted\n"
+
+
+@pytest.mark.parametrize("command", ["sim", "stream"])
+def test_vehicle_side_commands_do_not_import_the_estimation_stack(command):
+    """`sim` and `stream` start without importing the diagnosis and evaluation modules."""
+    code = ("import sys\nfrom mavsysid.cli import main\n"
+            f"try:\n    main(['{command}', '--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('estimation.diagnosis', "
+            "'mavsysid.evaluat', 'statsmodels'))))")
+    env = {**os.environ, "PYTHONPATH": str(HERE.parents[1])}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=60, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"

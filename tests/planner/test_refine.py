@@ -11,7 +11,7 @@ from planner.belief import apply_transfer, identity_transfer
 from planner.feasibility import check_segment
 from planner.refine import FlightPricing, PathRefiner, RefinablePath, StopChoice, split_path
 from planner.results import PlannerSettings
-from planner.rrbt import _Search, plan
+from planner.rrbt import GraphSearch, plan
 from planner.segments import VertexState, connect_fixed, to_piecewise
 from vehicle.config import load_vehicle
 from vehicle.errors import InputError
@@ -117,7 +117,7 @@ def searched():
     cfg = load_vehicle("firefly")
     settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=4,
                                refine_steps=300)
-    search = _Search(cfg, settings, "dopt", None)
+    search = GraphSearch(cfg, settings, "dopt", None)
     search.run()
     return search, search.best_path()
 

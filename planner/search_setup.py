@@ -1,0 +1,84 @@
+"""What a planning run needs before its search starts: the checked request, the search's
+lumped measurement model, the estimator's initial covariance and warm numba kernels."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from planner.belief import apply_transfer_logdet, edge_samples, edge_transfer, propagate_final
+from planner.feasibility import check_segment
+from planner.results import PlannerSettings
+from planner.segments import Segment, VertexState, connect_free_end
+from vehicle.config import VehicleConfig
+from vehicle.errors import InputError
+from vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
+from vehicle.trajectory import PiecewisePolynomial
+
+__all__ = ["initial_covariance", "search_model", "segment_trajectory", "validate_settings",
+           "warm_up"]
+
+
+def segment_trajectory(segment: Segment) -> PiecewisePolynomial:
+    """One segment as a one-piece trajectory."""
+    return PiecewisePolynomial(np.array([segment.duration]), segment.position_coeffs[None],
+                               segment.yaw_coeffs[None])
+
+
+def search_model(config: VehicleConfig, settings: PlannerSettings) -> ErrorStateModel:
+    """The model for search steps at the propagation rate: each step's measurement carries
+    the information of measurement_rate / propagation_rate measurements."""
+    weight = settings.measurement_rate / settings.propagation_rate
+    nz = config.noise
+    lumped = replace(config, noise=replace(nz, position_sigma=nz.position_sigma / np.sqrt(weight),
+                                           attitude_sigma=nz.attitude_sigma / np.sqrt(weight)))
+    return ErrorStateModel.for_vehicle(lumped)
+
+
+def initial_covariance(model: ErrorStateModel, config: VehicleConfig,
+                        settings: PlannerSettings) -> np.ndarray:
+    """The estimator's initial covariance: state from the first poses, θ from the prior."""
+    s = initial_state_sigma(config.noise.position_sigma, config.noise.attitude_sigma,
+                            1.0 / settings.measurement_rate)
+    diag = np.concatenate([np.full(3, v**2) for v in s] + [np.full(6, 0.0)])
+    sigma = np.diag(diag)
+    sigma[E_THETA, E_THETA] = np.eye(6) * settings.prior_relative_sigma**2
+    assert sigma.shape == (ERROR_DIM, ERROR_DIM)
+    return sigma
+
+
+def warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
+    """Load (or compile) the numba kernels before the planning clock starts."""
+    pose = settings.start_pose
+    state = VertexState.hover(pose[:3], float(pose[3]))
+    segment = connect_free_end(state, pose[:3] + [0.1, 0.0, 0.0], float(pose[3]), 1.0)
+    check_segment(segment, config, np.asarray(settings.box, dtype=float))
+    model = search_model(config, settings)
+    states, n, dt = edge_samples(segment_trajectory(segment), config, config.theta,
+                                 settings.propagation_rate)
+    transfer = edge_transfer(model, states, n, config.theta, dt)
+    apply_transfer_logdet(np.eye(ERROR_DIM), transfer)
+    propagate_final(model, np.eye(ERROR_DIM), states, n, config.theta, dt)
+
+
+def validate_settings(config: VehicleConfig, settings: PlannerSettings) -> None:
+    """Refuse a bad box, budget, refinement setting, start or limits (one line)."""
+    box = np.asarray(settings.box, dtype=float)
+    if box.shape != (6,) or np.any(box[:3] >= box[3:]):
+        raise InputError(f"box {list(settings.box)}: expected x_min,y_min,z_min,x_max,y_max,z_max "
+                         "with each min below its max")
+    if not settings.budget > 0.0:
+        raise InputError(f"budget {settings.budget:g} s: expected a positive flight time")
+    if (not 0.0 <= settings.refine_share < 1.0 or settings.refine_steps < 0
+            or settings.refine_split < 1):
+        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1), "
+                         f"steps {settings.refine_steps} must be ≥ 0 and split "
+                         f"{settings.refine_split} ≥ 1")
+    start = settings.start_pose
+    if np.any(start[:3] < box[:3]) or np.any(start[:3] > box[3:]):
+        raise InputError(f"start {list(start[:3])} lies outside the box {list(box)}")
+    lim = config.limits
+    if lim.thrust_min_ratio > 1.0 or lim.thrust_max_ratio < 1.0:
+        raise InputError(f"{config.source}: [limits] thrust ratios [{lim.thrust_min_ratio:g}, "
+                         f"{lim.thrust_max_ratio:g}] × m g exclude hover (1.0)")
