@@ -12,6 +12,7 @@ messages are dropped by pymavlink's signature check and counted here (by message
 
 from __future__ import annotations
 
+import gc
 import threading
 from collections import Counter
 from collections.abc import Callable
@@ -194,6 +195,11 @@ class SimEndpoint:
         """Simulate until `stop` or the settings' duration; close everything; summarise."""
         clock, duration = self.clock, self.settings.duration
         status = "aborted"
+        # Freeze what is alive now out of the cyclic collector: after a first run compiled
+        # the kernels, numba's leftovers made full collections take 0.1–0.2 s, and ticks
+        # that late set the vehicle oscillating on the setpoints that piled up meanwhile.
+        gc.collect()
+        gc.freeze()
         try:
             clock.start()
             while not self._stop.is_set():
