@@ -260,9 +260,11 @@ class ResidualProblem:
     known_effects: tuple[ModelEffect, ...] = ()
 
     def __post_init__(self) -> None:
-        _uniform_step(self.flight.t)
+        _ = self.dt  # refuses a log sampled at a non-uniform rate
 
-    @property
+    # Caches on a frozen dataclass (cached_property writes the instance __dict__): each
+    # value is a pure function of the fields, and every residual evaluation reads them.
+    @cached_property
     def dt(self) -> float:
         """Sample time, s."""
         return _uniform_step(self.flight.t)
@@ -303,7 +305,7 @@ class ResidualProblem:
             # A delayed pose belongs to earlier times: the rotor speeds are read there.
             n = np.column_stack([np.interp(t, fl.t, n[:, i]) for i in range(n.shape[1])])
         if p is fl.position and q is fl.quaternion and t is fl.t:
-            pose, inputs = self._smoothed_log()
+            pose, inputs = self._smoothed_log
         else:
             pose, inputs = self._smooth(t, p, q)
         model = model_accelerations(inputs, n, theta, self.config, all_effects)
@@ -315,15 +317,11 @@ class ResidualProblem:
         light = replace(self.settings, window=self.settings.input_window)
         return smooth_pose(t, p, q, self.settings), smooth_pose(t, p, q, light)
 
+    @cached_property
     def _smoothed_log(self) -> tuple[SmoothedPose, SmoothedPose]:
         """The logged pose smoothed (long and light windows), computed once per problem."""
-        cached = self.__dict__.get("_smoothed")
-        if cached is None:
-            fl = self.flight
-            cached = self._smooth(fl.t, fl.position, fl.quaternion)
-            # A cache on a frozen dataclass: the value is a pure function of its fields.
-            object.__setattr__(self, "_smoothed", cached)
-        return cached
+        fl = self.flight
+        return self._smooth(fl.t, fl.position, fl.quaternion)
 
     def residual(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
                  ) -> np.ndarray:
@@ -375,7 +373,7 @@ def acceleration_kernel(settings: SmootherSettings, dt: float) -> np.ndarray:
 
 @lru_cache(maxsize=16)
 def _acceleration_kernel(window: int, polyorder: int, dt: float) -> np.ndarray:
-    c = savgol_coeffs(window, polyorder, deriv=2, delta=dt, use="conv")
+    c = _savgol_kernel(window, polyorder, 2, dt)
     h = np.cumsum(np.cumsum(c))[:-1] * dt**2
     # Centre h (length w − 1 after the double sum drops its zero tail) on w taps.
     h = np.concatenate([[0.0], h]) if len(h) % 2 == 0 else h
@@ -389,4 +387,4 @@ def noise_gain(settings: SmootherSettings, dt: float) -> float:
     Used to document the noise floor: σ_a = σ_p ‖c‖ (white position noise, m → m/s²).
     """
     w = settings.samples(dt)
-    return float(np.linalg.norm(savgol_coeffs(w, settings.polyorder, deriv=2, delta=dt)))
+    return float(np.linalg.norm(_savgol_kernel(w, settings.polyorder, 2, dt)))

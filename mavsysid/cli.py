@@ -117,10 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MavsysidError as error:
         print(f"mavsysid {args.command}: error: {error}", file=sys.stderr)
         return error.exit_code
-    except KeyboardInterrupt:
-        print(f"mavsysid {args.command}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except SystemError as error:
+    except (KeyboardInterrupt, SystemError) as error:
         if not _caused_by_interrupt(error):
             raise
         print(f"mavsysid {args.command}: interrupted", file=sys.stderr)

@@ -23,13 +23,12 @@ from mavsysid.evaluation import (
     write_table,
 )
 from mavsysid.experiment import KINDS, ExperimentSpec
-from mavsysid.plan import parse_numbers
+from mavsysid.plan import DEFAULT_BOX, parse_numbers
+from planner.results import PlannerSettings
 from vehicle.config import load_vehicle
 from vehicle.errors import InputError
 
 __all__ = ["EvaluationRun", "add_arguments", "main", "run_evaluation"]
-
-_DEFAULT_BOX = "-2,-2,0.5,2,2,2.5"
 
 
 @dataclass(frozen=True)
@@ -45,7 +44,7 @@ class EvaluationRun:
 
 def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
                planning_time: float = 30.0, samples: int | None = None,
-               box: tuple[float, ...] = (-2.0, -2.0, 0.5, 2.0, 2.0, 2.5), seed: int = 0,
+               box: tuple[float, ...] = PlannerSettings.box, seed: int = 0,
                iterations: int = 1, refine_steps: int | None = None) -> list[ExperimentSpec]:
     """The specs of experiments 0 … n−1 (experiment i uses seed ``seed + i``)."""
     if n < 1:
@@ -131,8 +130,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="planner sample budget: results depend only on the seeds")
     parser.add_argument("--refine-steps", type=int, metavar="N",
                         help="most refinement steps of the planner (default: the planner's)")
-    parser.add_argument("--box", default=_DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
-                        help=f"flight volume in m, world ENU (default: {_DEFAULT_BOX})")
+    parser.add_argument("--box", default=DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                        help=f"flight volume in m, world ENU (default: {DEFAULT_BOX})")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of experiment 0; experiment i uses seed + i (default: 0)")
     parser.add_argument("--iterations", type=int, default=1,

@@ -82,7 +82,7 @@ class ExperimentSpec:
     budget: float = 30.0
     planning_time: float = 30.0
     samples: int | None = None
-    box: tuple[float, float, float, float, float, float] = (-2.0, -2.0, 0.5, 2.0, 2.0, 2.5)
+    box: tuple[float, float, float, float, float, float] = PlannerSettings.box
     iterations: int = 1
     kinds: tuple[str, ...] = KINDS
     refine_steps: int | None = None

@@ -24,6 +24,7 @@ from vehicle.config import GRAVITY, PARAMETER_NAMES, VehicleConfig, load_vehicle
 from vehicle.errors import ConfigError, InputError, JobFailedError
 
 __all__ = [
+    "DEFAULT_BOX",
     "MIN_BOX_SIDE",
     "add_arguments",
     "check_request",
@@ -35,7 +36,8 @@ __all__ = [
 
 #: Shortest side of a flight box, m, whatever the vehicle.
 MIN_BOX_SIDE = 0.5
-_DEFAULT_BOX = "-2,-2,0.5,2,2,2.5"
+#: The planner's default flight box as the ``--box`` text of the commands.
+DEFAULT_BOX = ",".join(f"{v:g}" for v in PlannerSettings.box)
 _DEFAULT_TIME = 30.0
 _KIND_LABELS = {"dopt": "information-gathering planner", "random": "random baseline"}
 _UNITS = {"c_T": "N/(rad/s)²", "c_D": "s/m", "c_M": "N·m/(rad/s)²",
@@ -276,8 +278,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "with --samples; 0 with --samples: no limit)")
     parser.add_argument("--samples", type=int, metavar="N",
                         help="stop after N samples: the result then depends only on the seed")
-    parser.add_argument("--box", default=_DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
-                        help=f"flight volume in m, world ENU (default: {_DEFAULT_BOX})")
+    parser.add_argument("--box", default=DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                        help=f"flight volume in m, world ENU (default: {DEFAULT_BOX})")
     parser.add_argument("--start", metavar="X,Y,Z,YAW",
                         help="start hover, m and rad (default: box centre, yaw 0)")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
