@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -39,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from flight.excitation import ExcitationSpec, excitation_trajectory
+from flight.loopback_ports import free_udp_port
 from flight.mavlink_setup import load_mavutil
 from flight.setpoints import Setpoint
 from flight.stream_session import StreamSession, StreamSettings
@@ -47,12 +47,6 @@ from planner.trajectory_file import trajectory_file_for, write_trajectory_file
 from vehicle.config import load_vehicle
 
 BOX = (-2.0, -2.0, 0.5, 2.0, 2.0, 2.5)
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class LatencySteps:
@@ -123,7 +117,7 @@ def main() -> None:
         traj = tmp / "excitation.json"
         write_trajectory_file(traj, trajectory_file_for(
             excitation_trajectory(ExcitationSpec(duration=args.duration)), config, box=BOX))
-        port = _free_udp_port()
+        port = free_udp_port()
         sim = subprocess.Popen(
             [sys.executable, "-m", "mavsysid", "sim", "--connect", f"udpout:127.0.0.1:{port}",
              "--vehicle", "firefly"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,

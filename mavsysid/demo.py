@@ -20,7 +20,7 @@ recording of every stage). `run_demo` does the work; `main` is the console layer
 from __future__ import annotations
 
 import argparse
-import socket
+import signal
 import subprocess
 import sys
 import time
@@ -36,6 +36,7 @@ from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.flight_data import FlightData
 from estimation.readers import load_flight
 from estimation.results import EstimationResult, ParameterEstimate
+from flight.loopback_ports import free_udp_port
 from flight.stream_session import StreamSettings
 from mavsysid.offline import parse_hidden_effects
 from mavsysid.plan import run_plan
@@ -152,12 +153,6 @@ def hidden_scale(config: VehicleConfig, seed: int) -> np.ndarray:
             return scale
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 class _SimVehicle:
     """``mavsysid sim`` in its own process, sending to a loopback port."""
 
@@ -176,7 +171,7 @@ class _SimVehicle:
 
     def stop(self) -> None:
         if self.process.poll() is None:
-            self.process.send_signal(2)
+            self.process.send_signal(signal.SIGINT)
             try:
                 self.process.wait(timeout=15)
             except subprocess.TimeoutExpired:
@@ -210,7 +205,7 @@ def trajectory_window(flight_dir: Path, model: VehicleConfig) -> FlightData:
 def _fly(plan_file: Path, directory: Path, settings: DemoSettings, scale: np.ndarray,
          seed: int, say: Callable[[str], None], progress: bool) -> tuple[Path, float]:
     """Start the simulated vehicle, stream the plan to it, stop it; the flight directory."""
-    port = _free_udp_port()
+    port = free_udp_port()
     sim = _SimVehicle(directory / "sim", settings.vehicle, scale, port, settings.speedup, seed,
                       settings.hidden_effects)
     try:

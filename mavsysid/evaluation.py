@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from estimation.report import CONVERGENCE_TOLERANCE
+from estimation.report import CONVERGENCE_TOLERANCE, convergence_time
 from mavsysid.experiment import ExperimentSpec, run_experiment
 from vehicle.config import PARAMETER_NAMES
 from vehicle.errors import InputError
@@ -186,15 +186,7 @@ def median_convergence_time(t: np.ndarray, ratios: np.ndarray,
     ndarray, shape (6,)
         s; NaN where the median ends outside the band.
     """
-    median = np.median(ratios, axis=0)
-    outside = np.abs(median - 1.0) > tolerance
-    result = np.full(ratios.shape[2], np.nan)
-    for j in range(ratios.shape[2]):
-        if outside[-1, j]:
-            continue
-        bad = np.flatnonzero(outside[:, j])
-        result[j] = t[bad[-1] + 1] if bad.size else t[0]
-    return result
+    return convergence_time(t, np.median(ratios, axis=0), np.ones(ratios.shape[2]), tolerance)
 
 
 @dataclass(frozen=True)

@@ -7,11 +7,11 @@ import time
 
 import pytest
 
+from flight.loopback_ports import free_udp_port
 from flight.mavlink_link import HeartbeatLost, MavlinkLink
 from flight.mavlink_setup import load_mavutil
 from flight.tlog_writer import LinkClock
 from tests.support.mavlink_peer import ScriptedVehicle
-from tests.support.ports import free_udp_port
 from vehicle.errors import InputError, JobFailedError
 
 

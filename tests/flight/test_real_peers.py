@@ -22,8 +22,8 @@ from pathlib import Path
 import pytest
 
 from flight.autopilot_modes import Autopilot
+from flight.loopback_ports import free_udp_port
 from flight.sim_params import default_parameters
-from tests.support.ports import free_udp_port
 from tests.support.stream_flights import SimProcess
 from vehicle.config import load_vehicle
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from estimation.readers.tlog import read_tlog as estimation_read_tlog
-from tests.support.ports import free_udp_port
+from flight.loopback_ports import free_udp_port
 from tests.support.stream_flights import (
     SimProcess,
     export_excitation,

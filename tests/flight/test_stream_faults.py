@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from flight.autopilot_modes import ARDUCOPTER_MODES
+from flight.loopback_ports import free_udp_port
 from flight.mavlink_setup import load_mavutil
-from tests.support.ports import free_udp_port
 from tests.support.stream_flights import (
     SimProcess,
     export_excitation,

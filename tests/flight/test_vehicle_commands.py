@@ -8,11 +8,11 @@ import time
 import pytest
 
 from flight.autopilot_modes import ARDUCOPTER_MODES, PX4_MODES
+from flight.loopback_ports import free_udp_port
 from flight.mavlink_link import MavlinkLink
 from flight.tlog_writer import LinkClock
 from flight.vehicle_commands import CommandRejected, VehicleCommands
 from tests.support.mavlink_peer import ScriptedVehicle
-from tests.support.ports import free_udp_port
 from vehicle.errors import JobFailedError
 
 ACCEPTED, TEMPORARILY_REJECTED, DENIED = 0, 1, 2

@@ -15,9 +15,9 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from flight.loopback_ports import free_tcp_port
 from flight.sim_endpoint import SimEndpoint, SimSettings
 from flight.sim_link import mavlink, mavutil
-from tests.support.ports import free_tcp_port
 from vehicle.config import load_vehicle
 
 __all__ = ["Gcs", "running_sim"]

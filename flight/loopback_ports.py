@@ -1,4 +1,5 @@
-"""Free loopback ports for tests that open real sockets (never a non-loopback address)."""
+"""Free loopback ports, for the demo, the benches and the tests that open real sockets on
+127.0.0.1 (never a non-loopback address)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ __all__ = ["free_tcp_port", "free_udp_port"]
 def _free_port(kind: int) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+        return int(s.getsockname()[1])
 
 
 def free_udp_port() -> int:
