@@ -7,6 +7,7 @@ logs. Reported: median D-opt (SI) predicted and reached by the estimator, their 
 the prediction error, and how many seconds of planning reach 90 % of the final log D-opt.
 
     python bench/planner_vs_random.py [--seeds 20] [--budget 30] [--time 30] [--process-noise]
+        [--rotor-headroom F]
 """
 
 from __future__ import annotations
@@ -22,9 +23,12 @@ from estimation.readers import load_flight
 from flight.effects import ProcessNoise
 from flight.simulator import SimulationSettings, Simulator
 from planner.baseline import plan_random
+from planner.belief import propagate_final
 from planner.results import PlannerSettings, PlanResult
 from planner.rrbt import plan
+from planner.search_setup import initial_covariance
 from vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
+from vehicle.linearization import ErrorStateModel
 
 
 def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanResult,
@@ -36,10 +40,18 @@ def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanRes
     """
     effects = [ProcessNoise(prior.noise.force_density, prior.noise.moment_density,
                             seed=seed)] if process_noise else []
-    Simulator(prior, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
-              effects=effects).run(result.trajectory, directory)
+    sim = Simulator(prior, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
+                    effects=effects).run(result.trajectory, directory)
     flight = load_flight(directory / "pose.csv", prior)
-    return estimate_parameters(flight, prior, EstimatorSettings(refine=False))
+    return sim, estimate_parameters(flight, prior, EstimatorSettings(refine=False))
+
+
+def flown_sigma(truth: VehicleConfig, settings: PlannerSettings, sim) -> np.ndarray:
+    """σ the planner's belief propagation predicts with the true θ along the flown states."""
+    model = ErrorStateModel.for_vehicle(truth)
+    sigma = propagate_final(model, initial_covariance(model, truth, settings), sim.states,
+                            sim.rotor_speeds, truth.theta, float(sim.times[1] - sim.times[0]))
+    return np.sqrt(np.diag(model.parameter_covariance_si(sigma)))
 
 
 def time_to_90(result: PlanResult) -> float:
@@ -57,6 +69,8 @@ def main() -> None:
     parser.add_argument("--budget", type=float, default=30.0)
     parser.add_argument("--time", type=float, default=30.0)
     parser.add_argument("--vehicle", default="firefly")
+    parser.add_argument("--rotor-headroom", type=float, default=PlannerSettings.rotor_headroom,
+                        help="planner's rotor headroom (fraction of the n² range at each end)")
     parser.add_argument("--process-noise", action="store_true",
                         help="fly in a world with the process noise the filter assumes")
     args = parser.parse_args()
@@ -66,23 +80,31 @@ def main() -> None:
         for seed in range(args.seeds):
             rng = np.random.default_rng(20_000 + seed)
             prior = truth.with_parameters(truth.theta * (1.0 + rng.uniform(-0.5, 0.5, 6)))
-            settings = PlannerSettings(budget=args.budget, planning_time=args.time, seed=seed)
+            settings = PlannerSettings(budget=args.budget, planning_time=args.time, seed=seed,
+                                       rotor_headroom=args.rotor_headroom)
             row = {}
             for kind, planner in (("dopt", plan), ("random", plan_random)):
                 result = planner(prior, settings)
-                est = fly_and_estimate(truth, prior, result, Path(tmp) / f"{kind}-{seed}", seed,
-                                       args.process_noise)
-                row[kind] = (result, est)
+                sim, est = fly_and_estimate(truth, prior, result, Path(tmp) / f"{kind}-{seed}",
+                                            seed, args.process_noise)
+                row[kind] = (result, est, sim)
             rows.append(row)
-            (p, e), (rp, re) = row["dopt"], row["random"]
+            (p, e, ps), (rp, re, rs) = row["dopt"], row["random"]
             print(f"seed {seed:2d}: dopt predicted {p.predicted_dopt:.3g} reached "
                   f"{e.filtered.d_optimality:.3g} | random predicted {rp.predicted_dopt:.3g} "
                   f"reached {re.filtered.d_optimality:.3g} | vertices {p.stats.vertices}, "
-                  f"edges {p.stats.edges}, beliefs {p.stats.beliefs}", flush=True)
+                  f"edges {p.stats.edges}, beliefs {p.stats.beliefs} | saturated "
+                  f"{ps.saturated_fraction:.0%}/{rs.saturated_fraction:.0%}, tracking RMS "
+                  f"{ps.position_rms:.2g}/{rs.position_rms:.2g} m", flush=True)
     reached = {k: np.array([r[k][1].filtered.d_optimality for r in rows]) for k in rows[0]}
     predicted = {k: np.array([r[k][0].predicted_dopt for r in rows]) for k in rows[0]}
     print(f"\n{args.seeds} seeds, budget {args.budget:g} s, planning {args.time:g} s, "
-          f"{args.vehicle}, priors ±50 %")
+          f"{args.vehicle}, priors ±50 %, rotor headroom {args.rotor_headroom:g}")
+    for k in ("dopt", "random"):
+        sims = [r[k][2] for r in rows]
+        print(f"  {k:<7} flights saturating > 5 % of ticks: "
+              f"{sum(s.saturated_fraction > 0.05 for s in sims)}, tracking RMS > 0.5 m: "
+              f"{sum(s.position_rms > 0.5 for s in sims)} (true θ beyond the plan's rotor range)")
     for k in ("dopt", "random"):
         print(f"  {k:<7} median D-opt predicted {np.median(predicted[k]):.3g}, reached by the "
               f"estimator {np.median(reached[k]):.3g}")
@@ -95,6 +117,17 @@ def main() -> None:
     for j, name in enumerate(PARAMETER_NAMES):
         print(f"    {name}: {np.median(ratio[:, j]):.2f} [{ratio[:, j].min():.2f}, "
               f"{ratio[:, j].max():.2f}]")
+    calm = np.array([r["dopt"][2].saturated_fraction <= 0.05 for r in rows])
+    if calm.any():
+        print(f"  the same on the {calm.sum()} dopt flights saturating ≤ 5 % of ticks: "
+              + ", ".join(f"{n} {np.median(ratio[calm, j]):.2f}"
+                          for j, n in enumerate(PARAMETER_NAMES)))
+    flown = np.array([flown_sigma(truth, r["dopt"][0].settings, r["dopt"][2]) for r in rows])
+    print("  estimator σ / σ propagated with the true θ along the flown states, median [min, "
+          "max]: " + ", ".join(f"{n} {np.median(sig_est[:, j] / flown[:, j]):.2f} "
+                               f"[{(sig_est[:, j] / flown[:, j]).min():.2f}, "
+                               f"{(sig_est[:, j] / flown[:, j]).max():.2f}]"
+                               for j, n in enumerate(PARAMETER_NAMES)))
     errors = np.array([(r["dopt"][1].filtered.value - truth.theta) / r["dopt"][1].filtered.sigma
                        for r in rows])
     print(f"  estimator error / σ over seeds (dopt): std per parameter "

@@ -45,7 +45,8 @@ class EvaluationRun:
 def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
                planning_time: float = 30.0, samples: int | None = None,
                box: tuple[float, ...] = PlannerSettings.box, seed: int = 0,
-               iterations: int = 1, refine_steps: int | None = None) -> list[ExperimentSpec]:
+               iterations: int = 1, refine_steps: int | None = None,
+               rotor_headroom: float = PlannerSettings.rotor_headroom) -> list[ExperimentSpec]:
     """The specs of experiments 0 … n−1 (experiment i uses seed ``seed + i``)."""
     if n < 1:
         raise InputError(f"--n {n}: expected at least 1 experiment")
@@ -58,11 +59,14 @@ def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
     if samples is None and not (planning_time > 0.0 and math.isfinite(planning_time)):
         raise InputError(f"--time {planning_time:g}: expected a finite planning time > 0 s "
                          "(or --samples N)")
+    if not 0.0 <= rotor_headroom < 0.5:
+        raise InputError(f"--rotor-headroom {rotor_headroom:g}: expected a fraction in [0, 0.5)")
     load_vehicle(vehicle)  # a bad vehicle fails here, not inside a worker
     return [ExperimentSpec(index=i, seed=seed + i, vehicle=str(vehicle), budget=budget,
                            planning_time=planning_time, samples=samples,
                            box=tuple(box), iterations=iterations, kinds=KINDS,  # type: ignore[arg-type]
-                           refine_steps=refine_steps) for i in range(n)]
+                           refine_steps=refine_steps, rotor_headroom=rotor_headroom)
+            for i in range(n)]
 
 
 def run_evaluation(out: str | Path, specs: list[ExperimentSpec], executor: str = "local",
@@ -130,6 +134,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="planner sample budget: results depend only on the seeds")
     parser.add_argument("--refine-steps", type=int, metavar="N",
                         help="most refinement steps of the planner (default: the planner's)")
+    parser.add_argument("--rotor-headroom", type=float, default=PlannerSettings.rotor_headroom,
+                        metavar="F", help="fraction of the rotor n² range the plans leave "
+                        f"free at each end (default: {PlannerSettings.rotor_headroom:g})")
     parser.add_argument("--box", default=DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
                         help=f"flight volume in m, world ENU (default: {DEFAULT_BOX})")
     parser.add_argument("--seed", type=int, default=0,
@@ -156,7 +163,7 @@ def main(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise InputError(f"--workers {args.workers}: expected at least 1")
     specs = make_specs(args.n, args.vehicle, args.budget, args.time, args.samples, box,
-                       args.seed, args.iterations, args.refine_steps)
+                       args.seed, args.iterations, args.refine_steps, args.rotor_headroom)
     run = run_evaluation(args.out, specs, args.executor, args.workers, args.scheduler,
                          args.rrd, png=not args.no_png, progress=args.verbosity >= 0)
     print(format_summary(run))

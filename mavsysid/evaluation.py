@@ -145,6 +145,8 @@ def _rows(records: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
             row: dict[str, Any] = {"experiment": spec["index"], "seed": spec["seed"],
                                    "kind": f["kind"], "iteration": f["iteration"],
                                    "flight_time": f["flight_time"],
+                                   "saturated_fraction": f.get("saturated_fraction", ""),
+                                   "tracking_rms": f.get("tracking_rms", ""),
                                    "predicted_dopt": f["predicted_dopt"],
                                    "reached_dopt": f["reached_dopt"]}
             for j, name in enumerate(PARAMETER_NAMES):

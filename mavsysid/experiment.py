@@ -74,6 +74,8 @@ class ExperimentSpec:
         Planner kinds to run.
     refine_steps : int or None
         Most refinement steps of the D-optimal planner (None: the planner's default).
+    rotor_headroom : float
+        The planners' rotor headroom (`planner.results.PlannerSettings.rotor_headroom`).
     """
 
     index: int
@@ -86,6 +88,7 @@ class ExperimentSpec:
     iterations: int = 1
     kinds: tuple[str, ...] = KINDS
     refine_steps: int | None = None
+    rotor_headroom: float = PlannerSettings.rotor_headroom
 
     def key(self) -> str:
         """A short hash of the spec: a stored record is reused only for the same spec."""
@@ -102,7 +105,8 @@ def draw_prior(truth: VehicleConfig, seed: int) -> np.ndarray:
 def _planner_settings(spec: ExperimentSpec, seed: int) -> PlannerSettings:
     time = math.inf if spec.samples is not None else spec.planning_time
     settings = PlannerSettings(budget=spec.budget, planning_time=time,
-                               max_samples=spec.samples, box=spec.box, seed=seed)
+                               max_samples=spec.samples, box=spec.box, seed=seed,
+                               rotor_headroom=spec.rotor_headroom)
     if spec.refine_steps is not None:
         settings = replace(settings, refine_steps=spec.refine_steps)
     return settings
@@ -132,8 +136,8 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
     planner = plan if kind == "dopt" else plan_random
     result = planner(model, _planner_settings(spec, seed))
     directory = workdir / f"{kind}-{iteration}"
-    Simulator(model, true_theta=truth.theta,
-              settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
+    sim = Simulator(model, true_theta=truth.theta,
+                    settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
     run = _filter(directory, model, prior)
     est = run.estimate
     h = run.history
@@ -141,6 +145,10 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
         "kind": kind,
         "iteration": iteration,
         "flight_time": float(result.trajectory.duration),
+        # The true vehicle may need rotor speeds the plan's prior did not: then it
+        # saturates and leaves the planned path.
+        "saturated_fraction": float(sim.saturated_fraction),
+        "tracking_rms": float(sim.position_rms),
         "predicted_dopt": float(result.predicted_dopt),
         "reached_dopt": est.d_optimality,
         "estimate": est.value.tolist(),

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from planner.feasibility import rotor_square_range
 from planner.results import PlannerSettings, PlanProgress, PlanResult
 from planner.trajectory_file import write_setpoints_csv, write_trajectory
 from vehicle.config import GRAVITY, PARAMETER_NAMES, VehicleConfig, load_vehicle
@@ -141,6 +142,20 @@ def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
         raise InputError("planner settings: measurement rate and prior σ must be positive")
     _check_box(settings, config)
     _check_hover(config)
+    _check_headroom(config, settings)
+
+
+def _check_headroom(config: VehicleConfig, settings: PlannerSettings) -> None:
+    """The rotor headroom must leave the hover rotor speeds inside the range it shrinks."""
+    h = settings.rotor_headroom
+    if not 0.0 <= h < 0.5:
+        raise InputError(f"--rotor-headroom {h:g}: expected a fraction in [0, 0.5)")
+    lo, hi = rotor_square_range(config, h)
+    hover = config.mass * GRAVITY / (config.rotor_count * config.parameters.c_T)
+    if not lo <= hover <= hi:
+        raise InputError(
+            f"--rotor-headroom {h:g}: leaves rotor speeds {math.sqrt(lo):.0f}–"
+            f"{math.sqrt(hi):.0f} rad/s, without the hover speed {math.sqrt(hover):.0f} rad/s")
 
 
 @contextmanager
@@ -287,6 +302,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="N", help="most steps refining the search's best flight in "
                         f"the last {100 * PlannerSettings.refine_share:.0f}%% of the planning time "
                         f"(default: {PlannerSettings.refine_steps}; 0: paper's search only)")
+    parser.add_argument("--rotor-headroom", type=float, metavar="F",
+                        default=PlannerSettings.rotor_headroom,
+                        help="fraction of the rotor n² range left free at each end, for the "
+                        "autopilot and for a vehicle whose θ differs from the prior's "
+                        f"(default: {PlannerSettings.rotor_headroom:g})")
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -310,7 +330,7 @@ def _settings(args: argparse.Namespace) -> PlannerSettings:
         time = math.inf
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
-                           refine_steps=args.refine_steps)
+                           refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom)
 
 
 def main(args: argparse.Namespace) -> int:

@@ -29,7 +29,8 @@ from planner.segments import Segment, VertexState
 from vehicle.allocation import allocation_pinv
 from vehicle.config import GRAVITY, VehicleConfig
 
-__all__ = ["CONSTRAINTS", "FeasibilityResult", "check_segment", "check_vertex_state"]
+__all__ = ["CONSTRAINTS", "FeasibilityResult", "check_segment", "check_vertex_state",
+           "rotor_square_range"]
 
 #: Constraint names in the order they are checked (``FeasibilityResult.reason``).
 CONSTRAINTS = ("box", "thrust", "speed", "yaw_acceleration", "body_rate", "rotor_speed")
@@ -333,25 +334,37 @@ def _check_kernel(dc: np.ndarray, duration: float, box: np.ndarray,
 
 # (config, theta) → kernel inputs; keyed by identity (a config's value hash costs more
 # than a check), holding the config so that its id cannot be reused while cached.
-_KERNEL_CACHE: dict[tuple[int, bytes], tuple[VehicleConfig, tuple]] = {}
+_KERNEL_CACHE: dict[tuple[int, bytes, float], tuple[VehicleConfig, tuple]] = {}
 
 
-def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None
+def rotor_square_range(config: VehicleConfig, headroom: float = 0.0) -> tuple[float, float]:
+    """The n² range a plan may use, (rad/s)²: the rotor range less ``headroom`` at each end.
+
+    ``headroom`` is a fraction of n²_max − n²_min kept free at both ends for the
+    autopilot's feedback, and for the true vehicle, whose θ is not the planner's: with a
+    prior 30 % off, a flight planned to the last rotor rad/s saturates and can diverge.
+    """
+    lim = config.limits
+    lo, hi = lim.rotor_speed_min**2, lim.rotor_speed_max**2
+    return lo + headroom * (hi - lo), hi - headroom * (hi - lo)
+
+
+def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: float = 0.0
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(limits, J, A⁺) for the kernels, cached per config and θ.
+    """(limits, J, A⁺) for the kernels, cached per config, θ and rotor headroom.
 
     limits = [m, (r_min g)², (r_max g)², v_max², ψ̈_max, ω_max, n²_min, n²_max].
     """
     th = config.theta if theta is None else np.asarray(theta, dtype=float).reshape(6)
-    key = (id(config), b"" if theta is None else th.tobytes())
+    key = (id(config), b"" if theta is None else th.tobytes(), headroom)
     hit = _KERNEL_CACHE.get(key)
     if hit is not None and hit[0] is config:
         return hit[1]
     lim = config.limits
     limits = np.array([config.mass, (lim.thrust_min_ratio * GRAVITY) ** 2,
                        (lim.thrust_max_ratio * GRAVITY) ** 2, lim.speed_max**2,
-                       lim.yaw_acceleration_max, lim.body_rate_max, lim.rotor_speed_min**2,
-                       lim.rotor_speed_max**2])
+                       lim.yaw_acceleration_max, lim.body_rate_max,
+                       *rotor_square_range(config, headroom)])
     value = (limits, th[3:6].copy(), np.ascontiguousarray(allocation_pinv(config, th)))
     if len(_KERNEL_CACHE) >= 32:
         _KERNEL_CACHE.clear()
@@ -367,6 +380,7 @@ def check_segment(
     *,
     grid_step: float = 0.01,
     safety: float = 2.0,
+    rotor_headroom: float = 0.0,
 ) -> FeasibilityResult:
     """Check a segment against all limits on the whole of [0, T].
 
@@ -384,6 +398,8 @@ def check_segment(
         Coarse grid step for body rates and rotor speeds, s.
     safety : float, optional
         Factor (≥ 2) on the local bound that decides whether an interval is refined.
+    rotor_headroom : float, optional
+        Fraction of the rotor n² range kept free at each end (`rotor_square_range`).
 
     Returns
     -------
@@ -392,14 +408,15 @@ def check_segment(
     T = segment.duration
     which, time, evaluations = _check_kernel(
         segment.derivative_coeffs, T, np.asarray(box, dtype=float),
-        _kernel_inputs(config, theta), max(2, ceil(T / grid_step)), float(safety))
+        _kernel_inputs(config, theta, float(rotor_headroom)), max(2, ceil(T / grid_step)),
+        float(safety))
     if which < 0:
         return FeasibilityResult(True, samples=evaluations)
     return FeasibilityResult(False, CONSTRAINTS[which], time, evaluations)
 
 
 def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarray,
-                       theta: np.ndarray | None = None) -> bool:
+                       theta: np.ndarray | None = None, rotor_headroom: float = 0.0) -> bool:
     """Whether one flat state satisfies every instantaneous limit (for sampling).
 
     Parameters
@@ -412,6 +429,8 @@ def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarra
         Flight volume [x_min, y_min, z_min, x_max, y_max, z_max], m.
     theta : ndarray, shape (6,), optional
         Parameters for inertia and allocation; the config's nominal θ by default.
+    rotor_headroom : float, optional
+        As for `check_segment`.
 
     Returns
     -------
@@ -422,5 +441,5 @@ def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarra
     dc[0, :15] = state.position.ravel()
     dc[0, 15:] = state.yaw
     which, _, _ = _check_kernel(dc, 1.0, np.asarray(box, dtype=float),
-                                _kernel_inputs(config, theta), 1, 2.0)
+                                _kernel_inputs(config, theta, float(rotor_headroom)), 1, 2.0)
     return which < 0

@@ -55,6 +55,10 @@ class PlannerSettings:
         (1: none). The flight stays the same; the refinement gets more, shorter segments
         to shape (faster manoeuvres), which lowered the D-optimality it reaches by 5–15 %
         at 2–3 pieces in bench trials.
+    rotor_headroom : float
+        Fraction of the rotor n² range (`Limits.rotor_speed_min` to `rotor_speed_max`)
+        the plan leaves free at each end, for the autopilot's feedback and for a true
+        vehicle whose θ differs from the planner's (`planner.feasibility.rotor_square_range`).
     """
 
     budget: float = 30.0
@@ -69,6 +73,7 @@ class PlannerSettings:
     refine_share: float = 0.7
     refine_steps: int = 100_000
     refine_split: int = 2
+    rotor_headroom: float = 0.0
 
     @property
     def start_pose(self) -> np.ndarray:

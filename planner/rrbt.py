@@ -156,7 +156,8 @@ class GraphSearch:
         return self.transfer_of(segment)
 
     def feasible(self, segment: Segment) -> bool:
-        return check_segment(segment, self.config, self.box).feasible
+        return check_segment(segment, self.config, self.box,
+                             rotor_headroom=self.settings.rotor_headroom).feasible
 
     def stop_at(self, state: VertexState, with_transfer: bool = True) -> StopChoice | None:
         """The shortest feasible stopping segment from ``state``; None if there is none.

@@ -69,6 +69,9 @@ def test_csv_has_a_row_per_flight_matching_the_records(two_experiments):
                       if fl["kind"] == row["kind"])
         assert float(row["reached_dopt"]) == flight["reached_dopt"]
         assert float(row["relative_error_j_z"]) == flight["relative_error"][5]
+        assert float(row["saturated_fraction"]) == flight["saturated_fraction"]
+        assert 0.0 <= flight["saturated_fraction"] <= 1.0
+        assert 0.0 < float(row["tracking_rms"]) == flight["tracking_rms"]
 
 
 def test_table_and_plots_are_written(two_experiments):
@@ -133,6 +136,7 @@ def test_other_settings_in_the_folder_are_refused(two_experiments, capsys):
     (["--vehicle", "nosuch"], "nosuch"),
     (["--executor", "dask"], "--scheduler"),
     (["--workers", "0"], "--workers 0"),
+    (["--rotor-headroom", "0.5"], "--rotor-headroom 0.5"),
 ])
 def test_bad_input_exits_2_with_one_line(argv, fragment, tmp_path, capsys):
     """Bad options give exit code 2 and one line naming the problem."""

@@ -83,6 +83,8 @@ BAD_OPTIONS = {
     "start with 2 numbers": (["--start", "0,0"], "--start"),
     "negative seed": (["--seed", "-1"], "--seed"),
     "unknown vehicle": (["--vehicle", "fireflyy"], "did you mean firefly"),
+    "negative rotor headroom": (["--rotor-headroom", "-0.1"], "--rotor-headroom"),
+    "rotor headroom without hover": (["--rotor-headroom", "0.45"], "hover speed"),
 }
 
 

@@ -9,7 +9,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from planner.feasibility import CONSTRAINTS, check_segment, check_vertex_state
+from planner.feasibility import (
+    CONSTRAINTS,
+    check_segment,
+    check_vertex_state,
+    rotor_square_range,
+)
 from planner.segments import Segment, VertexState, connect_fixed, connect_free_end, stop_segment
 from vehicle.config import VehicleConfig
 from vehicle.flatness import flat_to_state
@@ -198,3 +203,26 @@ def test_reports_the_failed_constraint_and_cost(firefly):
     fast = check_segment(connect_free_end(hover, np.array([1.9, 1.9, 2.4]), 0.0, 0.3),
                          firefly, BOX)
     assert not fast and fast.reason in CONSTRAINTS and 0.0 <= fast.time <= 0.3
+
+
+@pytest.mark.parametrize("headroom", [0.1, 0.25])
+def test_rotor_headroom_keeps_sampled_rotor_speeds_inside_the_shrunk_range(firefly, headroom):
+    """With headroom h no accepted segment's 1 ms rotor n² leaves [h, 1 − h] of the range."""
+    lo, hi = rotor_square_range(firefly, headroom)
+    span = firefly.limits.rotor_speed_max**2 - firefly.limits.rotor_speed_min**2
+    assert lo == pytest.approx(headroom * span) and hi == pytest.approx((1 - headroom) * span)
+    counts = {"accepted": 0, "dropped": 0}
+    for seed in range(300):
+        seg = _random_segment(seed, ("free", "fixed", "stop")[seed % 3])
+        wide = check_segment(seg, firefly, BOX).feasible
+        narrow = check_segment(seg, firefly, BOX, rotor_headroom=headroom)
+        if not narrow.feasible:
+            counts["dropped"] += wide
+            assert not wide or narrow.reason == "rotor_speed"
+            continue
+        assert wide
+        counts["accepted"] += 1
+        t = np.append(np.arange(0.0, seg.duration, 1e-3), seg.duration)
+        n2 = flat_to_state(seg.flat_outputs(t), firefly).rotor_speeds_squared
+        assert lo <= n2.min() and n2.max() <= hi
+    assert counts["accepted"] >= 20 and counts["dropped"] >= 5, counts

@@ -14,6 +14,7 @@ from flight.simulator import SimulationSettings, Simulator
 from planner.results import PlannerSettings
 from planner.rrbt import plan
 from vehicle.config import load_vehicle
+from vehicle.flatness import flat_to_state
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -62,3 +63,19 @@ def test_plan_starts_and_ends_in_hover_inside_the_budget():
     assert traj.duration <= settings.budget + 1e-9
     history = result.stats.best_history
     assert history.shape[0] >= 1 and np.all(np.diff(history[:, 1]) < 0.0)
+
+
+def test_rotor_headroom_keeps_the_whole_flight_inside_the_shrunk_rotor_range():
+    """A plan with headroom h keeps n² in [h, 1 − h] of the range; without, it uses more."""
+    cfg = load_vehicle("firefly")
+    settings = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=2,
+                               refine_steps=300)
+    span = cfg.limits.rotor_speed_max**2
+    used = {}
+    for headroom in (0.0, 0.15):
+        traj = plan(cfg, replace(settings, rotor_headroom=headroom)).trajectory
+        t = np.append(np.arange(0.0, traj.duration, 1e-3), traj.duration)
+        n2 = flat_to_state(traj.flat_outputs(t), cfg).rotor_speeds_squared / span
+        used[headroom] = (n2.min(), n2.max())
+    assert used[0.15][0] >= 0.15 and used[0.15][1] <= 0.85
+    assert used[0.0][0] < 0.15 or used[0.0][1] > 0.85, used
