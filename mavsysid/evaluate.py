@@ -24,6 +24,7 @@ from mavsysid.evaluation import (
 )
 from mavsysid.experiment import KINDS, ExperimentSpec
 from mavsysid.plan import DEFAULT_BOX, parse_numbers
+from planner.feasibility import check_rotor_headroom
 from planner.results import PlannerSettings
 from vehicle.config import load_vehicle
 from vehicle.errors import InputError
@@ -59,9 +60,8 @@ def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
     if samples is None and not (planning_time > 0.0 and math.isfinite(planning_time)):
         raise InputError(f"--time {planning_time:g}: expected a finite planning time > 0 s "
                          "(or --samples N)")
-    if not 0.0 <= rotor_headroom < 0.5:
-        raise InputError(f"--rotor-headroom {rotor_headroom:g}: expected a fraction in [0, 0.5)")
-    load_vehicle(vehicle)  # a bad vehicle fails here, not inside a worker
+    # A bad vehicle or headroom fails here, not inside a worker.
+    check_rotor_headroom(load_vehicle(vehicle), rotor_headroom, "--rotor-headroom")
     return [ExperimentSpec(index=i, seed=seed + i, vehicle=str(vehicle), budget=budget,
                            planning_time=planning_time, samples=samples,
                            box=tuple(box), iterations=iterations, kinds=KINDS,  # type: ignore[arg-type]

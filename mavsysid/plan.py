@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.feasibility import rotor_square_range
+from planner.feasibility import check_rotor_headroom
 from planner.results import PlannerSettings, PlanProgress, PlanResult
 from planner.trajectory_file import write_setpoints_csv, write_trajectory
 from vehicle.config import GRAVITY, PARAMETER_NAMES, VehicleConfig, load_vehicle
@@ -142,20 +142,7 @@ def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
         raise InputError("planner settings: measurement rate and prior σ must be positive")
     _check_box(settings, config)
     _check_hover(config)
-    _check_headroom(config, settings)
-
-
-def _check_headroom(config: VehicleConfig, settings: PlannerSettings) -> None:
-    """The rotor headroom must leave the hover rotor speeds inside the range it shrinks."""
-    h = settings.rotor_headroom
-    if not 0.0 <= h < 0.5:
-        raise InputError(f"--rotor-headroom {h:g}: expected a fraction in [0, 0.5)")
-    lo, hi = rotor_square_range(config, h)
-    hover = config.mass * GRAVITY / (config.rotor_count * config.parameters.c_T)
-    if not lo <= hover <= hi:
-        raise InputError(
-            f"--rotor-headroom {h:g}: leaves rotor speeds {math.sqrt(lo):.0f}–"
-            f"{math.sqrt(hi):.0f} rad/s, without the hover speed {math.sqrt(hover):.0f} rad/s")
+    check_rotor_headroom(config, settings.rotor_headroom, "--rotor-headroom")
 
 
 @contextmanager

@@ -28,9 +28,10 @@ import numpy as np
 from planner.segments import Segment, VertexState
 from vehicle.allocation import allocation_pinv
 from vehicle.config import GRAVITY, VehicleConfig
+from vehicle.errors import InputError
 
-__all__ = ["CONSTRAINTS", "FeasibilityResult", "check_segment", "check_vertex_state",
-           "rotor_square_range"]
+__all__ = ["CONSTRAINTS", "FeasibilityResult", "check_rotor_headroom", "check_segment",
+           "check_vertex_state", "rotor_square_range"]
 
 #: Constraint names in the order they are checked (``FeasibilityResult.reason``).
 CONSTRAINTS = ("box", "thrust", "speed", "yaw_acceleration", "body_rate", "rotor_speed")
@@ -347,6 +348,25 @@ def rotor_square_range(config: VehicleConfig, headroom: float = 0.0) -> tuple[fl
     lim = config.limits
     lo, hi = lim.rotor_speed_min**2, lim.rotor_speed_max**2
     return lo + headroom * (hi - lo), hi - headroom * (hi - lo)
+
+
+def check_rotor_headroom(config: VehicleConfig, headroom: float,
+                         name: str = "rotor headroom") -> None:
+    """Refuse a headroom outside [0, 0.5) or one whose range excludes the hover speeds.
+
+    Raises
+    ------
+    InputError
+        One line naming ``name`` (the option that set it) and the problem.
+    """
+    if not 0.0 <= headroom < 0.5:
+        raise InputError(f"{name} {headroom:g}: expected a fraction in [0, 0.5)")
+    lo, hi = rotor_square_range(config, headroom)
+    hover = allocation_pinv(config, config.theta) @ np.array([config.hover_thrust, 0, 0, 0])
+    if hover.min() < lo or hover.max() > hi:
+        raise InputError(
+            f"{name} {headroom:g}: leaves rotor speeds {np.sqrt(lo):.0f}–{np.sqrt(hi):.0f} "
+            f"rad/s, without the hover speed {np.sqrt(hover.max()):.0f} rad/s")
 
 
 def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: float = 0.0

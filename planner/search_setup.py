@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from planner.belief import apply_transfer_logdet, edge_samples, edge_transfer, propagate_final
-from planner.feasibility import check_segment, check_vertex_state
+from planner.feasibility import check_rotor_headroom, check_segment
 from planner.results import PlannerSettings
 from planner.segments import Segment, VertexState, connect_free_end
 from vehicle.config import VehicleConfig
@@ -82,8 +82,4 @@ def validate_settings(config: VehicleConfig, settings: PlannerSettings) -> None:
     if lim.thrust_min_ratio > 1.0 or lim.thrust_max_ratio < 1.0:
         raise InputError(f"{config.source}: [limits] thrust ratios [{lim.thrust_min_ratio:g}, "
                          f"{lim.thrust_max_ratio:g}] × m g exclude hover (1.0)")
-    hover = VertexState.hover(start[:3], float(start[3]))
-    if not (0.0 <= settings.rotor_headroom < 0.5
-            and check_vertex_state(hover, config, box, rotor_headroom=settings.rotor_headroom)):
-        raise InputError(f"rotor headroom {settings.rotor_headroom:g}: expected a fraction in "
-                         "[0, 0.5) that leaves the hover rotor speeds inside the rotor range")
+    check_rotor_headroom(config, settings.rotor_headroom)

@@ -11,12 +11,14 @@ from hypothesis import strategies as st
 
 from planner.feasibility import (
     CONSTRAINTS,
+    check_rotor_headroom,
     check_segment,
     check_vertex_state,
     rotor_square_range,
 )
 from planner.segments import Segment, VertexState, connect_fixed, connect_free_end, stop_segment
 from vehicle.config import VehicleConfig
+from vehicle.errors import InputError
 from vehicle.flatness import flat_to_state
 
 # The planner's default flight volume (planner.results.PlannerSettings.box), m.
@@ -226,3 +228,17 @@ def test_rotor_headroom_keeps_sampled_rotor_speeds_inside_the_shrunk_range(firef
         n2 = flat_to_state(seg.flat_outputs(t), firefly).rotor_speeds_squared
         assert lo <= n2.min() and n2.max() <= hi
     assert counts["accepted"] >= 20 and counts["dropped"] >= 5, counts
+
+
+@pytest.mark.parametrize(("headroom", "problem"), [
+    (0.0, None), (0.2, None), (-0.1, "fraction"), (0.5, "fraction"), (0.45, "hover speed"),
+])
+def test_rotor_headroom_must_leave_the_hover_speeds_in_range(firefly, headroom, problem):
+    """Headroom in [0, 0.5) whose range holds the hover rotor speeds passes; else one line."""
+    if problem is None:
+        check_rotor_headroom(firefly, headroom)
+        return
+    with pytest.raises(InputError, match=problem) as error:
+        check_rotor_headroom(firefly, headroom, "--rotor-headroom")
+    assert str(error.value).startswith(f"--rotor-headroom {headroom:g}: ")
+    assert "\n" not in str(error.value)
