@@ -186,12 +186,19 @@ class MavlinkLink:
         msg_args = (_MAV_TYPE_GCS, _MAV_AUTOPILOT_INVALID, 0, 0, _MAV_STATE_ACTIVE)
 
         def beat() -> None:
+            # Due times on a fixed grid, so that a late wake-up (a busy main thread holds
+            # the GIL) does not push every later beat back; after a stall of more than a
+            # period the grid restarts from now instead of sending a burst.
+            wall_period = self.clock.wall(period)
+            due = time.monotonic()
             while not self._stop.is_set():
                 try:
                     self.send(self.mav.heartbeat_encode(*msg_args))
                 except (OSError, ValueError):
                     return  # the link was closed under us
-                self._stop.wait(self.clock.wall(period))
+                now = time.monotonic()
+                due = due + wall_period if due + wall_period > now else now + wall_period
+                self._stop.wait(due - now)
 
         self._beat_thread = threading.Thread(target=beat, name="gcs-heartbeat", daemon=True)
         self._beat_thread.start()
