@@ -12,7 +12,6 @@ messages are dropped by pymavlink's signature check and counted here (by message
 
 from __future__ import annotations
 
-import gc
 import threading
 from collections import Counter
 from collections.abc import Callable
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from flight.autopilot_modes import Autopilot
+from flight.collector import frozen_collector
 from flight.effects import config_truth_effects, effect_metadata, hidden_effect, motor_time_constant
 from flight.sim_autopilot import SimAutopilot
 from flight.sim_clock import ClockStats, SimClock
@@ -198,22 +198,21 @@ class SimEndpoint:
         # Freeze what is alive now out of the cyclic collector: after a first run compiled
         # the kernels, numba's leftovers made full collections take 0.1–0.2 s, and ticks
         # that late set the vehicle oscillating on the setpoints that piled up meanwhile.
-        gc.collect()
-        gc.freeze()
-        try:
-            clock.start()
-            while not self._stop.is_set():
-                while clock.due():
-                    self._tick()
-                    clock.advance()
-                    if duration is not None and clock.tick_time >= duration - 1e-9:
-                        self._stop.set()
-                    if self._stop.is_set():
-                        break
-                clock.sleep_until_due()
-            status = "complete"
-        finally:
-            summary = self.close(status)
+        with frozen_collector(collect_first=True):
+            try:
+                clock.start()
+                while not self._stop.is_set():
+                    while clock.due():
+                        self._tick()
+                        clock.advance()
+                        if duration is not None and clock.tick_time >= duration - 1e-9:
+                            self._stop.set()
+                        if self._stop.is_set():
+                            break
+                    clock.sleep_until_due()
+                status = "complete"
+            finally:
+                summary = self.close(status)
         return summary
 
     def close(self, status: str = "complete") -> SimSummary:

@@ -19,7 +19,6 @@ brakes, then lands. Everything is recorded as it arrives (`flight.stream_session
 
 from __future__ import annotations
 
-import gc
 import time
 from collections.abc import Callable
 from typing import Any
@@ -27,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from flight.autopilot_modes import Autopilot
+from flight.collector import frozen_collector
 from flight.mavlink_link import HeartbeatLost
 from flight.preflight import check_vehicle
 from flight.setpoints import SmoothMove, hold, trajectory_setpoint
@@ -229,33 +229,29 @@ class _Flight:
         st = self.settings
         self.say(f"streaming the {duration:.1f} s trajectory at {st.rate:g} Hz")
         line = ProgressLine(duration, enabled=self.progress)
-        # A collection can stall the stream: pause the collector while streaming (reference
-        # counting still frees nearly everything; the flight's reference cycles are
-        # collected afterwards). What is alive now is frozen out of the collector rather
-        # than collected: a full collection of a large process (a caller's planner graph,
-        # freshly compiled kernels) took 0.9 s, long enough for the socket's receive
-        # buffer to overflow and lose a third of a second of telemetry.
-        gc.freeze()
-        gc.disable()
-        schedule = self.stream.start(lambda t: trajectory_setpoint(traj, t))
-        self.s.note_trajectory_start(schedule.start)
-        clock = self.link.clock
-        last_sent, last_t = 0, schedule.start
-        try:
-            while (now := clock.now()) < schedule.start + duration:
-                self.link.poll_until(min(schedule.start + duration, now + 0.1 * st.speedup))
-                now = clock.now()
-                rate = (schedule.sent - last_sent) / max(now - last_t, 1e-9)
-                if now - last_t >= 1.0:
-                    last_sent, last_t = schedule.sent, now
-                latest = self.recorder.latest
-                line.update(now - schedule.start, rate,
-                            None if latest is None else latest.tracking_error, time.monotonic())
-        finally:
-            gc.unfreeze()
-            gc.enable()
-            line.close()
-            self.s.note_trajectory_end(clock.now(), schedule.statistics())
+        # A collection can stall the stream: pause the collector while streaming. What is
+        # alive now is frozen rather than collected: a full collection of a large process
+        # (a caller's planner graph, freshly compiled kernels) took 0.9 s, long enough for
+        # the socket's receive buffer to overflow and lose a third of a second of telemetry.
+        with frozen_collector(pause=True):
+            schedule = self.stream.start(lambda t: trajectory_setpoint(traj, t))
+            self.s.note_trajectory_start(schedule.start)
+            clock = self.link.clock
+            last_sent, last_t = 0, schedule.start
+            try:
+                while (now := clock.now()) < schedule.start + duration:
+                    self.link.poll_until(min(schedule.start + duration, now + 0.1 * st.speedup))
+                    now = clock.now()
+                    rate = (schedule.sent - last_sent) / max(now - last_t, 1e-9)
+                    if now - last_t >= 1.0:
+                        last_sent, last_t = schedule.sent, now
+                    latest = self.recorder.latest
+                    line.update(now - schedule.start, rate,
+                                None if latest is None else latest.tracking_error,
+                                time.monotonic())
+            finally:
+                line.close()
+                self.s.note_trajectory_end(clock.now(), schedule.statistics())
 
     def _finish(self) -> None:
         last = trajectory_setpoint(self.s.trajectory, self.s.trajectory.duration)
