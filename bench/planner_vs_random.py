@@ -7,7 +7,7 @@ logs. Reported: median D-opt (SI) predicted and reached by the estimator, their 
 the prediction error, and how many seconds of planning reach 90 % of the final log D-opt.
 
     python bench/planner_vs_random.py [--seeds 20] [--budget 30] [--time 30] [--process-noise]
-        [--rotor-headroom F]
+        [--rotor-headroom F] [--controller-model {truth,prior}]
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import bootstrap
 
 from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.readers import load_flight
@@ -32,15 +33,19 @@ from vehicle.linearization import ErrorStateModel
 
 
 def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanResult,
-                     directory: Path, seed: int, process_noise: bool = False):
-    """Fly the plan with the true θ (the controller knows only the prior) and filter the log.
+                     directory: Path, seed: int, process_noise: bool = False,
+                     controller_model: str = "truth"):
+    """Fly the plan with the true θ and filter the log.
 
-    With ``process_noise`` the world carries the force and moment noise the filter assumes,
-    so that its σ can be compared with the spread of its errors.
+    The flight controller is tuned to the truth (the paper's RotorS controller; a tuned
+    autopilot) or, with ``controller_model="prior"``, to the planner's ±50 % guess. With
+    ``process_noise`` the world carries the force and moment noise the filter assumes, so
+    that its σ can be compared with the spread of its errors.
     """
     effects = [ProcessNoise(prior.noise.force_density, prior.noise.moment_density,
                             seed=seed)] if process_noise else []
-    sim = Simulator(prior, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
+    controlled = truth if controller_model == "truth" else prior
+    sim = Simulator(controlled, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
                     effects=effects).run(result.trajectory, directory)
     flight = load_flight(directory / "pose.csv", prior)
     return sim, estimate_parameters(flight, prior, EstimatorSettings(refine=False))
@@ -52,6 +57,15 @@ def flown_sigma(truth: VehicleConfig, settings: PlannerSettings, sim) -> np.ndar
     sigma = propagate_final(model, initial_covariance(model, truth, settings), sim.states,
                             sim.rotor_speeds, truth.theta, float(sim.times[1] - sim.times[0]))
     return np.sqrt(np.diag(model.parameter_covariance_si(sigma)))
+
+
+def median_interval(samples: tuple[np.ndarray, ...], statistic) -> tuple[float, float]:
+    """95 % percentile bootstrap interval over seeds (samples resampled in pairs)."""
+    if samples[0].size < 2:
+        return float("nan"), float("nan")
+    result = bootstrap(samples, statistic, paired=True, vectorized=False,
+                       n_resamples=2000, method="percentile", rng=np.random.default_rng(0))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
 def time_to_90(result: PlanResult) -> float:
@@ -71,6 +85,8 @@ def main() -> None:
     parser.add_argument("--vehicle", default="firefly")
     parser.add_argument("--rotor-headroom", type=float, default=PlannerSettings.rotor_headroom,
                         help="planner's rotor headroom (fraction of the n² range at each end)")
+    parser.add_argument("--controller-model", choices=("truth", "prior"), default="truth",
+                        help="θ the flight controller is tuned with (default: truth)")
     parser.add_argument("--process-noise", action="store_true",
                         help="fly in a world with the process noise the filter assumes")
     args = parser.parse_args()
@@ -82,11 +98,12 @@ def main() -> None:
             prior = truth.with_parameters(truth.theta * (1.0 + rng.uniform(-0.5, 0.5, 6)))
             settings = PlannerSettings(budget=args.budget, planning_time=args.time, seed=seed,
                                        rotor_headroom=args.rotor_headroom)
-            row = {}
+            row = {"prior": prior.theta}
             for kind, planner in (("dopt", plan), ("random", plan_random)):
                 result = planner(prior, settings)
                 sim, est = fly_and_estimate(truth, prior, result, Path(tmp) / f"{kind}-{seed}",
-                                            seed, args.process_noise)
+                                            seed, args.process_noise,
+                                            args.controller_model)
                 row[kind] = (result, est, sim)
             rows.append(row)
             (p, e, ps), (rp, re, rs) = row["dopt"], row["random"]
@@ -96,10 +113,12 @@ def main() -> None:
                   f"edges {p.stats.edges}, beliefs {p.stats.beliefs} | saturated "
                   f"{ps.saturated_fraction:.0%}/{rs.saturated_fraction:.0%}, tracking RMS "
                   f"{ps.position_rms:.2g}/{rs.position_rms:.2g} m", flush=True)
-    reached = {k: np.array([r[k][1].filtered.d_optimality for r in rows]) for k in rows[0]}
-    predicted = {k: np.array([r[k][0].predicted_dopt for r in rows]) for k in rows[0]}
+    kinds = ("dopt", "random")
+    reached = {k: np.array([r[k][1].filtered.d_optimality for r in rows]) for k in kinds}
+    predicted = {k: np.array([r[k][0].predicted_dopt for r in rows]) for k in kinds}
     print(f"\n{args.seeds} seeds, budget {args.budget:g} s, planning {args.time:g} s, "
-          f"{args.vehicle}, priors ±50 %, rotor headroom {args.rotor_headroom:g}")
+          f"{args.vehicle}, priors ±50 %, rotor headroom {args.rotor_headroom:g}, controller "
+          f"tuned to the {args.controller_model}")
     for k in ("dopt", "random"):
         sims = [r[k][2] for r in rows]
         print(f"  {k:<7} flights saturating > 5 % of ticks: "
@@ -108,15 +127,25 @@ def main() -> None:
     for k in ("dopt", "random"):
         print(f"  {k:<7} median D-opt predicted {np.median(predicted[k]):.3g}, reached by the "
               f"estimator {np.median(reached[k]):.3g}")
+    lo, hi = median_interval((reached["random"], reached["dopt"]),
+                             lambda a, b: np.median(a) / np.median(b))
     print(f"  ratio random/dopt of median reached D-opt: "
-          f"{np.median(reached['random']) / np.median(reached['dopt']):.2f} (paper: 4.4)")
+          f"{np.median(reached['random']) / np.median(reached['dopt']):.2f} (paper: 4.4; "
+          f"95 % paired bootstrap interval over seeds {lo:.2f}–{hi:.2f})")
     sig_pred = np.array([r["dopt"][0].predicted_sigma[-1] for r in rows])
     sig_est = np.array([r["dopt"][1].filtered.sigma for r in rows])
     ratio = sig_pred / sig_est
-    print("  predicted/estimator final σ (dopt plans), median [min, max] per parameter:")
+    print("  predicted/estimator final σ (dopt plans), median (95 % bootstrap interval of "
+          "the median) [min, max] per parameter:")
     for j, name in enumerate(PARAMETER_NAMES):
-        print(f"    {name}: {np.median(ratio[:, j]):.2f} [{ratio[:, j].min():.2f}, "
-              f"{ratio[:, j].max():.2f}]")
+        lo, hi = median_interval((ratio[:, j],), np.median)
+        print(f"    {name}: {np.median(ratio[:, j]):.2f} ({lo:.2f}–{hi:.2f}) "
+              f"[{ratio[:, j].min():.2f}, {ratio[:, j].max():.2f}]")
+    relative = ratio * np.array([r["dopt"][1].filtered.value for r in rows]) / np.array(
+        [r["prior"] for r in rows])
+    print("  the same in relative σ (σ / θ of the model each used: the planner's prior, the "
+          "estimate): " + ", ".join(f"{n} {np.median(relative[:, j]):.2f}"
+                                    for j, n in enumerate(PARAMETER_NAMES)))
     calm = np.array([r["dopt"][2].saturated_fraction <= 0.05 for r in rows])
     if calm.any():
         print(f"  the same on the {calm.sum()} dopt flights saturating ≤ 5 % of ticks: "

@@ -36,8 +36,10 @@ from vehicle.flight_dir import write_json_atomic
 __all__ = [
     "EvaluationSummary",
     "check_executor",
+    "last_flights",
     "load_records",
     "median_convergence_time",
+    "paired_flight_arrays",
     "pending_specs",
     "run_specs",
     "summarise",
@@ -217,7 +219,8 @@ class EvaluationSummary:
     ratio_percentiles: dict[str, np.ndarray]
 
 
-def _last_flights(records: list[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
+def last_flights(records: list[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
+    """Per record that flew ``kind``, its flight of the last iteration."""
     flights = []
     for record in records:
         mine = [f for f in record["flights"] if f["kind"] == kind]
@@ -238,16 +241,45 @@ def _padded_ratios(flights: list[dict[str, Any]], truth: np.ndarray, length: int
     return out / truth[:, None, :]
 
 
+def _history_grid(records: list[dict[str, Any]]) -> np.ndarray:
+    longest = max((f["history"]["t"] for r in records for f in r["flights"]), key=len)
+    return np.asarray(longest, dtype=float)
+
+
+def paired_flight_arrays(records: list[dict[str, Any]], kinds: tuple[str, ...]
+                         ) -> tuple[np.ndarray, dict[str, np.ndarray],
+                                    dict[str, np.ndarray]] | None:
+    """Per-experiment arrays of the experiments that flew every one of ``kinds``.
+
+    Returns
+    -------
+    (t, dopt, ratios) or None
+        t : ndarray, shape (T,), the common history grid, s; dopt : kind → reached D-opt,
+        shape (E,); ratios : kind → estimate / truth, shape (E, T, 6), row i of every
+        kind from the same experiment. None when no experiment flew all ``kinds``.
+    """
+    both = [r for r in records if set(kinds) <= {f["kind"] for f in r["flights"]}]
+    if not both:
+        return None
+    t = _history_grid(both)
+    truth = np.array([r["truth"] for r in both])
+    dopt, ratios = {}, {}
+    for kind in kinds:
+        flights = last_flights(both, kind)
+        dopt[kind] = np.array([f["reached_dopt"] for f in flights], dtype=float)
+        ratios[kind] = _padded_ratios(flights, truth, t.size)
+    return t, dopt, ratios
+
+
 def summarise(records: list[dict[str, Any]]) -> EvaluationSummary:
     """Aggregate stored records into the paper's Table quantities."""
     if not records:
         raise InputError("no finished experiments to summarise")
     kinds = tuple(dict.fromkeys(f["kind"] for r in records for f in r["flights"]))
-    longest = max((f["history"]["t"] for r in records for f in r["flights"]), key=len)
-    t = np.asarray(longest, dtype=float)
+    t = _history_grid(records)
     conv, dopt, pct = {}, {}, {}
     for kind in kinds:
-        flights = _last_flights(records, kind)
+        flights = last_flights(records, kind)
         truth = np.array([r["truth"] for r in records
                           if any(f["kind"] == kind for f in r["flights"])])
         ratios = _padded_ratios(flights, truth, t.size)
@@ -280,11 +312,14 @@ def table_markdown(summary: EvaluationSummary) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_table(path: str | Path, summary: EvaluationSummary) -> str:
-    """Write the Markdown table with a one-line caption; returns the table text."""
+def write_table(path: str | Path, summary: EvaluationSummary,
+                notes: Iterable[str] = ()) -> str:
+    """Write the Markdown table with a one-line caption and ``notes`` (one paragraph
+    each) under it; returns the table text."""
     text = table_markdown(summary)
     caption = (f"\nConvergence time of the median of the estimates (within "
                f"{CONVERGENCE_TOLERANCE:.0%} of the truth and staying there) and median "
                f"final D-optimality (SI) over {summary.experiments} simulated experiments.\n")
-    Path(path).write_text(text + caption, encoding="utf-8")
+    extra = "".join(f"\n{note}\n" for note in notes)
+    Path(path).write_text(text + caption + extra, encoding="utf-8")
     return text

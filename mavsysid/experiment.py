@@ -4,7 +4,9 @@ Experiments"), and the iterative identification the paper names as future work.
 An experiment draws the unknown parameters ±50 % around the truth; that draw is the
 planner's model and the EKF's initial guess. For each planner kind (the D-optimal planner
 and the random baseline) it plans a flight within the budget, flies it in the offline
-simulator with the true θ (the controller knows only the guess), runs the paper's EKF on
+simulator with the true θ (the flight controller tuned to the true vehicle, as RotorS's is
+in the paper and a real autopilot is after tuning; or, with ``controller_model="prior"``,
+to the guess), runs the paper's EKF on
 the pose log and keeps what the evaluation reports: final σ, relative error, D-opt,
 per-parameter convergence time and the estimate over flight time. With ``iterations > 1``
 the flight is planned again with the updated model and flown again; the filter of each
@@ -38,7 +40,7 @@ from planner.rrbt import plan
 from vehicle.config import VehicleConfig, load_vehicle
 from vehicle.linearization import initial_state_sigma
 
-__all__ = ["KINDS", "ExperimentSpec", "draw_prior", "run_experiment"]
+__all__ = ["CONTROLLER_MODELS", "KINDS", "ExperimentSpec", "draw_prior", "run_experiment"]
 
 #: Planner kinds, in the paper's names: DOPT-COV (ours) and RAND.
 KINDS: tuple[str, ...] = ("dopt", "random")
@@ -46,6 +48,8 @@ KINDS: tuple[str, ...] = ("dopt", "random")
 HISTORY_RATE = 10.0
 #: Relative half-width of the draw of the unknown parameters around the truth.
 PRIOR_SPREAD = 0.5
+#: Which θ the simulated flight controller is tuned with.
+CONTROLLER_MODELS: tuple[str, ...] = ("truth", "prior")
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,9 @@ class ExperimentSpec:
         Most refinement steps of the D-optimal planner (None: the planner's default).
     rotor_headroom : float
         The planners' rotor headroom (`planner.results.PlannerSettings.rotor_headroom`).
+    controller_model : {"truth", "prior"}
+        θ of the simulated flight controller's model: the truth (the paper's RotorS
+        controller; a tuned autopilot) or the model the flight was planned with.
     """
 
     index: int
@@ -89,6 +96,7 @@ class ExperimentSpec:
     kinds: tuple[str, ...] = KINDS
     refine_steps: int | None = None
     rotor_headroom: float = PlannerSettings.rotor_headroom
+    controller_model: str = "truth"
 
     def key(self) -> str:
         """A short hash of the spec: a stored record is reused only for the same spec."""
@@ -136,7 +144,8 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
     planner = plan if kind == "dopt" else plan_random
     result = planner(model, _planner_settings(spec, seed))
     directory = workdir / f"{kind}-{iteration}"
-    sim = Simulator(model, true_theta=truth.theta,
+    controlled = truth if spec.controller_model == "truth" else model
+    sim = Simulator(controlled, true_theta=truth.theta,
                     settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
     run = _filter(directory, model, prior)
     est = run.estimate

@@ -17,6 +17,7 @@ import pytest
 from mavsysid.cli import main
 from mavsysid.evaluate import make_specs, run_evaluation
 from mavsysid.evaluation import load_records, median_convergence_time, summarise
+from mavsysid.evaluation_intervals import headline_intervals, saturating_flights
 from mavsysid.experiment import draw_prior, run_experiment
 from vehicle.config import load_vehicle
 
@@ -83,6 +84,38 @@ def test_table_and_plots_are_written(two_experiments):
         assert (two_experiments / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_table_notes_give_the_headline_intervals_and_saturating_flights(two_experiments):
+    """Under the table: the D-opt ratio of the table's medians with its bootstrap interval,
+    and the saturating flights counted from the records."""
+    records = load_records(two_experiments)
+    h = headline_intervals(records)
+    summary = summarise(records)
+    assert h.dopt_ratio == pytest.approx(summary.median_dopt["random"]
+                                         / summary.median_dopt["dopt"])
+    table = (two_experiments / "table.md").read_text()
+    assert (f"random / planned {h.dopt_ratio:.2f} (95 % paired bootstrap interval over the "
+            f"2 experiments {h.dopt_ratio_interval[0]:.2f}–{h.dopt_ratio_interval[1]:.2f}; "
+            "paper: 4.4)"
+            in table)
+    saturating = saturating_flights(records)
+    assert saturating.keys() == {"dopt", "random"}
+    assert (f"planned {saturating['dopt'][0]} of 2, random {saturating['random'][0]} of 2."
+            in table)
+
+
+def test_command_prints_the_table_and_its_notes(two_experiments, capsys):
+    """A rerun over finished records prints the table and the very notes of table.md."""
+    code = main(["evaluate", "--n", "2", "--budget", "15", "--samples", "150",
+                 "--refine-steps", "30", "--out", str(two_experiments), "--no-png"])
+    out = capsys.readouterr().out
+    table = (two_experiments / "table.md").read_text()
+    notes = table.split("simulated experiments.\n", 1)[1].strip().split("\n\n")
+    assert code == 0 and len(notes) == 2
+    assert out.startswith(f"2 experiments in {two_experiments} (0 run now, 2 reused).\n")
+    assert table.split("\n\n")[0] in out
+    assert "\n\n".join(notes) in out
+
+
 @pytest.mark.parametrize(("ratios", "expected"), [
     ([[0.5, 0.9, 0.97, 1.0, 1.02]], 0.2),     # enters the band at t = 0.2 and stays
     ([[0.5, 1.0, 1.2, 1.0, 1.01]], 0.3),      # leaves it again once: the later entry counts
@@ -95,6 +128,20 @@ def test_median_convergence_time(ratios, expected):
     t = np.arange(5) * 0.1
     got = median_convergence_time(t, r)
     assert np.allclose(got, expected, equal_nan=True)
+
+
+def test_flight_controller_is_tuned_to_the_truth_unless_asked_for_the_prior():
+    """The same plans; tuned to the truth (the default) the flights track within 1 cm, tuned
+    to the ±50 % guess they leave the plan (thrust and inertia mis-modelled)."""
+    truth_spec, = make_specs(1, **FAST)
+    prior_spec, = make_specs(1, controller_model="prior", **FAST)
+    assert truth_spec.controller_model == "truth" and truth_spec.key() != prior_spec.key()
+    tuned, guessed = run_experiment(truth_spec), run_experiment(prior_spec)
+    for a, b in zip(tuned["flights"], guessed["flights"], strict=True):
+        assert a["predicted_dopt"] == b["predicted_dopt"], "the planner does not change"
+        assert a["saturated_fraction"] == 0.0
+        assert a["tracking_rms"] < 0.01
+        assert b["tracking_rms"] > 3.0 * a["tracking_rms"]
 
 
 def test_summary_of_records_uses_the_last_iteration(tmp_path):
@@ -137,6 +184,7 @@ def test_other_settings_in_the_folder_are_refused(two_experiments, capsys):
     (["--executor", "dask"], "--scheduler"),
     (["--workers", "0"], "--workers 0"),
     (["--rotor-headroom", "0.5"], "--rotor-headroom 0.5"),
+    (["--controller-model", "guess"], "--controller-model 'guess'"),
 ])
 def test_bad_input_exits_2_with_one_line(argv, fragment, tmp_path, capsys):
     """Bad options give exit code 2 and one line naming the problem."""
