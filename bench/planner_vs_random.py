@@ -23,6 +23,7 @@ from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.readers import load_flight
 from flight.effects import ProcessNoise
 from flight.simulator import SimulationSettings, Simulator
+from mavsysid.experiment import CONTROLLER_MODELS, controller_config
 from planner.baseline import plan_random
 from planner.belief import propagate_final
 from planner.results import PlannerSettings, PlanResult
@@ -44,7 +45,7 @@ def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanRes
     """
     effects = [ProcessNoise(prior.noise.force_density, prior.noise.moment_density,
                             seed=seed)] if process_noise else []
-    controlled = truth if controller_model == "truth" else prior
+    controlled = controller_config(controller_model, truth, prior)
     sim = Simulator(controlled, true_theta=truth.theta, settings=SimulationSettings(seed=seed),
                     effects=effects).run(result.trajectory, directory)
     flight = load_flight(directory / "pose.csv", prior)
@@ -85,7 +86,7 @@ def main() -> None:
     parser.add_argument("--vehicle", default="firefly")
     parser.add_argument("--rotor-headroom", type=float, default=PlannerSettings.rotor_headroom,
                         help="planner's rotor headroom (fraction of the n² range at each end)")
-    parser.add_argument("--controller-model", choices=("truth", "prior"), default="truth",
+    parser.add_argument("--controller-model", choices=CONTROLLER_MODELS, default="truth",
                         help="θ the flight controller is tuned with (default: truth)")
     parser.add_argument("--process-noise", action="store_true",
                         help="fly in a world with the process noise the filter assumes")
@@ -119,12 +120,12 @@ def main() -> None:
     print(f"\n{args.seeds} seeds, budget {args.budget:g} s, planning {args.time:g} s, "
           f"{args.vehicle}, priors ±50 %, rotor headroom {args.rotor_headroom:g}, controller "
           f"tuned to the {args.controller_model}")
-    for k in ("dopt", "random"):
+    for k in kinds:
         sims = [r[k][2] for r in rows]
         print(f"  {k:<7} flights saturating > 5 % of ticks: "
               f"{sum(s.saturated_fraction > 0.05 for s in sims)}, tracking RMS > 0.5 m: "
               f"{sum(s.position_rms > 0.5 for s in sims)} (true θ beyond the plan's rotor range)")
-    for k in ("dopt", "random"):
+    for k in kinds:
         print(f"  {k:<7} median D-opt predicted {np.median(predicted[k]):.3g}, reached by the "
               f"estimator {np.median(reached[k]):.3g}")
     lo, hi = median_interval((reached["random"], reached["dopt"]),

@@ -27,7 +27,7 @@ from mavsysid.evaluation_intervals import (
     headline_intervals,
     saturating_flights,
 )
-from mavsysid.experiment import CONTROLLER_MODELS, KINDS, ExperimentSpec
+from mavsysid.experiment import KINDS, ExperimentSpec, controller_config
 from mavsysid.plan import DEFAULT_BOX, parse_numbers
 from planner.feasibility import check_rotor_headroom
 from planner.results import PlannerSettings
@@ -68,11 +68,10 @@ def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
     if samples is None and not (planning_time > 0.0 and math.isfinite(planning_time)):
         raise InputError(f"--time {planning_time:g}: expected a finite planning time > 0 s "
                          "(or --samples N)")
-    # A bad vehicle or headroom fails here, not inside a worker.
-    check_rotor_headroom(load_vehicle(vehicle), rotor_headroom, "--rotor-headroom")
-    if controller_model not in CONTROLLER_MODELS:
-        raise InputError(f"--controller-model {controller_model!r}: expected one of "
-                         f"{', '.join(CONTROLLER_MODELS)}")
+    # A bad vehicle, headroom or controller model fails here, not inside a worker.
+    truth = load_vehicle(vehicle)
+    check_rotor_headroom(truth, rotor_headroom, "--rotor-headroom")
+    controller_config(controller_model, truth, truth)
     return [ExperimentSpec(index=i, seed=seed + i, vehicle=str(vehicle), budget=budget,
                            planning_time=planning_time, samples=samples,
                            box=tuple(box), iterations=iterations, kinds=KINDS,  # type: ignore[arg-type]

@@ -38,9 +38,11 @@ from planner.baseline import plan_random
 from planner.results import PlannerSettings
 from planner.rrbt import plan
 from vehicle.config import VehicleConfig, load_vehicle
+from vehicle.errors import InputError
 from vehicle.linearization import initial_state_sigma
 
-__all__ = ["CONTROLLER_MODELS", "KINDS", "ExperimentSpec", "draw_prior", "run_experiment"]
+__all__ = ["CONTROLLER_MODELS", "KINDS", "ExperimentSpec", "controller_config", "draw_prior",
+           "run_experiment"]
 
 #: Planner kinds, in the paper's names: DOPT-COV (ours) and RAND.
 KINDS: tuple[str, ...] = ("dopt", "random")
@@ -104,6 +106,19 @@ class ExperimentSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def controller_config(name: str, truth: VehicleConfig, guess: VehicleConfig) -> VehicleConfig:
+    """The vehicle model the simulated flight controller is tuned with.
+
+    ``"truth"``: the true vehicle (the paper's RotorS controller, a tuned autopilot);
+    ``"prior"``: the model the flight was planned with. Anything else is an InputError
+    naming ``--controller-model``.
+    """
+    if name not in CONTROLLER_MODELS:
+        raise InputError(f"--controller-model {name!r}: expected one of "
+                         f"{', '.join(CONTROLLER_MODELS)}")
+    return truth if name == "truth" else guess
+
+
 def draw_prior(truth: VehicleConfig, seed: int) -> np.ndarray:
     """The unknown parameters drawn uniformly ±50 % around the truth, shape (6,)."""
     rng = np.random.default_rng([seed, 20_000])
@@ -144,7 +159,7 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
     planner = plan if kind == "dopt" else plan_random
     result = planner(model, _planner_settings(spec, seed))
     directory = workdir / f"{kind}-{iteration}"
-    controlled = truth if spec.controller_model == "truth" else model
+    controlled = controller_config(spec.controller_model, truth, model)
     sim = Simulator(controlled, true_theta=truth.theta,
                     settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
     run = _filter(directory, model, prior)
