@@ -29,6 +29,13 @@ from planner.segments import Segment, VertexState
 from vehicle.allocation import allocation_pinv
 from vehicle.config import GRAVITY, VehicleConfig
 from vehicle.errors import InputError
+from vehicle.flatness import (
+    SAMPLE_NORM,
+    SAMPLE_RATE,
+    SAMPLE_SIZE,
+    SAMPLE_TORQUE,
+    flat_sample,
+)
 
 __all__ = ["CONSTRAINTS", "FeasibilityResult", "check_rotor_headroom", "check_segment",
            "check_vertex_state", "rotor_square_range"]
@@ -139,60 +146,27 @@ def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
     """Normalised slacks at unit time s into out[row]: ‖ω‖/ω_max − 1, then per rotor.
 
     Rotor slack max(n² − n²_max, n²_min − n²) / n²_max. Positive means violated; NaN or
-    inf (a singular attitude) counts as violated. Same math as ``flat_to_state``. ``v``
-    (12,) is scratch space (no allocation per sample).
+    inf (a singular attitude) counts as violated. The flatness is ``flat_to_state``'s own
+    (`vehicle.flatness.flat_sample`). ``v`` (12 + SAMPLE_SIZE,) is scratch space (no
+    allocation per sample).
     """
     # Horner, all 12 derivatives at once: a, jerk, snap (3 each), ψ, ψ̇, ψ̈.
     v[:] = 0.0
     for j in range(dc.shape[0] - 1, -1, -1):
         for r in range(12):
             v[r] = v[r] * s + dc[j, 6 + r]
-    tx, ty, tz = v[0], v[1], v[2] + GRAVITY
-    jx, jy, jz = v[3], v[4], v[5]
-    sx, sy, sz = v[6], v[7], v[8]
-    psi, dpsi, ddpsi = v[9], v[10], v[11]
-    norm = np.sqrt(tx * tx + ty * ty + tz * tz)
-    if not norm > 1e-9:
+    sample = v[12:]
+    if not flat_sample(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10],
+                       v[11], J, sample):
         out[row] = np.inf
         return
-    zx, zy, zz = tx / norm, ty / norm, tz / norm
-    cp, sp = np.cos(psi), np.sin(psi)
-    # y_B = z_B × x_C / ‖·‖ with x_C = [cos ψ, sin ψ, 0]; x_B = y_B × z_B.
-    yx, yy, yz = -zz * sp, zz * cp, zx * sp - zy * cp
-    ny = np.sqrt(yx * yx + yy * yy + yz * yz)
-    if not ny > 1e-9:
-        out[row] = np.inf
-        return
-    yx, yy, yz = yx / ny, yy / ny, yz / ny
-    xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
-    ds = zx * jx + zy * jy + zz * jz
-    dzx, dzy, dzz = (jx - ds * zx) / norm, (jy - ds * zy) / norm, (jz - ds * zz) / norm
-    wx = -(yx * dzx + yy * dzy + yz * dzz)
-    wy = xx * dzx + xy * dzy + xz * dzz
-    xxc = xx * cp + xy * sp
-    zxc = zx * cp + zy * sp
-    yyc = -yx * sp + yy * cp
-    wz = (wx * zxc + dpsi * yyc) / xxc
-    dxx, dxy, dxz = wz * yx - wy * zx, wz * yy - wy * zy, wz * yz - wy * zz
-    dyx, dyy, dyz = -wz * xx + wx * zx, -wz * xy + wx * zy, -wz * xz + wx * zz
-    dds = dzx * jx + dzy * jy + dzz * jz + zx * sx + zy * sy + zz * sz
-    cx = (sx - 2.0 * ds * dzx - dds * zx) / norm - wy * dxx + wx * dyx
-    cy = (sy - 2.0 * ds * dzy - dds * zy) / norm - wy * dxy + wx * dyy
-    cz = (sz - 2.0 * ds * dzz - dds * zz) / norm - wy * dxz + wx * dyz
-    dwx = -(yx * cx + yy * cy + yz * cz)
-    dwy = xx * cx + xy * cy + xz * cz
-    lhs_rest = wz * ((dxx * cp + dxy * sp) + dpsi * (-xx * sp + xy * cp))
-    rhs = (dwx * zxc + wx * ((dzx * cp + dzy * sp) + dpsi * (-zx * sp + zy * cp))
-           + ddpsi * yyc + dpsi * (-dyx * sp + dyy * cp))
-    dwz = (rhs - lhs_rest) / xxc
+    wx, wy, wz = sample[SAMPLE_RATE], sample[SAMPLE_RATE + 1], sample[SAMPLE_RATE + 2]
     out[row, 0] = np.sqrt(wx * wx + wy * wy + wz * wz) / lim[5] - 1.0
     # Paper Eq. (allocation): [T, J ω̇ + ω × J ω] = A n².
-    thrust = lim[0] * norm
-    tau_x = J[0] * dwx + (wy * J[2] * wz - wz * J[1] * wy)
-    tau_y = J[1] * dwy + (wz * J[0] * wx - wx * J[2] * wz)
-    tau_z = J[2] * dwz + (wx * J[1] * wy - wy * J[0] * wx)
+    thrust = lim[0] * sample[SAMPLE_NORM]
+    tau = sample[SAMPLE_TORQUE:SAMPLE_TORQUE + 3]
     for i in range(pinv.shape[0]):
-        n2 = pinv[i, 0] * thrust + pinv[i, 1] * tau_x + pinv[i, 2] * tau_y + pinv[i, 3] * tau_z
+        n2 = pinv[i, 0] * thrust + pinv[i, 1] * tau[0] + pinv[i, 2] * tau[1] + pinv[i, 3] * tau[2]
         out[row, 1 + i] = max(n2 - lim[7], lim[6] - n2) / lim[7]
     for f in range(out.shape[1]):
         if not out[row, f] <= 1e300:
@@ -288,7 +262,7 @@ def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: floa
     violates or that stayed undecided down to the minimum step, at local ``time``.
     """
     lim, J, pinv = kernel
-    v = np.empty(12)
+    v = np.empty(12 + SAMPLE_SIZE)
     # Level 0 is the whole segment in ``intervals`` parts; deeper levels split each
     # undecided interval of the level above into _REFINE parts.
     starts, columns = np.zeros(1), np.zeros(1, dtype=np.int64)

@@ -8,6 +8,8 @@ paper: thrust acts along z_B at r_i, so the torque of rotor i is r_i × (0, 0, c
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from vehicle.config import VehicleConfig
@@ -31,17 +33,11 @@ def allocation_matrix(config: VehicleConfig, theta: np.ndarray | None = None) ->
         Rows: collective thrust (N), roll, pitch and yaw torque (N·m), per n² ((rad/s)²).
     """
     theta = config.theta if theta is None else np.asarray(theta, dtype=float)
-    c_T, c_M = theta[0], theta[2]
-    r = config.rotor_positions
-    eps = config.rotor_directions
-    return np.vstack(
-        [
-            np.full(config.rotor_count, c_T),
-            c_T * r[:, 1],
-            -c_T * r[:, 0],
-            -eps * c_M,
-        ]
-    )
+    return _matrix(config.rotor_positions, config.rotor_directions, theta[0], theta[2])
+
+
+def _matrix(r: np.ndarray, eps: np.ndarray, c_T: float, c_M: float) -> np.ndarray:
+    return np.vstack([np.full(r.shape[0], c_T), c_T * r[:, 1], -c_T * r[:, 0], -eps * c_M])
 
 
 def allocation_pinv(config: VehicleConfig, theta: np.ndarray | None = None) -> np.ndarray:
@@ -49,7 +45,16 @@ def allocation_pinv(config: VehicleConfig, theta: np.ndarray | None = None) -> n
 
     For 4 rotors this is the exact inverse; for more it gives the n² of least norm.
     """
-    return np.linalg.pinv(allocation_matrix(config, theta))
+    theta = config.theta if theta is None else np.asarray(theta, dtype=float)
+    # The SVD costs more than the flatness of a whole segment, and θ rarely changes.
+    return _cached_pinv(config.rotor_positions.tobytes(), config.rotor_directions.tobytes(),
+                        float(theta[0]), float(theta[2])).copy()
+
+
+@lru_cache(maxsize=64)
+def _cached_pinv(positions: bytes, directions: bytes, c_T: float, c_M: float) -> np.ndarray:
+    r = np.frombuffer(positions).reshape(-1, 3)
+    return np.linalg.pinv(_matrix(r, np.frombuffer(directions), c_T, c_M))
 
 
 def rotor_speeds_squared(

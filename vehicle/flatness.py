@@ -14,15 +14,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from vehicle.allocation import rotor_speeds_squared
+from vehicle.allocation import allocation_pinv
 from vehicle.config import GRAVITY, VehicleConfig
 from vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
-from vehicle.rotation import matrix_to_quat
 from vehicle.trajectory import FlatOutputs
 
-__all__ = ["FlatState", "flat_to_state"]
+__all__ = ["SAMPLE_SIZE", "FlatState", "flat_sample", "flat_to_state"]
 
 
 @dataclass(frozen=True)
@@ -75,16 +75,135 @@ class FlatState:
         return x
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sum(a * b, axis=-1)
+#: Layout of the scratch row `flat_sample` fills: ‖a - g‖, R (row-major, columns
+#: x_B y_B z_B), ω, ω̇ and the torque J ω̇ + ω × J ω.
+SAMPLE_NORM, SAMPLE_R, SAMPLE_RATE, SAMPLE_RATE_DOT, SAMPLE_TORQUE = 0, 1, 10, 13, 16
+SAMPLE_SIZE = 19
 
 
-def _sign_continuous(q: np.ndarray) -> np.ndarray:
-    """Flip quaternion signs so consecutive samples lie in the same hemisphere."""
-    if q.shape[0] < 2:
-        return q
-    flips = np.concatenate([[1.0], np.sign(_dot(q[1:], q[:-1]) + 1e-300)])
-    return q * np.cumprod(flips)[:, None]
+@numba.njit(cache=True)
+def flat_sample(ax: float, ay: float, az: float, jx: float, jy: float, jz: float,
+                sx: float, sy: float, sz: float, psi: float, dpsi: float, ddpsi: float,
+                J: np.ndarray, out: np.ndarray) -> bool:
+    """Flatness at one sample into ``out`` (`SAMPLE_SIZE`,); False at a singular attitude.
+
+    Acceleration a (m/s²), jerk and snap are world ENU; ψ, ψ̇, ψ̈ in rad, rad/s, rad/s²;
+    J (3,) the principal inertia, kg m². The planner's feasibility kernel and
+    `flat_to_state` share this one implementation.
+    """
+    # Thrust direction: m (a - g) with g = [0, 0, -GRAVITY].
+    tx, ty, tz = ax, ay, az + GRAVITY
+    norm = np.sqrt(tx * tx + ty * ty + tz * tz)
+    if not norm > 1e-9:
+        return False
+    zx, zy, zz = tx / norm, ty / norm, tz / norm
+    cp, sp = np.cos(psi), np.sin(psi)
+    # y_B = z_B × x_C / ‖·‖ with x_C = [cos ψ, sin ψ, 0]; x_B = y_B × z_B.
+    yx, yy, yz = -zz * sp, zz * cp, zx * sp - zy * cp
+    ny = np.sqrt(yx * yx + yy * yy + yz * yz)
+    if not ny > 1e-9:
+        return False
+    yx, yy, yz = yx / ny, yy / ny, yz / ny
+    xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
+    # First derivatives: s ż + ṡ z = jerk, ż = ω_y x - ω_x y.
+    ds = zx * jx + zy * jy + zz * jz
+    dzx, dzy, dzz = (jx - ds * zx) / norm, (jy - ds * zy) / norm, (jz - ds * zz) / norm
+    wx = -(yx * dzx + yy * dzy + yz * dzz)
+    wy = xx * dzx + xy * dzy + xz * dzz
+    # From d/dt (y_B · x_C) = 0 with ẏ = -ω_z x + ω_x z and ẋ_C = ψ̇ y_C.
+    xxc = xx * cp + xy * sp
+    zxc = zx * cp + zy * sp
+    yyc = -yx * sp + yy * cp
+    wz = (wx * zxc + dpsi * yyc) / xxc
+    dxx, dxy, dxz = wz * yx - wy * zx, wz * yy - wy * zy, wz * yz - wy * zz
+    dyx, dyy, dyz = -wz * xx + wx * zx, -wz * xy + wx * zy, -wz * xz + wx * zz
+    # Second derivatives: s z̈ + 2 ṡ ż + s̈ z = snap.
+    dds = dzx * jx + dzy * jy + dzz * jz + zx * sx + zy * sy + zz * sz
+    cx = (sx - 2.0 * ds * dzx - dds * zx) / norm - wy * dxx + wx * dyx
+    cy = (sy - 2.0 * ds * dzy - dds * zy) / norm - wy * dxy + wx * dyy
+    cz = (sz - 2.0 * ds * dzz - dds * zz) / norm - wy * dxz + wx * dyz
+    dwx = -(yx * cx + yy * cy + yz * cz)
+    dwy = xx * cx + xy * cy + xz * cz
+    # Time derivative of ω_z (x·x_C) = ω_x (z·x_C) + ψ̇ (y·y_C), with ẏ_C = -ψ̇ x_C.
+    lhs_rest = wz * ((dxx * cp + dxy * sp) + dpsi * (-xx * sp + xy * cp))
+    rhs = (dwx * zxc + wx * ((dzx * cp + dzy * sp) + dpsi * (-zx * sp + zy * cp))
+           + ddpsi * yyc + dpsi * (-dyx * sp + dyy * cp))
+    dwz = (rhs - lhs_rest) / xxc
+    out[SAMPLE_NORM] = norm
+    r = SAMPLE_R
+    out[r], out[r + 1], out[r + 2] = xx, yx, zx
+    out[r + 3], out[r + 4], out[r + 5] = xy, yy, zy
+    out[r + 6], out[r + 7], out[r + 8] = xz, yz, zz
+    out[SAMPLE_RATE], out[SAMPLE_RATE + 1], out[SAMPLE_RATE + 2] = wx, wy, wz
+    out[SAMPLE_RATE_DOT], out[SAMPLE_RATE_DOT + 1], out[SAMPLE_RATE_DOT + 2] = dwx, dwy, dwz
+    # Paper Eq. (allocation), torque side: J ω̇ + ω × J ω.
+    out[SAMPLE_TORQUE] = J[0] * dwx + (wy * J[2] * wz - wz * J[1] * wy)
+    out[SAMPLE_TORQUE + 1] = J[1] * dwy + (wz * J[0] * wx - wx * J[2] * wz)
+    out[SAMPLE_TORQUE + 2] = J[2] * dwz + (wx * J[1] * wy - wy * J[0] * wx)
+    return True
+
+
+@numba.njit(cache=True)
+def _matrix_quaternion(R: np.ndarray, q: np.ndarray) -> None:
+    """Unit quaternion [w, x, y, z] of a rotation matrix (Shepperd's branch choice), w ≥ 0."""
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    if trace >= R[0, 0] and trace >= R[1, 1] and trace >= R[2, 2]:
+        q[0] = 1.0 + trace
+        q[1], q[2], q[3] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
+    elif R[0, 0] >= R[1, 1] and R[0, 0] >= R[2, 2]:
+        q[1] = 1.0 + R[0, 0] - R[1, 1] - R[2, 2]
+        q[0], q[2], q[3] = R[2, 1] - R[1, 2], R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]
+    elif R[1, 1] >= R[2, 2]:
+        q[2] = 1.0 + R[1, 1] - R[0, 0] - R[2, 2]
+        q[0], q[1], q[3] = R[0, 2] - R[2, 0], R[0, 1] + R[1, 0], R[1, 2] + R[2, 1]
+    else:
+        q[3] = 1.0 + R[2, 2] - R[0, 0] - R[1, 1]
+        q[0], q[1], q[2] = R[1, 0] - R[0, 1], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1]
+    scale = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if q[0] < 0.0:
+        scale = -scale
+    for i in range(4):
+        q[i] *= scale
+
+
+@numba.njit(cache=True)
+def _flat_states_kernel(acc, jerk, snap, yaw, yaw_rate, yaw_acc, velocity, J, mass, pinv):
+    """Every sample of `flat_to_state`; NaN rows where the attitude is singular."""
+    S, k = acc.shape[0], pinv.shape[0]
+    R = np.full((S, 3, 3), np.nan)
+    quat, v_body = np.full((S, 4), np.nan), np.full((S, 3), np.nan)
+    omega, domega = np.full((S, 3), np.nan), np.full((S, 3), np.nan)
+    torque, thrust, n2 = np.full((S, 3), np.nan), np.full(S, np.nan), np.full((S, k), np.nan)
+    f = np.empty(SAMPLE_SIZE)
+    have_previous = False
+    for i in range(S):
+        if not flat_sample(acc[i, 0], acc[i, 1], acc[i, 2], jerk[i, 0], jerk[i, 1], jerk[i, 2],
+                           snap[i, 0], snap[i, 1], snap[i, 2], yaw[i], yaw_rate[i], yaw_acc[i],
+                           J, f):
+            have_previous = False
+            continue
+        for a in range(3):
+            for b in range(3):
+                R[i, a, b] = f[SAMPLE_R + 3 * a + b]
+            omega[i, a] = f[SAMPLE_RATE + a]
+            domega[i, a] = f[SAMPLE_RATE_DOT + a]
+            torque[i, a] = f[SAMPLE_TORQUE + a]
+        for b in range(3):
+            v_body[i, b] = R[i, 0, b] * velocity[i, 0] + R[i, 1, b] * velocity[i, 1] \
+                + R[i, 2, b] * velocity[i, 2]
+        _matrix_quaternion(R[i], quat[i])
+        # Sign-continuous along the samples: consecutive q in the same hemisphere.
+        if have_previous and (quat[i, 0] * quat[i - 1, 0] + quat[i, 1] * quat[i - 1, 1]
+                              + quat[i, 2] * quat[i - 1, 2] + quat[i, 3] * quat[i - 1, 3]) < 0.0:
+            for c in range(4):
+                quat[i, c] = -quat[i, c]
+        have_previous = True
+        thrust[i] = mass * f[SAMPLE_NORM]
+        # Paper Eq. allocation: [T; J ω̇ + ω × J ω] = A n².
+        for r in range(k):
+            n2[i, r] = (pinv[r, 0] * thrust[i] + pinv[r, 1] * torque[i, 0]
+                        + pinv[r, 2] * torque[i, 1] + pinv[r, 3] * torque[i, 2])
+    return R, quat, v_body, omega, domega, thrust, torque, n2
 
 
 def flat_to_state(
@@ -104,62 +223,23 @@ def flat_to_state(
     Returns
     -------
     FlatState
+        NaN at samples where the attitude is singular (free fall, or thrust along x_C).
     """
     theta = config.theta if theta is None else np.asarray(theta, dtype=float)
-    J = theta[3:6]
-    psi, dpsi, ddpsi = flat.yaw, flat.yaw_rate[:, None], flat.yaw_acceleration[:, None]
 
-    # Thrust direction: m (a - g) with g = [0, 0, -GRAVITY].
-    t_vec = flat.acceleration + np.array([0.0, 0.0, GRAVITY])
-    s = np.linalg.norm(t_vec, axis=-1, keepdims=True)
-    z = t_vec / s
-    x_c = np.stack([np.cos(psi), np.sin(psi), np.zeros_like(psi)], axis=-1)
-    y_c = np.stack([-np.sin(psi), np.cos(psi), np.zeros_like(psi)], axis=-1)
-    y = np.cross(z, x_c)
-    y /= np.linalg.norm(y, axis=-1, keepdims=True)
-    x = np.cross(y, z)
-    R = np.stack([x, y, z], axis=-1)
+    def column(a: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(a, dtype=float)
 
-    # First derivatives: s ż + ṡ z = jerk, ż = ω_y x - ω_x y.
-    ds = _dot(z, flat.jerk)[:, None]
-    dz = (flat.jerk - ds * z) / s
-    wx = -_dot(y, dz)
-    wy = _dot(x, dz)
-    # From d/dt (y_B · x_C) = 0 with ẏ = -ω_z x + ω_x z and ẋ_C = ψ̇ y_C.
-    xxc = _dot(x, x_c)
-    wz = (wx * _dot(z, x_c) + dpsi[:, 0] * _dot(y, y_c)) / xxc
-    omega = np.stack([wx, wy, wz], axis=-1)
-    dx = wz[:, None] * y - wy[:, None] * z
-    dy = -wz[:, None] * x + wx[:, None] * z
-
-    # Second derivatives: s z̈ + 2 ṡ ż + s̈ z = snap.
-    dds = (_dot(dz, flat.jerk) + _dot(z, flat.snap))[:, None]
-    ddz = (flat.snap - 2.0 * ds * dz - dds * z) / s
-    c = ddz - wy[:, None] * dx + wx[:, None] * dy
-    dwx = -_dot(y, c)
-    dwy = _dot(x, c)
-    # Time derivative of ω_z (x·x_C) = ω_x (z·x_C) + ψ̇ (y·y_C), with ẏ_C = -ψ̇ x_C.
-    lhs_rest = wz * (_dot(dx, x_c) + dpsi[:, 0] * _dot(x, y_c))
-    rhs = (
-        dwx * _dot(z, x_c)
-        + wx * (_dot(dz, x_c) + dpsi[:, 0] * _dot(z, y_c))
-        + ddpsi[:, 0] * _dot(y, y_c)
-        + dpsi[:, 0] * _dot(dy, y_c)
-    )
-    dwz = (rhs - lhs_rest) / xxc
-    domega = np.stack([dwx, dwy, dwz], axis=-1)
-
-    thrust = config.mass * s[:, 0]
-    # Paper Eq. allocation: [T; J ω̇ + ω × J ω] = A n².
-    torque = J * domega + np.cross(omega, J * omega)
-    n2 = rotor_speeds_squared(np.concatenate([thrust[:, None], torque], axis=-1), config, theta)
-
+    R, quat, v_body, omega, domega, thrust, torque, n2 = _flat_states_kernel(
+        column(flat.acceleration), column(flat.jerk), column(flat.snap), column(flat.yaw),
+        column(flat.yaw_rate), column(flat.yaw_acceleration), column(flat.velocity),
+        column(theta[3:6]), float(config.mass), allocation_pinv(config, theta))
     return FlatState(
         position=flat.position,
         velocity=flat.velocity,
-        velocity_body=np.einsum("sji,sj->si", R, flat.velocity),
+        velocity_body=v_body,
         rotation=R,
-        quaternion=_sign_continuous(matrix_to_quat(R)),
+        quaternion=quat,
         body_rates=omega,
         angular_acceleration=domega,
         thrust=thrust,

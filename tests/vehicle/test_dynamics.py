@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehicle.allocation import allocation_matrix, rotor_speeds_squared
+from vehicle.allocation import allocation_matrix, allocation_pinv, rotor_speeds_squared
 from vehicle.config import GRAVITY
 from vehicle.dynamics import ATT, POS, RATE, VEL, hover_state, state_derivative
 from vehicle.rotation import quat_exp, quat_multiply, quat_to_matrix
@@ -120,3 +120,13 @@ def test_allocation_pseudo_inverse_reproduces_wrench(any_vehicle):
     w = np.array([any_vehicle.hover_thrust * 1.2, 0.01, -0.02, 0.003])
     n2 = rotor_speeds_squared(w, any_vehicle)
     np.testing.assert_allclose(allocation_matrix(any_vehicle) @ n2, w, rtol=1e-12, atol=1e-15)
+
+
+def test_allocation_pinv_is_the_callers_own_array(firefly):
+    """A⁺ is computed once per θ but every call gets its own copy: writing to one changes
+    nothing for the next caller."""
+    first = allocation_pinv(firefly)
+    expected = np.linalg.pinv(allocation_matrix(firefly))
+    np.testing.assert_array_equal(first, expected)
+    first[:] = 0.0
+    np.testing.assert_array_equal(allocation_pinv(firefly), expected)

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vehicle.allocation import allocation_matrix
 from vehicle.config import GRAVITY
 from vehicle.dynamics import ATT, POS, VEL, state_derivative
 from vehicle.flatness import flat_to_state
-from vehicle.rotation import quat_conjugate, quat_log, quat_multiply
+from vehicle.rotation import quat_conjugate, quat_log, quat_multiply, quat_to_matrix
+from vehicle.trajectory import FlatOutputs
 
 
 def _flat_at(traj, t, cfg):
@@ -104,3 +106,50 @@ def test_hover_flat_state_is_level_with_given_yaw(firefly, yaw):
     np.testing.assert_allclose(np.arctan2(R[1, 0], R[0, 0]), yaw, atol=1e-12)
     np.testing.assert_allclose(state.thrust, firefly.hover_thrust)
     np.testing.assert_allclose(state.body_rates, 0.0, atol=1e-12)
+
+
+def _random_flat(seed: int, samples: int, acceleration: float) -> FlatOutputs:
+    rng = np.random.default_rng(seed)
+
+    def vectors(scale: float) -> np.ndarray:
+        return rng.normal(0.0, scale, (samples, 3))
+
+    return FlatOutputs(vectors(1.0), vectors(2.0), vectors(acceleration), vectors(20.0),
+                       vectors(100.0), rng.uniform(-np.pi, np.pi, samples),
+                       rng.normal(0.0, 2.0, samples), rng.normal(0.0, 5.0, samples))
+
+
+@pytest.mark.parametrize("acceleration", [3.0, 30.0])
+def test_quaternion_is_the_rotation_and_sign_continuous(firefly, acceleration):
+    """q reproduces R (upright and inverted attitudes alike), |q| = 1, q_0 has w ≥ 0, and
+    consecutive quaternions lie in the same hemisphere."""
+    state = flat_to_state(_random_flat(3, 400, acceleration), firefly)
+    q = state.quaternion
+    np.testing.assert_allclose(quat_to_matrix(q), state.rotation, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-12)
+    assert q[0, 0] >= 0.0
+    assert np.all(np.sum(q[1:] * q[:-1], axis=1) >= 0.0)
+    if acceleration > GRAVITY:  # the draw holds inverted attitudes (rotations near π)
+        assert state.rotation[:, 2, 2].min() < -0.9
+
+
+def test_singular_attitude_is_nan_only_at_its_sample(firefly):
+    """Free fall (a = g) has no thrust direction: that sample is NaN, its neighbours are not."""
+    flat = _random_flat(4, 5, 1.0)
+    flat.acceleration[2] = [0.0, 0.0, -GRAVITY]
+    state = flat_to_state(flat, firefly)
+    assert np.all(np.isnan(state.quaternion[2])) and np.all(np.isnan(state.rotor_speeds_squared[2]))
+    others = [0, 1, 3, 4]
+    for field in (state.quaternion, state.rotation, state.body_rates, state.rotor_speeds_squared):
+        assert np.all(np.isfinite(field[others]))
+
+
+def test_rotor_speeds_follow_theta(firefly):
+    """n² is A(θ)⁺ [T, τ] for the θ passed in, not a cached θ of an earlier call."""
+    flat = _random_flat(5, 20, 3.0)
+    for scale in (1.0, 0.6, 1.4, 1.0):
+        theta = firefly.theta * scale
+        state = flat_to_state(flat, firefly, theta)
+        wrench = np.column_stack([state.thrust, state.torque])
+        np.testing.assert_allclose(state.rotor_speeds_squared @ allocation_matrix(firefly, theta).T,
+                                   wrench, rtol=1e-9, atol=1e-9 * firefly.hover_thrust)
