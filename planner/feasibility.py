@@ -13,8 +13,8 @@ onto the true range — the answer the derivative's roots give, cheaper and with
 companion-matrix trouble at clustered extrema. ω and n² are sampled on a grid (10 ms by
 default); Mueller-style, each interval where a sample comes within a conservative local
 bound of a limit (safety × |f'| × half the step) is split ten-fold, down to 0.1 ms, and
-rejected if still undecided there. The pointwise flatness (`vehicle.flatness` math for
-ω and n² only) is a numba kernel.
+rejected if still undecided there. The pointwise flatness is `vehicle.flatness.flat_sample`,
+the numba kernel `flat_to_state` runs too.
 """
 
 from __future__ import annotations
