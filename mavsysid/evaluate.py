@@ -23,8 +23,10 @@ from mavsysid.evaluation import (
     write_table,
 )
 from mavsysid.evaluation_intervals import (
+    OFF_PATH_RMS,
     HeadlineFigures,
     headline_intervals,
+    off_path_flights,
     saturating_flights,
 )
 from mavsysid.experiment import KINDS, ExperimentSpec, controller_config
@@ -48,6 +50,7 @@ class EvaluationRun:
     files: dict[str, Path]
     headline: HeadlineFigures | None = None
     saturating: dict[str, tuple[int, int]] | None = None
+    off_path: dict[str, tuple[int, int]] | None = None
 
 
 def make_specs(n: int, vehicle: str = "firefly", budget: float = 30.0,
@@ -99,8 +102,8 @@ def run_evaluation(out: str | Path, specs: list[ExperimentSpec], executor: str =
     write_csv(files["csv"], records)
     summary = summarise(records)
     headline = headline_intervals(records)
-    saturating = saturating_flights(records)
-    table = write_table(files["table"], summary, notes=_notes(headline, saturating))
+    saturating, off_path = saturating_flights(records), off_path_flights(records)
+    table = write_table(files["table"], summary, notes=_notes(headline, saturating, off_path))
     if png:
         from mavsysid.evaluation_plots import write_evaluation_pngs
 
@@ -111,12 +114,13 @@ def run_evaluation(out: str | Path, specs: list[ExperimentSpec], executor: str =
 
         write_evaluation_rrd(rrd, summary)
         files["recording"] = Path(rrd)
-    return EvaluationRun(out, ran, summary, table, files, headline, saturating)
+    return EvaluationRun(out, ran, summary, table, files, headline, saturating, off_path)
 
 
-def _notes(headline: HeadlineFigures | None,
-           saturating: dict[str, tuple[int, int]]) -> list[str]:
-    """Lines under the table: the headline figures' intervals and the saturating flights."""
+def _notes(headline: HeadlineFigures | None, saturating: dict[str, tuple[int, int]],
+           off_path: dict[str, tuple[int, int]]) -> list[str]:
+    """Lines under the table: the headline figures' intervals, and the flights that
+    saturated a rotor or left their path."""
     notes = []
     if headline is not None:
         level = f"{100 * headline.confidence:.0f} %"
@@ -130,11 +134,16 @@ def _notes(headline: HeadlineFigures | None,
             f"({100 * c_lo:.0f}–{100 * c_hi:.0f} %; paper: 65 %; a parameter that never "
             "settles counts as the whole flight).")
     if saturating:
-        counts = ", ".join(f"{_KIND_NAMES.get(k, k)} {n} of {total}"
-                           for k, (n, total) in saturating.items())
         notes.append(f"Flights saturating a rotor on more than 5 % of the control ticks: "
-                     f"{counts}.")
+                     f"{_counts(saturating)}.")
+    if off_path:
+        notes.append(f"Flights off their path by more than {OFF_PATH_RMS:g} m RMS (the true "
+                     f"vehicle could not fly the plan): {_counts(off_path)}.")
     return notes
+
+
+def _counts(counts: dict[str, tuple[int, int]]) -> str:
+    return ", ".join(f"{_KIND_NAMES.get(k, k)} {n} of {total}" for k, (n, total) in counts.items())
 
 
 _KIND_NAMES = {"dopt": "planned", "random": "random"}
@@ -145,7 +154,7 @@ def format_summary(run: EvaluationRun) -> str:
     s = run.summary
     lines = [f"{s.experiments} experiments in {run.out} ({run.ran} run now, "
              f"{s.experiments - run.ran} reused).", "", run.table.rstrip()]
-    for note in _notes(run.headline, run.saturating or {}):
+    for note in _notes(run.headline, run.saturating or {}, run.off_path or {}):
         lines += ["", note]
     lines.append("")
     lines += [f"  {name:<16} {path}" for name, path in run.files.items()]

@@ -18,8 +18,12 @@ from scipy.stats import bootstrap
 
 from mavsysid.evaluation import last_flights, median_convergence_time, paired_flight_arrays
 
-__all__ = ["HeadlineFigures", "headline_figures", "headline_intervals",
-           "saturating_flights"]
+__all__ = ["OFF_PATH_RMS", "HeadlineFigures", "flights_beyond", "headline_figures",
+           "headline_intervals", "off_path_flights", "saturating_flights"]
+
+#: A flight whose tracking RMS exceeds this (m) left its plan: the true vehicle could not
+#: fly it (a real one would likely have crashed).
+OFF_PATH_RMS = 0.5
 
 #: Planner kinds compared by the headline figures: planned, baseline.
 _PLANNED, _BASELINE = "dopt", "random"
@@ -113,15 +117,26 @@ def headline_intervals(records: list[dict[str, Any]], confidence: float = 0.95,
                            confidence, resamples, count)
 
 
-def saturating_flights(records: list[dict[str, Any]], threshold: float = 0.05
-                       ) -> dict[str, tuple[int, int]]:
-    """Per planner kind, (flights saturating on more than ``threshold`` of the control
-    ticks, flights with a recorded saturated fraction), last iteration of each experiment.
-    Records made before the fraction was recorded are left out."""
+def flights_beyond(records: list[dict[str, Any]], field: str, threshold: float
+                   ) -> dict[str, tuple[int, int]]:
+    """Per planner kind, (flights whose ``field`` exceeds ``threshold``, flights with the
+    field recorded), last iteration of each experiment. Records made before the field was
+    recorded are left out."""
     counts = {}
     for kind in dict.fromkeys(f["kind"] for r in records for f in r["flights"]):
-        fractions = [f["saturated_fraction"] for f in last_flights(records, kind)
-                     if f.get("saturated_fraction") is not None]
-        if fractions:
-            counts[kind] = (sum(x > threshold for x in fractions), len(fractions))
+        values = [f[field] for f in last_flights(records, kind) if f.get(field) is not None]
+        if values:
+            counts[kind] = (sum(x > threshold for x in values), len(values))
     return counts
+
+
+def saturating_flights(records: list[dict[str, Any]], threshold: float = 0.05
+                       ) -> dict[str, tuple[int, int]]:
+    """`flights_beyond` for a rotor saturated on more than ``threshold`` of the ticks."""
+    return flights_beyond(records, "saturated_fraction", threshold)
+
+
+def off_path_flights(records: list[dict[str, Any]], threshold: float = OFF_PATH_RMS
+                     ) -> dict[str, tuple[int, int]]:
+    """`flights_beyond` for a tracking RMS over ``threshold``, m."""
+    return flights_beyond(records, "tracking_rms", threshold)

@@ -17,7 +17,11 @@ import pytest
 from mavsysid.cli import main
 from mavsysid.evaluate import make_specs, run_evaluation
 from mavsysid.evaluation import load_records, median_convergence_time, summarise
-from mavsysid.evaluation_intervals import headline_intervals, saturating_flights
+from mavsysid.evaluation_intervals import (
+    headline_intervals,
+    off_path_flights,
+    saturating_flights,
+)
 from mavsysid.experiment import draw_prior, run_experiment
 from vehicle.config import load_vehicle
 
@@ -101,6 +105,9 @@ def test_table_notes_give_the_headline_intervals_and_saturating_flights(two_expe
     assert saturating.keys() == {"dopt", "random"}
     assert (f"planned {saturating['dopt'][0]} of 2, random {saturating['random'][0]} of 2."
             in table)
+    off_path = off_path_flights(records)
+    assert (f"than 0.5 m RMS (the true vehicle could not fly the plan): planned "
+            f"{off_path['dopt'][0]} of 2, random {off_path['random'][0]} of 2." in table)
 
 
 def test_command_prints_the_table_and_its_notes(two_experiments, capsys):
@@ -110,7 +117,7 @@ def test_command_prints_the_table_and_its_notes(two_experiments, capsys):
     out = capsys.readouterr().out
     table = (two_experiments / "table.md").read_text()
     notes = table.split("simulated experiments.\n", 1)[1].strip().split("\n\n")
-    assert code == 0 and len(notes) == 2
+    assert code == 0 and len(notes) == 3
     assert out.startswith(f"2 experiments in {two_experiments} (0 run now, 2 reused).\n")
     assert table.split("\n\n")[0] in out
     assert "\n\n".join(notes) in out

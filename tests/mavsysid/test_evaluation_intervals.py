@@ -10,6 +10,7 @@ import pytest
 from mavsysid.evaluation_intervals import (
     headline_figures,
     headline_intervals,
+    off_path_flights,
     saturating_flights,
 )
 
@@ -25,11 +26,13 @@ def _history(settle: float, start: float = 1.3) -> dict[str, list]:
 
 
 def _flight(kind: str, dopt: float, settle: float, iteration: int = 0,
-            saturated: float | None = None) -> dict[str, Any]:
+            saturated: float | None = None, tracking: float | None = None) -> dict[str, Any]:
     f = {"kind": kind, "iteration": iteration, "reached_dopt": dopt,
          "history": _history(settle)}
     if saturated is not None:
         f["saturated_fraction"] = saturated
+    if tracking is not None:
+        f["tracking_rms"] = tracking
     return f
 
 
@@ -113,3 +116,17 @@ def test_saturating_flights_counts_the_last_iteration_over_the_threshold():
         {"flights": [_flight("dopt", 1.0, 1.0, 0, 0.051), _flight("random", 1.0, 1.0, 0)]},
     ]
     assert saturating_flights(records) == {"dopt": (1, 2), "random": (1, 1)}
+
+
+def test_off_path_flights_count_the_last_iteration_over_half_a_metre():
+    """A flight is off its path when its last iteration tracked more than 0.5 m RMS off;
+    flights recorded without a tracking RMS are left out."""
+    records = [
+        {"flights": [_flight("dopt", 1.0, 1.0, 0, tracking=3.0),
+                     _flight("dopt", 1.0, 1.0, 1, tracking=0.01),
+                     _flight("random", 1.0, 1.0, 0, tracking=0.51)]},
+        {"flights": [_flight("dopt", 1.0, 1.0, 0, tracking=14.0),
+                     _flight("random", 1.0, 1.0, 0)]},
+    ]
+    assert off_path_flights(records) == {"dopt": (1, 2), "random": (1, 1)}
+    assert off_path_flights(records, threshold=1.0) == {"dopt": (1, 2), "random": (0, 1)}
