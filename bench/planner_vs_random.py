@@ -23,6 +23,7 @@ from estimation.estimator import EstimatorSettings, estimate_parameters
 from estimation.readers import load_flight
 from flight.effects import ProcessNoise
 from flight.simulator import SimulationSettings, Simulator
+from mavsysid.evaluation_intervals import OFF_PATH_RMS, SATURATED_SHARE
 from mavsysid.experiment import CONTROLLER_MODELS, controller_config
 from planner.baseline import plan_random
 from planner.belief import propagate_final
@@ -122,9 +123,10 @@ def main() -> None:
           f"tuned to the {args.controller_model}")
     for k in kinds:
         sims = [r[k][2] for r in rows]
-        print(f"  {k:<7} flights saturating > 5 % of ticks: "
-              f"{sum(s.saturated_fraction > 0.05 for s in sims)}, tracking RMS > 0.5 m: "
-              f"{sum(s.position_rms > 0.5 for s in sims)} (true θ beyond the plan's rotor range)")
+        print(f"  {k:<7} flights saturating > {100 * SATURATED_SHARE:g} % of ticks: "
+              f"{sum(s.saturated_fraction > SATURATED_SHARE for s in sims)}, tracking RMS > "
+              f"{OFF_PATH_RMS:g} m: {sum(s.position_rms > OFF_PATH_RMS for s in sims)} (true θ "
+              "beyond the plan's rotor range)")
     for k in kinds:
         print(f"  {k:<7} median D-opt predicted {np.median(predicted[k]):.3g}, reached by the "
               f"estimator {np.median(reached[k]):.3g}")
@@ -147,9 +149,10 @@ def main() -> None:
     print("  the same in relative σ (σ / θ of the model each used: the planner's prior, the "
           "estimate): " + ", ".join(f"{n} {np.median(relative[:, j]):.2f}"
                                     for j, n in enumerate(PARAMETER_NAMES)))
-    calm = np.array([r["dopt"][2].saturated_fraction <= 0.05 for r in rows])
+    calm = np.array([r["dopt"][2].saturated_fraction <= SATURATED_SHARE for r in rows])
     if calm.any():
-        print(f"  the same on the {calm.sum()} dopt flights saturating ≤ 5 % of ticks: "
+        print(f"  the same on the {calm.sum()} dopt flights saturating ≤ "
+              f"{100 * SATURATED_SHARE:g} % of ticks: "
               + ", ".join(f"{n} {np.median(ratio[calm, j]):.2f}"
                           for j, n in enumerate(PARAMETER_NAMES)))
     flown = sig_est / np.array([flown_sigma(truth, r["dopt"][0].settings, r["dopt"][2])

@@ -24,6 +24,7 @@ from mavsysid.evaluation import (
 )
 from mavsysid.evaluation_intervals import (
     OFF_PATH_RMS,
+    SATURATED_SHARE,
     HeadlineFigures,
     headline_intervals,
     off_path_flights,
@@ -134,7 +135,8 @@ def _notes(headline: HeadlineFigures | None, saturating: dict[str, tuple[int, in
             f"({100 * c_lo:.0f}–{100 * c_hi:.0f} %; paper: 65 %; a parameter that never "
             "settles counts as the whole flight).")
     if saturating:
-        notes.append(f"Flights saturating a rotor on more than 5 % of the control ticks: "
+        notes.append(f"Flights saturating a rotor on more than {100 * SATURATED_SHARE:g} % of "
+                     f"the control ticks: "
                      f"{_counts(saturating)}.")
     if off_path:
         notes.append(f"Flights off their path by more than {OFF_PATH_RMS:g} m RMS (the true "

@@ -18,12 +18,14 @@ from scipy.stats import bootstrap
 
 from mavsysid.evaluation import last_flights, median_convergence_time, paired_flight_arrays
 
-__all__ = ["OFF_PATH_RMS", "HeadlineFigures", "flights_beyond", "headline_figures",
-           "headline_intervals", "off_path_flights", "saturating_flights"]
+__all__ = ["OFF_PATH_RMS", "SATURATED_SHARE", "HeadlineFigures", "flights_beyond",
+           "headline_figures", "headline_intervals", "off_path_flights", "saturating_flights"]
 
 #: A flight whose tracking RMS exceeds this (m) left its plan: the true vehicle could not
 #: fly it (a real one would likely have crashed).
 OFF_PATH_RMS = 0.5
+#: A flight saturated when a rotor sat at a limit on more than this share of the ticks.
+SATURATED_SHARE = 0.05
 
 #: Planner kinds compared by the headline figures: planned, baseline.
 _PLANNED, _BASELINE = "dopt", "random"
@@ -130,7 +132,7 @@ def flights_beyond(records: list[dict[str, Any]], field: str, threshold: float
     return counts
 
 
-def saturating_flights(records: list[dict[str, Any]], threshold: float = 0.05
+def saturating_flights(records: list[dict[str, Any]], threshold: float = SATURATED_SHARE
                        ) -> dict[str, tuple[int, int]]:
     """`flights_beyond` for a rotor saturated on more than ``threshold`` of the ticks."""
     return flights_beyond(records, "saturated_fraction", threshold)
