@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from planner.belief import EdgeTransfer
@@ -26,6 +27,26 @@ class Edge:
     _transfer: EdgeTransfer | None = None
 
 
+@numba.njit(cache=True)
+def _beaten_by(keys: np.ndarray, key: np.ndarray) -> np.ndarray | None:
+    """Rows of ``keys`` that ``key`` is no worse than in every column; None when a row
+    is no worse than ``key`` in every column (``key`` is dominated)."""
+    n, m = keys.shape
+    beaten = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        no_worse = True
+        no_better = True
+        for j in range(m):
+            if keys[i, j] > key[j]:
+                no_worse = False
+            if key[j] > keys[i, j]:
+                no_better = False
+        if no_worse:
+            return None
+        beaten[i] = no_better
+    return beaten
+
+
 @dataclass(eq=False)
 class Vertex:
     """A graph vertex. ``can_stop`` is False where no stopping segment is feasible: the
@@ -37,6 +58,28 @@ class Vertex:
     can_stop: bool
     out_edges: list[Edge] = field(default_factory=list)
     beliefs: list[Belief] = field(default_factory=list)
+    #: One row per kept belief, in the order of ``beliefs``: the keys of the dominance
+    #: test (paper Eq. compare), smaller is better in every column.
+    keys: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+
+    def keep(self, belief: Belief, key: np.ndarray) -> bool:
+        """Keep ``belief`` unless a kept one is no worse in every key; prune those it beats.
+
+        Returns False (nothing changes) when ``belief`` is dominated.
+        """
+        keys = self.keys
+        beaten = _beaten_by(keys, key)
+        if beaten is None:
+            return False
+        if beaten.any():
+            for i in np.flatnonzero(beaten):
+                self.beliefs[i].pruned = True
+            self.beliefs[:] = [b for b, lost in zip(self.beliefs, beaten, strict=True)
+                               if not lost]
+            keys = keys[~beaten]
+        self.beliefs.append(belief)
+        self.keys = np.vstack((keys, key))
+        return True
 
     @property
     def stop_time(self) -> float:

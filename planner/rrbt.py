@@ -225,22 +225,17 @@ class GraphSearch:
 
     def append(self, belief: Belief) -> bool:
         """Keep a belief unless another at its vertex dominates it (paper Eq. compare)."""
-        kept = self.vertices[belief.vertex].beliefs
-        for other in kept:
-            if self._dominates(other, belief):
-                return False
-        for other in kept:
-            if self._dominates(belief, other):
-                other.pruned = True
-        kept[:] = [b for b in kept if not b.pruned]
-        kept.append(belief)
+        if not self.vertices[belief.vertex].keep(belief, self._dominance_key(belief)):
+            return False
         self.consider(belief)
         return True
 
-    def _dominates(self, a: Belief, b: Belief) -> bool:
+    def _dominance_key(self, b: Belief) -> np.ndarray:
+        """Keys of paper Eq. compare, each smaller-is-better: a belief dominates another
+        when it is no worse in all of them."""
         if self.objective == "random":  # no information in the baseline's choices
-            return a.cost <= b.cost and a.distinct >= b.distinct
-        return a.cost <= b.cost and a.logdet <= b.logdet and a.logdet_theta <= b.logdet_theta
+            return np.array([b.cost, -b.distinct, 0.0])
+        return np.array([b.cost, b.logdet, b.logdet_theta])
 
     def consider(self, belief: Belief) -> None:
         """Track the best candidate flight: the belief with its stop, inside the budget."""
@@ -353,7 +348,7 @@ class GraphSearch:
         root_vertex = self.add_vertex(VertexState.hover(pose[:3], float(pose[3])))
         assert root_vertex == 0
         root = self.belief(self.sigma0, 0.0, 0, None, None)
-        self.vertices[0].beliefs.append(root)
+        self.vertices[0].keep(root, self._dominance_key(root))
         while not self.done():
             self.propagate(self.grow())
             self.report()
