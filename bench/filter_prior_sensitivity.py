@@ -5,8 +5,8 @@ Flies experiments 0 … n−1 exactly as `mavsysid evaluate --n N --samples S --
 does (same specs, seeds, plans and simulated flights), keeps their pose logs in
 ``--workdir`` (a re-run flies only what is missing), then re-runs the EKF from a starting
 σ of each ``--sigmas`` fraction of the guess and scores the flights with evaluate's own
-statistics (`mavsysid.evaluation_intervals.headline_figures`, paired bootstrap over
-experiments).
+statistics (`mavsysid.evaluation_intervals.headline_intervals` over records shaped as
+evaluate's).
 
     python bench/filter_prior_sensitivity.py --n 100 --workdir /tmp/prior-sensitivity
         [--sigmas 0.5,0.369,0.29,0.2] [--first 20] [--samples 8000] [--refine-steps 100000]
@@ -16,75 +16,70 @@ experiments).
 from __future__ import annotations
 
 import argparse
-import json
+import shutil
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from scipy.stats import bootstrap
 
 from estimation.results import ParameterEstimate
-from flight.simulator import SimulationSettings, Simulator
 from mavsysid.evaluate import make_specs
-from mavsysid.evaluation_intervals import headline_figures
+from mavsysid.evaluation_intervals import headline_intervals
 from mavsysid.experiment import (
     KINDS,
     ExperimentSpec,
-    _filter,
-    _planner_settings,
-    controller_config,
     draw_prior,
+    estimate_history,
+    filter_flight,
+    fly_plan,
 )
-from planner.baseline import plan_random
-from planner.rrbt import plan
 from vehicle.config import load_vehicle
 
-#: Flight-time grid of the estimate histories, s (evaluate's 10 Hz).
-GRID = np.round(np.arange(0.0, 27.95, 0.1), 6)
+
+def _flight_dir(workdir: Path, spec: ExperimentSpec, kind: str) -> Path:
+    return workdir / f"{spec.index:03d}-{kind}"
 
 
 def fly(spec: ExperimentSpec, workdir: Path) -> None:
-    """Both flights of one experiment, as `mavsysid.experiment._fly` flies them."""
+    """Both flights of one experiment (first iteration), as evaluate flies them.
+
+    A flight is written to a scratch folder and renamed when complete, so an
+    interrupted run re-flies only what is missing.
+    """
+    truth = load_vehicle(spec.vehicle)
+    model = truth.with_parameters(draw_prior(truth, spec.seed))
+    for kind in KINDS:
+        directory = _flight_dir(workdir, spec, kind)
+        if directory.exists():
+            continue
+        scratch = directory.with_name(directory.name + ".partial")
+        shutil.rmtree(scratch, ignore_errors=True)
+        fly_plan(spec, truth, model, kind, 1, scratch)
+        scratch.rename(directory)
+
+
+def record(spec: ExperimentSpec, workdir: Path, sigma: float) -> dict[str, Any]:
+    """Evaluate's record fields the headline figures read, filtered from σ = sigma·|guess|."""
     truth = load_vehicle(spec.vehicle)
     guess = draw_prior(truth, spec.seed)
     model = truth.with_parameters(guess)
-    seed = spec.seed * 100 + 1
-    for kind, planner in (("dopt", plan), ("random", plan_random)):
-        directory = workdir / f"{spec.index:03d}-{kind}"
-        if (directory / "guess.json").exists():
-            continue
-        result = planner(model, _planner_settings(spec, seed))
-        Simulator(controller_config(spec.controller_model, truth, model),
-                  true_theta=truth.theta, settings=SimulationSettings(seed=seed)
-                  ).run(result.trajectory, directory)
-        (directory / "guess.json").write_text(json.dumps(guess.tolist()))
+    prior = ParameterEstimate(guess, np.diag((sigma * np.abs(guess)) ** 2))
+    flights = []
+    for kind in KINDS:
+        run = filter_flight(_flight_dir(workdir, spec, kind), model, prior)
+        h = run.history
+        flights.append({"kind": kind, "iteration": 1, "reached_dopt": run.estimate.d_optimality,
+                        "history": estimate_history(h.t, h.theta, h.theta_sigma)})
+    return {"truth": truth.theta.tolist(), "flights": flights}
 
 
-def filtered(directory: Path, sigma: float, truth_theta: np.ndarray, vehicle: str
-             ) -> tuple[np.ndarray, float]:
-    """Estimate / truth on `GRID` and the reached D-opt, from a starting σ = sigma·|guess|."""
-    guess = np.array(json.loads((directory / "guess.json").read_text()))
-    model = load_vehicle(vehicle).with_parameters(guess)
-    run = _filter(directory, model, ParameterEstimate(guess, np.diag((sigma * np.abs(guess)) ** 2)))
-    t = run.history.t - run.history.t[0]
-    ratios = np.column_stack([np.interp(GRID, t, run.history.theta[:, j]) for j in range(6)])
-    return ratios / truth_theta, run.estimate.d_optimality
-
-
-def score(dopt: dict[str, np.ndarray], ratios: dict[str, np.ndarray]) -> str:
-    """The two headline figures with their 95 % paired-bootstrap intervals."""
-    count = len(dopt["dopt"])
-
-    def statistic(index: np.ndarray) -> np.ndarray:
-        i = np.asarray(index, dtype=int)
-        return headline_figures(GRID, {k: v[i] for k, v in dopt.items()},
-                                {k: v[i] for k, v in ratios.items()})
-
-    point = statistic(np.arange(count))
-    ci = bootstrap((np.arange(count),), statistic, vectorized=False, n_resamples=1000,
-                   method="percentile", rng=np.random.default_rng(0)).confidence_interval
-    return (f"D-opt ratio {point[0]:.2f} ({ci.low[0]:.2f}–{ci.high[0]:.2f}), convergence "
-            f"reduction {100 * point[1]:.0f} % ({100 * ci.low[1]:.0f}–{100 * ci.high[1]:.0f} %)")
+def score(records: list[dict[str, Any]]) -> str:
+    """The two headline figures with evaluate's 95 % paired-bootstrap intervals."""
+    h = headline_intervals(records)
+    (r_lo, r_hi), (c_lo, c_hi) = h.dopt_ratio_interval, h.convergence_reduction_interval
+    return (f"D-opt ratio {h.dopt_ratio:.2f} ({r_lo:.2f}–{r_hi:.2f}), convergence reduction "
+            f"{100 * h.convergence_reduction:.0f} % ({100 * c_lo:.0f}–{100 * c_hi:.0f} %)")
 
 
 def main() -> None:
@@ -102,22 +97,13 @@ def main() -> None:
     args.workdir.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(args.workers) as pool:
         list(pool.map(fly, specs, [args.workdir] * len(specs)))
-    truth = load_vehicle(specs[0].vehicle).theta
-    for sigma in (float(x) for x in args.sigmas.split(",")):
-        with ProcessPoolExecutor(args.workers) as pool:
-            runs = {k: list(pool.map(filtered, [args.workdir / f"{s.index:03d}-{k}"
-                                                for s in specs],
-                                     [sigma] * len(specs), [truth] * len(specs),
-                                     [specs[0].vehicle] * len(specs)))
-                    for k in KINDS}
-        ratios = {k: np.array([r for r, _ in v]) for k, v in runs.items()}
-        dopt = {k: np.array([d for _, d in v]) for k, v in runs.items()}
-        line = f"starting σ {sigma:g} of the guess: {args.n} experiments, {score(dopt, ratios)}"
-        if 2 <= args.first < args.n:
-            first = score({k: v[:args.first] for k, v in dopt.items()},
-                          {k: v[:args.first] for k, v in ratios.items()})
-            line += f"; first {args.first}: {first}"
-        print(line, flush=True)
+        for sigma in (float(x) for x in args.sigmas.split(",")):
+            records = list(pool.map(record, specs, [args.workdir] * len(specs),
+                                    [sigma] * len(specs)))
+            line = f"starting σ {sigma:g} of the guess: {args.n} experiments, {score(records)}"
+            if 2 <= args.first < args.n:
+                line += f"; first {args.first}: {score(records[:args.first])}"
+            print(line, flush=True)
 
 
 if __name__ == "__main__":

@@ -33,16 +33,16 @@ from estimation.ekf import ParameterEKF
 from estimation.readers import load_flight
 from estimation.report import convergence_time
 from estimation.results import ParameterEstimate
-from flight.simulator import SimulationSettings, Simulator
+from flight.simulator import SimulationResult, SimulationSettings, Simulator
 from planner.baseline import plan_random
-from planner.results import PlannerSettings
+from planner.results import PlannerSettings, PlanResult
 from planner.rrbt import plan
 from vehicle.config import VehicleConfig, load_vehicle
 from vehicle.errors import InputError
 from vehicle.linearization import initial_state_sigma
 
 __all__ = ["CONTROLLER_MODELS", "KINDS", "ExperimentSpec", "controller_config", "draw_prior",
-           "run_experiment"]
+           "estimate_history", "filter_flight", "fly_plan", "run_experiment"]
 
 #: Planner kinds, in the paper's names: DOPT-COV (ours) and RAND.
 KINDS: tuple[str, ...] = ("dopt", "random")
@@ -135,7 +135,7 @@ def _planner_settings(spec: ExperimentSpec, seed: int) -> PlannerSettings:
     return settings
 
 
-def _filter(directory: Path, model: VehicleConfig, prior: ParameterEstimate):
+def filter_flight(directory: Path, model: VehicleConfig, prior: ParameterEstimate):
     """The paper's EKF over a simulated flight's pose log, from an explicit prior."""
     flight = load_flight(directory / "pose.csv", model)
     sigma = (model.noise.position_sigma, model.noise.attitude_sigma)
@@ -143,7 +143,8 @@ def _filter(directory: Path, model: VehicleConfig, prior: ParameterEstimate):
     return ParameterEKF(model, prior, sigma).run(flight, state_sigma)
 
 
-def _history(t: np.ndarray, theta: np.ndarray, sigma: np.ndarray) -> dict[str, list]:
+def estimate_history(t: np.ndarray, theta: np.ndarray, sigma: np.ndarray
+                     ) -> dict[str, list]:
     """The estimate over flight time resampled at `HISTORY_RATE` (for medians and plots)."""
     grid = np.arange(0.0, t[-1] - t[0] + 1e-9, 1.0 / HISTORY_RATE)
     tt = t - t[0]
@@ -152,17 +153,28 @@ def _history(t: np.ndarray, theta: np.ndarray, sigma: np.ndarray) -> dict[str, l
     return {"t": grid.round(6).tolist(), "theta": th.tolist(), "sigma": sg.tolist()}
 
 
-def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
-         prior: ParameterEstimate, kind: str, iteration: int, workdir: Path) -> dict[str, Any]:
-    """Plan with ``model``, fly with the truth, filter from ``prior``: one record row."""
+def fly_plan(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig, kind: str,
+             iteration: int, directory: Path) -> tuple[PlanResult, SimulationResult]:
+    """Plan one flight of an experiment with ``model`` and fly it with the truth.
+
+    The pose log goes to ``directory``; the seed depends only on the spec and the
+    iteration, so the flight is the same wherever and whenever it runs.
+    """
     seed = spec.seed * 100 + iteration
     planner = plan if kind == "dopt" else plan_random
     result = planner(model, _planner_settings(spec, seed))
-    directory = workdir / f"{kind}-{iteration}"
     controlled = controller_config(spec.controller_model, truth, model)
     sim = Simulator(controlled, true_theta=truth.theta,
                     settings=SimulationSettings(seed=seed)).run(result.trajectory, directory)
-    run = _filter(directory, model, prior)
+    return result, sim
+
+
+def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
+         prior: ParameterEstimate, kind: str, iteration: int, workdir: Path) -> dict[str, Any]:
+    """Plan with ``model``, fly with the truth, filter from ``prior``: one record row."""
+    directory = workdir / f"{kind}-{iteration}"
+    result, sim = fly_plan(spec, truth, model, kind, iteration, directory)
+    run = filter_flight(directory, model, prior)
     est = run.estimate
     h = run.history
     return {
@@ -183,7 +195,7 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
                              convergence_time(h.t - h.t[0], h.theta, truth.theta)],
         "planner": {"samples": result.stats.samples, "vertices": result.stats.vertices,
                     "edges": result.stats.edges},
-        "history": _history(h.t, h.theta, h.theta_sigma),
+        "history": estimate_history(h.t, h.theta, h.theta_sigma),
         "_estimate": est,
     }
 
