@@ -23,10 +23,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from estimation.diagnosis import diagnose_flight
+from mavsysid.discrepancy.diagnosis import diagnose_flight
+from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.model_effects import effect_from_values
+
 from tests.support.hidden import ground_trajectory, hidden_flight
-from vehicle.config import load_vehicle
-from vehicle.model_effects import effect_from_values
 
 #: The issue's magnitudes: motor time constant 40 ms, pose delay 20 ms, body drag 5 % of
 #: the weight at 3 m/s, wind 2 m/s, marker offset 3 cm, CoG offset 1 cm, thrust −8 %

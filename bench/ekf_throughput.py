@@ -15,17 +15,17 @@ import tempfile
 import time
 from pathlib import Path
 
-from estimation.ekf import ParameterEKF
-from estimation.estimator import (
+from mavsysid.estimation.ekf import ParameterEKF
+from mavsysid.estimation.estimator import (
     EstimatorSettings,
     _initial_state_sigma,
     estimate_parameters,
     prior_from_config,
 )
-from estimation.readers import load_flight
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.simulator import SimulationSettings, Simulator
-from vehicle.config import load_vehicle
+from mavsysid.estimation.readers import load_flight
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.vehicle.config import load_vehicle
 
 
 def main() -> None:

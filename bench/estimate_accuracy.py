@@ -1,6 +1,6 @@
 """Estimation accuracy over many seeds (issue: median < 5 %, worst < 10 % on the core, 3σ).
 
-For each vehicle and seed: simulate the built-in 30 s excitation (DESIGN.md noise), draw
+For each vehicle and seed: simulate the built-in 30 s excitation (docs/architecture.md noise), draw
 the prior ±50 % around the truth, estimate. Prints per parameter the median and worst
 relative error of the filter and of the refined estimate, and the share of (seed,
 parameter) pairs within 3σ; then refined vs filter on 10 s flights.
@@ -15,12 +15,11 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
-from estimation.estimator import estimate_parameters
-from estimation.readers import load_flight
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.simulator import SimulationSettings, Simulator
-from vehicle.config import PARAMETER_NAMES, load_vehicle
+from mavsysid.estimation.estimator import estimate_parameters
+from mavsysid.estimation.readers import load_flight
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 
 
 def run(name: str, seed: int, duration: float, tmp: Path):

@@ -5,7 +5,7 @@ Flies experiments 0 … n−1 exactly as `mavsysid evaluate --n N --samples S --
 does (same specs, seeds, plans and simulated flights), keeps their pose logs in
 ``--workdir`` (a re-run flies only what is missing), then re-runs the EKF from a starting
 σ of each ``--sigmas`` fraction of the guess and scores the flights with evaluate's own
-statistics (`mavsysid.evaluation_intervals.headline_intervals` over records shaped as
+statistics (`mavsysid.experiments.evaluation_intervals.headline_intervals` over records shaped as
 evaluate's).
 
     python bench/filter_prior_sensitivity.py --n 100 --workdir /tmp/prior-sensitivity
@@ -22,11 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from estimation.results import ParameterEstimate
-from mavsysid.evaluate import make_specs
-from mavsysid.evaluation_intervals import headline_intervals
-from mavsysid.experiment import (
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.experiments.evaluation_intervals import headline_intervals
+from mavsysid.experiments.experiment import (
     KINDS,
     ExperimentSpec,
     draw_prior,
@@ -34,7 +32,9 @@ from mavsysid.experiment import (
     filter_flight,
     fly_plan,
 )
-from vehicle.config import load_vehicle
+from mavsysid.vehicle.config import load_vehicle
+
+from mavsysid.cli.evaluate import make_specs
 
 
 def _flight_dir(workdir: Path, spec: ExperimentSpec, kind: str) -> Path:

@@ -17,21 +17,20 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.readers import load_flight
+from mavsysid.experiments.evaluation_intervals import OFF_PATH_RMS, SATURATED_SHARE
+from mavsysid.experiments.experiment import CONTROLLER_MODELS, controller_config
+from mavsysid.flight.offline.effects import ProcessNoise
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.planner.baseline import plan_random
+from mavsysid.planner.belief import propagate_final
+from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.rrbt import plan
+from mavsysid.planner.search_setup import initial_covariance
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
+from mavsysid.vehicle.linearization import ErrorStateModel
 from scipy.stats import bootstrap
-
-from estimation.estimator import EstimatorSettings, estimate_parameters
-from estimation.readers import load_flight
-from flight.effects import ProcessNoise
-from flight.simulator import SimulationSettings, Simulator
-from mavsysid.evaluation_intervals import OFF_PATH_RMS, SATURATED_SHARE
-from mavsysid.experiment import CONTROLLER_MODELS, controller_config
-from planner.baseline import plan_random
-from planner.belief import propagate_final
-from planner.results import PlannerSettings, PlanResult
-from planner.rrbt import plan
-from planner.search_setup import initial_covariance
-from vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
-from vehicle.linearization import ErrorStateModel
 
 
 def fly_and_estimate(truth: VehicleConfig, prior: VehicleConfig, result: PlanResult,

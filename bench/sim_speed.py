@@ -16,9 +16,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from flight.excitation import excitation_trajectory
-from flight.simulator import SimulationSettings, Simulator
-from vehicle.config import load_vehicle
+from mavsysid.flight.offline.excitation import excitation_trajectory
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.vehicle.config import load_vehicle
 
 
 def measure(vehicle: str, control_rate: float, log: bool, repeats: int) -> tuple[float, float]:

@@ -1,1 +1,1 @@
-"""Post-flight estimation: log readers and the parameter EKF."""
+"""Post-flight estimation: log readers, the parameter EKF, noise fit and batch refinement."""

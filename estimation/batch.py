@@ -10,7 +10,7 @@ node (as a 12-D error of the filtered state) and θ (as a scaled error). The cos
 
 where Φ integrates the model (RK4, logged rotor speeds) from one node to the next and
 W_k whitens the defect with the process noise accumulated over the interval (the model's
-Q, at the level the caller chose, e.g. fitted by `estimation.noise_fit`). Unlike a pure
+Q, at the level the caller chose, e.g. fitted by `mavsysid.estimation.noise_fit`). Unlike a pure
 output-error fit, the defects let the states follow the data, so a 30 s flight does not
 drift. Levenberg–Marquardt with a sparse Jacobian built from the shared linearisation
 (transition matrices along each interval) and a sparse direct solve; the θ covariance is
@@ -25,12 +25,11 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-
-from estimation.ekf import _rk4_kernel
-from estimation.flight_data import FlightData
-from estimation.results import ParameterEstimate
-from vehicle.linearization import ErrorStateModel, jacobian_kernel, transition_kernel
-from vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
+from mavsysid.estimation.ekf import _rk4_kernel
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.vehicle.linearization import ErrorStateModel, jacobian_kernel, transition_kernel
+from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
 
 __all__ = ["BatchResult", "refine"]
 
@@ -260,7 +259,7 @@ def refine(
     wrench : ndarray, shape (N, 6), optional
         Extra body force (N) and torque (N·m) of known model effects at every sample,
         held fixed (as given to the filter); zeros by default. ``flight`` must already be
-        in the model's terms (`estimation.effect_channels.ModelTerms`).
+        in the model's terms (`mavsysid.estimation.effect_channels.ModelTerms`).
     """
     dt = float(np.median(np.diff(flight.t)))
     step = max(1, round(node_interval / dt))

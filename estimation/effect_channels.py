@@ -1,6 +1,6 @@
 """Known model effects in the estimator's terms: acting speeds, corrected poses, a wrench.
 
-A `ModelEffect` (`vehicle.model_effects`) enters the model through up to three channels;
+A `ModelEffect` (`mavsysid.vehicle.model_effects`) enters the model through up to three channels;
 the estimator turns a flight and a list of effects into `ModelTerms`, what the filter and
 the batch refinement consume:
 
@@ -27,10 +27,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from estimation.flight_data import FlightData
-from vehicle.config import VehicleConfig
-from vehicle.model_effects import EffectInputs, ModelEffect, total_wrench
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.model_effects import EffectInputs, ModelEffect, total_wrench
 
 __all__ = ["ModelTerms", "WrenchReference", "has_wrench", "in_model_terms", "model_terms"]
 
@@ -127,7 +126,7 @@ def model_terms(
         Rotor geometry for the wrench.
     reference : WrenchReference, optional
         States and θ to evaluate wrench effects on; without one the wrench is zero (the
-        first pass of `reference_terms` in `estimation.effect_fit`).
+        first pass of `reference_terms` in `mavsysid.estimation.effect_fit`).
 
     Returns
     -------

@@ -18,7 +18,7 @@ estimate at the bound gets its σ from the curvature just inside it.
 Why through the likelihood rather than an augmented filter state: the effects act
 through channels that are not smooth functions inside the filter — a pose delay re-times
 the measurements, a motor lag filters the whole rotor-speed log — and their physics is
-defined once, in numpy, for truth and model (`vehicle.model_effects`). The likelihood
+defined once, in numpy, for truth and model (`mavsysid.vehicle.model_effects`). The likelihood
 needs only to *evaluate* an effect at given values, so every catalogue effect (and any
 added later) is fitted the same way, and the filter kernel stays the paper's.
 
@@ -29,7 +29,7 @@ orthogonal, and this halves the evaluations. s starts at the config's densities 
 
 Cost: one filter pass per evaluation (≈ 0.1 s for 30 s at 100 Hz); a Newton iteration
 takes 2(P + 1) + 2P(P − 1) passes for P effect parameters, 2–4 iterations usually. Wrench
-effects are evaluated on a previous pass (`estimation.effect_channels`), so their fit
+effects are evaluated on a previous pass (`mavsysid.estimation.effect_channels`), so their fit
 repeats with the reference moved to the optimum until θ settles (usually once more).
 
 The uncertainty of ψ is carried into θ's: with J = dθ̂/dψ (from the same finite
@@ -43,18 +43,17 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from estimation.effect_channels import ModelTerms, WrenchReference, has_wrench, model_terms
-from estimation.ekf import FilterRun, ParameterEKF
-from estimation.flight_data import FlightData
-from estimation.noise_fit import NOISE_SCALE_BOUNDS, scaled_noise
-from estimation.results import FittedEffect, ParameterEstimate
-from vehicle.config import VehicleConfig
+from mavsysid.estimation.effect_channels import ModelTerms, WrenchReference, has_wrench, model_terms
+from mavsysid.estimation.ekf import FilterRun, ParameterEKF
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.noise_fit import NOISE_SCALE_BOUNDS, scaled_noise
+from mavsysid.estimation.results import FittedEffect, ParameterEstimate
+from mavsysid.vehicle.config import VehicleConfig
 
 # The schema's table of parameters that have a sign (tau ≥ 0 …): fitted values must load
 # back from the config they are written to. One table, so it is borrowed, not copied.
-from vehicle.config_schema import _EFFECT_SIGNS
-from vehicle.model_effects import ModelEffect
+from mavsysid.vehicle.config_schema import _EFFECT_SIGNS
+from mavsysid.vehicle.model_effects import ModelEffect
 
 __all__ = ["EffectFit", "EffectFitSettings", "fit_effects", "reference_terms"]
 
@@ -96,7 +95,7 @@ class EffectFit:
     theta_sensitivity : ndarray, shape (6, P)
         dθ̂/dψ of the filter's final θ, SI.
     noise_scale : float
-        Fitted process-noise scale (as `estimation.noise_fit`).
+        Fitted process-noise scale (as `mavsysid.estimation.noise_fit`).
     noise_at_bound : bool
         The noise scale sits at the edge of its range (held there).
     config : VehicleConfig

@@ -6,7 +6,7 @@
 ``x_post``/``P_post``. What differs, and why:
 
 * ``x`` is the nominal state [p, v_B, q, ω, θ], shape (19,), with θ in SI units, while
-  ``P`` is the covariance of the error state (18, 18) of `vehicle.linearization`:
+  ``P`` is the covariance of the error state (18, 18) of `mavsysid.vehicle.linearization`:
   the attitude error is a 3-vector (``q = q̂ ⊗ Exp(δφ)``) and θ errors are in units of
   ``theta_scale`` (the prior), so P stays well conditioned at any vehicle scale.
 * ``predict(u, dt, u_next)`` integrates the nonlinear model (RK4, rotor speeds linear
@@ -25,19 +25,18 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
-
-from estimation.flight_data import FlightData
-from estimation.results import EstimationHistory, ParameterEstimate
-from vehicle.config import VehicleConfig
-from vehicle.dynamics import STATE_DIM, derivative_kernel
-from vehicle.linearization import (
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.dynamics import STATE_DIM, derivative_kernel
+from mavsysid.vehicle.linearization import (
     ERROR_DIM,
     MEAS_DIM,
     ErrorStateModel,
     jacobian_kernel,
     transition_kernel,
 )
-from vehicle.rotation import (
+from mavsysid.vehicle.rotation import (
     exp_kernel,
     log_kernel,
     multiply_kernel,
@@ -293,7 +292,8 @@ class ParameterEKF(ExtendedKalmanFilter):
         The initial velocity and body rates come from finite differences of the first two
         poses; ``state_sigma`` gives their initial σ (position, velocity, attitude, rate).
         ``wrench`` (N, 6): extra body force (N) and torque (N·m) of known model effects at
-        every sample (`estimation.effect_channels.ModelTerms`); zeros by default. ``flight`` must
+        every sample (`mavsysid.estimation.effect_channels.ModelTerms`); zeros by default.
+        ``flight`` must
         already be in the model's terms (effects' pose and rotor-speed channels applied).
         """
         t = np.ascontiguousarray(flight.t, dtype=float)

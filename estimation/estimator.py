@@ -2,8 +2,8 @@
 
 0. Known model effects (the config's ``[effects.NAME]`` tables, or effects a caller such
    as the discrepancy workflow passes) put the flight in the model's terms
-   (`estimation.effect_channels`); by default their parameters are fitted jointly with
-   θ and the noise level first (`estimation.effect_fit`). Without effects this step is
+   (`mavsysid.estimation.effect_channels`); by default their parameters are fitted jointly with
+   θ and the noise level first (`mavsysid.estimation.effect_fit`). Without effects this step is
    absent and the results are exactly the paper's model's.
 1. The parameter EKF runs over the flight with the vehicle config's noise (the paper's
    estimator): the *filter* estimate and its history over time.
@@ -19,19 +19,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from mavsysid.estimation import effect_fit
+from mavsysid.estimation.batch import refine
+from mavsysid.estimation.effect_fit import EffectFit, reference_terms
+from mavsysid.estimation.ekf import ParameterEKF
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.noise_fit import fit_noise_scale
+from mavsysid.estimation.report import convergence_time
+from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
+from mavsysid.vehicle.linearization import initial_state_sigma
+from mavsysid.vehicle.model_effects import ModelEffect
 
-from estimation import effect_fit
-from estimation.batch import refine
-from estimation.effect_fit import EffectFit, reference_terms
-from estimation.ekf import ParameterEKF
-from estimation.flight_data import FlightData
-from estimation.noise_fit import fit_noise_scale
-from estimation.report import convergence_time
-from estimation.results import EstimationResult, FittedEffect, ParameterEstimate
-from vehicle.config import PARAMETER_NAMES, VehicleConfig
-from vehicle.errors import InputError
-from vehicle.linearization import initial_state_sigma
-from vehicle.model_effects import ModelEffect
+from mavsysid.errors import InputError
 
 __all__ = ["EstimatorSettings", "estimate_parameters", "estimate_with_effects",
            "prior_from_config"]
@@ -104,7 +104,7 @@ def _check_inputs(flight: FlightData, config: VehicleConfig,
     effects = tuple(effects)
     for effect in effects:
         if not isinstance(effect, ModelEffect):
-            raise InputError(f"model effect {effect!r}: expected a vehicle.model_effects "
+            raise InputError(f"model effect {effect!r}: expected a mavsysid.vehicle.model_effects "
                              "ModelEffect")
     names = [e.name for e in effects]
     if len(set(names)) < len(names):
@@ -137,7 +137,7 @@ def estimate_parameters(
     Parameters
     ----------
     flight : FlightData
-        Pose and rotor speeds (from `estimation.readers.load_flight`).
+        Pose and rotor speeds (from `mavsysid.estimation.readers.load_flight`).
     config : VehicleConfig
         The vehicle: known mass and geometry, nominal θ as the prior, noise, and its model
         effects (``config.effects``; fitted unless ``settings.fit_effects`` is off).
@@ -172,7 +172,7 @@ def estimate_with_effects(
     settings : EstimatorSettings, optional
         ``settings.fit_effects`` is ignored here in favour of ``fit_effects``.
     fit_effects : bool
-        Estimate the effects' parameters (maximum likelihood, `estimation.effect_fit`);
+        Estimate the effects' parameters (maximum likelihood, `mavsysid.estimation.effect_fit`);
         False holds them at the given values.
 
     Returns

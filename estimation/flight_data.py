@@ -1,6 +1,6 @@
 """A flight as the estimator sees it: timed pose measurements and rotor speeds.
 
-Every log reader (`estimation.readers.load_flight`) returns a `FlightData`, whatever the
+Every log reader (`mavsysid.estimation.readers.load_flight`) returns a `FlightData`, whatever the
 file format; frames are already converted to ENU/FLU and units to SI.
 """
 

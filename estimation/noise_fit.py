@@ -14,12 +14,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from mavsysid.estimation.ekf import FilterRun, ParameterEKF
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.vehicle.config import VehicleConfig
 from scipy.optimize import minimize_scalar
-
-from estimation.ekf import FilterRun, ParameterEKF
-from estimation.flight_data import FlightData
-from estimation.results import ParameterEstimate
-from vehicle.config import VehicleConfig
 
 __all__ = ["NOISE_SCALE_BOUNDS", "NoiseFit", "fit_noise_scale", "scaled_noise"]
 
@@ -67,7 +66,7 @@ def fit_noise_scale(
     ----------
     flight, config, prior, sigma, state_sigma, wrench
         As for `ParameterEKF` and `ParameterEKF.run` (``flight`` and ``wrench`` in the
-        model's terms when there are known effects, `estimation.effect_channels`).
+        model's terms when there are known effects, `mavsysid.estimation.effect_channels`).
     bounds : tuple of 2 float
         Range of the scale searched.
     """

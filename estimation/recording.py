@@ -19,12 +19,11 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.results import EstimationResult
+from mavsysid.formats.rerun_file import atomic_recording
+from mavsysid.vehicle.config import PARAMETER_NAMES
 from scipy.stats import chi2
-
-from estimation.flight_data import FlightData
-from estimation.results import EstimationResult
-from vehicle.config import PARAMETER_NAMES
-from vehicle.rerun_file import atomic_recording
 
 __all__ = ["APPLICATION_ID", "log_estimation", "recording_id_for", "write_estimation_rrd"]
 

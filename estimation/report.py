@@ -1,6 +1,6 @@
 """What `estimate` tells the user: a table on stdout, ``estimate.json`` and a new config.
 
-The JSON follows DESIGN.md's user-facing contract (``{"parameters": {"c_T": {"value",
+The JSON follows docs/architecture.md's user-facing contract (``{"parameters": {"c_T": {"value",
 "sigma", ...}, ...}, ...}``); everything in it is SI, and quantities that do not exist
 (a parameter that never converged, no refinement) are ``null``, never NaN.
 """
@@ -14,10 +14,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from estimation.results import EstimationResult, ParameterEstimate
-from vehicle.config import PARAMETER_NAMES, VehicleConfig
-from vehicle.flight_dir import write_json_atomic
+from mavsysid.estimation.results import EstimationResult, ParameterEstimate
+from mavsysid.formats.flight_dir import write_json_atomic
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
 
 __all__ = [
     "CONVERGENCE_TOLERANCE",
@@ -273,7 +272,7 @@ def _block(
 def result_to_json(
     result: EstimationResult, config: VehicleConfig, log_path: str | Path
 ) -> dict[str, Any]:
-    """The ``estimate.json`` document (DESIGN.md, "User-facing contract").
+    """The ``estimate.json`` document (docs/architecture.md, "User-facing contract").
 
     Parameters
     ----------

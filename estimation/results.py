@@ -6,9 +6,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from vehicle.config import PARAMETER_NAMES
-from vehicle.model_effects import ModelEffect
+from mavsysid.vehicle.config import PARAMETER_NAMES
+from mavsysid.vehicle.model_effects import ModelEffect
 
 __all__ = ["EstimationHistory", "EstimationResult", "FittedEffect", "ParameterEstimate"]
 
@@ -41,11 +40,11 @@ class ParameterEstimate:
 
     @property
     def d_optimality(self) -> float:
-        """det(Σ)^(1/6) via log-eigenvalues (paper Eq. dopt, DESIGN.md), SI."""
+        """det(Σ)^(1/6) via log-eigenvalues (paper Eq. dopt, docs/architecture.md), SI."""
         return float(np.exp(np.mean(np.log(np.linalg.eigvalsh(self.covariance)))))
 
     def as_dict(self) -> dict[str, dict[str, float]]:
-        """``{"c_T": {"value": .., "sigma": ..}, ...}`` (DESIGN.md's estimate JSON)."""
+        """``{"c_T": {"value": .., "sigma": ..}, ...}`` (docs/architecture.md's estimate JSON)."""
         return {name: {"value": float(v), "sigma": float(s)}
                 for name, v, s in zip(PARAMETER_NAMES, self.value, self.sigma, strict=True)}
 

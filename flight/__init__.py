@@ -1,25 +1,11 @@
-"""Flying: the position controller, the offline simulator and flight recording.
+"""Flying: the offline simulator, the simulated MAVLink vehicle and the ground station.
 
-MAVLink (the simulated vehicle endpoint and the setpoint streamer) lives here too, and
-is the only place where NED/FRD frames appear.
+- `mavsysid.flight.offline`: truth dynamics, controller, truth-side effects, excitation;
+- `mavsysid.flight.simvehicle`: a simulated ArduPilot/PX4 vehicle behind a MAVLink endpoint;
+- `mavsysid.flight.ground`: the ground station that streams a trajectory file and records the
+  flight.
+
+The modules directly here are shared by the last two: the autopilots' flight modes, pymavlink's
+set-up, free loopback ports, and keeping the garbage collector out of timed loops. MAVLink is
+the only place where NED/FRD frames appear (`mavsysid.vehicle.frames` converts).
 """
-
-from __future__ import annotations
-
-from flight.controller import ControllerGains, GeometricController
-from flight.effects import ConstantWrench, ProcessNoise, TruthEffect
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.simulator import SimulationResult, SimulationSettings, Simulator
-
-__all__ = [
-    "ConstantWrench",
-    "ControllerGains",
-    "ExcitationSpec",
-    "GeometricController",
-    "ProcessNoise",
-    "SimulationResult",
-    "SimulationSettings",
-    "Simulator",
-    "TruthEffect",
-    "excitation_trajectory",
-]

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from vehicle.errors import InputError
+from mavsysid.errors import InputError
 
 __all__ = ["load_mavutil", "parse_connect", "signing_key_from_file"]
 

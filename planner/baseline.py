@@ -6,14 +6,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from planner.results import PlannerSettings, PlanProgress, PlanResult
-from planner.rrbt import search_graph
-from vehicle.config import VehicleConfig
+from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
+from mavsysid.planner.rrbt import search_graph
+from mavsysid.vehicle.config import VehicleConfig
 
 __all__ = ["plan_random"]
 
 
 def plan_random(config: VehicleConfig, settings: PlannerSettings | None = None,
                 progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
-    """A random calibration flight from the same motion graph as `planner.rrbt.plan`."""
+    """A random calibration flight from the same motion graph as `mavsysid.planner.rrbt.plan`."""
     return search_graph(config, settings or PlannerSettings(), "random", progress)

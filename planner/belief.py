@@ -2,7 +2,7 @@
 
 Along a candidate segment the nominal flat states are sampled at the estimator's
 measurement rate, the full state and rotor speeds are recovered by flatness, the model
-is linearised with the shared `vehicle.linearization` kernels, and the EKF covariance
+is linearised with the shared `mavsysid.vehicle.linearization` kernels, and the EKF covariance
 recursion is collapsed into one transfer (paper Eq. one_step, after Prentice & Roy):
 
     S_k^C = (F_k, Q_k; 0, F_kᵀ),   S_k^M = (I, 0; -Hᵀ R⁻¹ H, I),
@@ -23,11 +23,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-
-from vehicle.config import VehicleConfig
-from vehicle.flatness import flat_to_state
-from vehicle.linearization import E_ATT, E_POS, ERROR_DIM, ErrorStateModel
-from vehicle.trajectory import FlatOutputs, Trajectory
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.flatness import flat_to_state
+from mavsysid.vehicle.linearization import E_ATT, E_POS, ERROR_DIM, ErrorStateModel
+from mavsysid.vehicle.trajectory import FlatOutputs, Trajectory
 
 __all__ = [
     "EdgeTransfer",
@@ -152,7 +151,7 @@ def segments_samples(
 
     Parameters
     ----------
-    segments : list of planner.segments.Segment
+    segments : list of mavsysid.planner.segments.Segment
         Segments (any object with ``duration`` and ``flat_outputs(tau)``).
     config, theta, rate
         As for `edge_samples`.

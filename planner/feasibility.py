@@ -1,8 +1,8 @@
 """Feasibility of a polynomial segment: paper Eq. (constraints) plus speed and rotor limits.
 
-Checked in this order (`vehicle.config.Limits`): position in the flight box; collective
+Checked in this order (`mavsysid.vehicle.config.Limits`): position in the flight box; collective
 thrust m‖a − g‖ in [thrust_min_ratio, thrust_max_ratio] · m g; ‖v‖ ≤ speed_max (a
-planner limit in DESIGN.md); |ψ̈| ≤ yaw_acceleration_max; ‖ω‖ ≤ body_rate_max; rotor
+planner limit in docs/architecture.md); |ψ̈| ≤ yaw_acceleration_max; ‖ω‖ ≤ body_rate_max; rotor
 speeds (n² from the allocation) in [rotor_speed_min, rotor_speed_max]² — the Firefly has
 so little yaw authority that without these the planner would plan yaw it cannot fly.
 
@@ -13,7 +13,8 @@ onto the true range — the answer the derivative's roots give, cheaper and with
 companion-matrix trouble at clustered extrema. ω and n² are sampled on a grid (10 ms by
 default); Mueller-style, each interval where a sample comes within a conservative local
 bound of a limit (safety × |f'| × half the step) is split ten-fold, down to 0.1 ms, and
-rejected if still undecided there. The pointwise flatness is `vehicle.flatness.flat_sample`,
+rejected if still undecided there. The pointwise flatness is
+`mavsysid.vehicle.flatness.flat_sample`,
 the numba kernel `flat_to_state` runs too.
 """
 
@@ -24,18 +25,18 @@ from math import ceil, comb
 
 import numba
 import numpy as np
-
-from planner.segments import Segment, VertexState
-from vehicle.allocation import allocation_pinv
-from vehicle.config import GRAVITY, VehicleConfig
-from vehicle.errors import InputError
-from vehicle.flatness import (
+from mavsysid.planner.segments import Segment, VertexState
+from mavsysid.vehicle.allocation import allocation_pinv
+from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.flatness import (
     SAMPLE_NORM,
     SAMPLE_RATE,
     SAMPLE_SIZE,
     SAMPLE_TORQUE,
     flat_sample,
 )
+
+from mavsysid.errors import InputError
 
 __all__ = ["CONSTRAINTS", "FeasibilityResult", "check_rotor_headroom", "check_segment",
            "check_vertex_state", "rotor_square_range"]
@@ -147,7 +148,7 @@ def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
 
     Rotor slack max(n² − n²_max, n²_min − n²) / n²_max. Positive means violated; NaN or
     inf (a singular attitude) counts as violated. The flatness is ``flat_to_state``'s own
-    (`vehicle.flatness.flat_sample`). ``v`` (12 + SAMPLE_SIZE,) is scratch space (no
+    (`mavsysid.vehicle.flatness.flat_sample`). ``v`` (12 + SAMPLE_SIZE,) is scratch space (no
     allocation per sample).
     """
     # Horner, all 12 derivatives at once: a, jerk, snap (3 each), ψ, ψ̇, ψ̈.

@@ -1,5 +1,5 @@
 """The planner's motion graph and belief nodes (paper Algorithm 1's vertices, edges and
-beliefs), shared by the search (`planner.rrbt`) and its result."""
+beliefs), shared by the search (`mavsysid.planner.rrbt`) and its result."""
 
 from __future__ import annotations
 
@@ -7,9 +7,8 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-
-from planner.belief import EdgeTransfer
-from planner.segments import Segment, VertexState
+from mavsysid.planner.belief import EdgeTransfer
+from mavsysid.planner.segments import Segment, VertexState
 
 __all__ = ["STOP_DURATIONS", "Belief", "Edge", "Vertex", "logdet"]
 

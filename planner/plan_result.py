@@ -6,17 +6,17 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from mavsysid.planner.belief import edge_samples, propagate_steps
+from mavsysid.planner.graph import logdet
+from mavsysid.planner.refine import RefinablePath
+from mavsysid.planner.results import PlannerGraph, PlannerStats, PlanResult
+from mavsysid.planner.search_setup import initial_covariance, segment_trajectory
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-from planner.belief import edge_samples, propagate_steps
-from planner.graph import logdet
-from planner.refine import RefinablePath
-from planner.results import PlannerGraph, PlannerStats, PlanResult
-from planner.search_setup import initial_covariance, segment_trajectory
-from vehicle.errors import JobFailedError
-from vehicle.trajectory import PiecewisePolynomial
+from mavsysid.errors import JobFailedError
 
 if TYPE_CHECKING:
-    from planner.rrbt import GraphSearch
+    from mavsysid.planner.rrbt import GraphSearch
 
 __all__ = ["plan_result"]
 

@@ -32,11 +32,10 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from mavsysid.formats.rerun_file import atomic_recording
+from mavsysid.planner.results import PlanResult
+from mavsysid.vehicle.config import PARAMETER_NAMES
 from scipy.spatial.transform import Rotation
-
-from planner.results import PlanResult
-from vehicle.config import PARAMETER_NAMES
-from vehicle.rerun_file import atomic_recording
 
 __all__ = ["APPLICATION_ID", "log_plan", "recording_id_for", "time_colors", "write_plan_rrd"]
 

@@ -22,9 +22,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from planner.belief import EdgeTransfer
-from planner.segments import Segment, VertexState, connect_fixed
+from mavsysid.planner.belief import EdgeTransfer
+from mavsysid.planner.segments import Segment, VertexState, connect_fixed
 
 __all__ = ["FlightPricing", "PathRefiner", "RefinablePath", "StopChoice", "split_path"]
 
@@ -87,7 +86,7 @@ class FlightPricing:
     propagate : callable
         (Σ, segments) → Σ after flying the segments in order (EKF recursion).
     transfer : callable
-        Segment → its one-step transfer (`planner.belief.edge_transfer`).
+        Segment → its one-step transfer (`mavsysid.planner.belief.edge_transfer`).
     apply : callable
         (Σ, transfer) → Σ after the transfer.
     dopt : callable

@@ -5,9 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from vehicle.config import VehicleConfig
-from vehicle.trajectory import PiecewisePolynomial
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 __all__ = ["PlanProgress", "PlanResult", "PlannerGraph", "PlannerSettings", "PlannerStats"]
 
@@ -43,7 +42,7 @@ class PlannerSettings:
         Prior σ of each parameter relative to the config's nominal θ.
     refine_share : float
         Share of the planning time spent refining the search's best flight
-        (`planner.refine`); the graph search gets the rest.
+        (`mavsysid.planner.refine`); the graph search gets the rest.
     refine_steps : int
         Most refinement steps (0: no refinement). With a sample budget this, not the
         clock, ends the refinement, so the result still depends only on the seed. The
@@ -58,7 +57,8 @@ class PlannerSettings:
     rotor_headroom : float
         Fraction of the rotor n² range (`Limits.rotor_speed_min` to `rotor_speed_max`)
         the plan leaves free at each end, for the autopilot's feedback and for a true
-        vehicle whose θ differs from the planner's (`planner.feasibility.rotor_square_range`).
+        vehicle whose θ differs from the planner's
+        (`mavsysid.planner.feasibility.rotor_square_range`).
     """
 
     budget: float = 30.0
@@ -119,7 +119,7 @@ class PlannerStats:
         (elapsed s, best D-opt) each time the best plan improved, in the search and then
         in the refinement.
     refine_steps, refine_accepted : int
-        Refinement perturbations tried and kept (`planner.refine`).
+        Refinement perturbations tried and kept (`mavsysid.planner.refine`).
     """
 
     samples: int

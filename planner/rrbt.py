@@ -12,8 +12,8 @@ appended and the whole inside the budget; the best candidate minimises the D-opt
 det(Σ_θ)^(1/6) (paper Eq. dopt, in log space).
 
 The search gets the first 1 − refine_share of the planning time; the rest refines its best
-flight (`planner.refine`, beyond the paper). The search core is shared with the random
-baseline (`planner.baseline`), which keeps the same graph and picks the path with the most
+flight (`mavsysid.planner.refine`, beyond the paper). The search core is shared with the random
+baseline (`mavsysid.planner.baseline`), which keeps the same graph and picks the path with the most
 distinct segments instead.
 """
 
@@ -23,8 +23,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-
-from planner.belief import (
+from mavsysid.planner.belief import (
     EdgeTransfer,
     apply_transfer,
     apply_transfer_logdet,
@@ -35,19 +34,25 @@ from planner.belief import (
     segments_samples,
     steps_transfer,
 )
-from planner.feasibility import check_segment
-from planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
-from planner.plan_result import plan_result
-from planner.refine import FlightPricing, PathRefiner, RefinablePath, StopChoice, split_path
-from planner.results import PlannerSettings, PlanProgress, PlanResult
-from planner.search_setup import (
+from mavsysid.planner.feasibility import check_segment
+from mavsysid.planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
+from mavsysid.planner.plan_result import plan_result
+from mavsysid.planner.refine import (
+    FlightPricing,
+    PathRefiner,
+    RefinablePath,
+    StopChoice,
+    split_path,
+)
+from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
+from mavsysid.planner.search_setup import (
     initial_covariance,
     search_model,
     segment_trajectory,
     validate_settings,
     warm_up,
 )
-from planner.segments import (
+from mavsysid.planner.segments import (
     Segment,
     VertexState,
     connect_fixed,
@@ -55,14 +60,14 @@ from planner.segments import (
     duration_range,
     stop_segment,
 )
-from planner.yaw_branch import (
+from mavsysid.planner.yaw_branch import (
     nearest_yaw_branch,
     shift_segment_yaw,
     shift_vertex_yaw,
     wrap_angle,
 )
-from vehicle.config import VehicleConfig
-from vehicle.linearization import E_THETA, ErrorStateModel
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel
 
 __all__ = ["GraphSearch", "plan", "search_graph"]
 

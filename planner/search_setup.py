@@ -6,15 +6,20 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from mavsysid.planner.belief import (
+    apply_transfer_logdet,
+    edge_samples,
+    edge_transfer,
+    propagate_final,
+)
+from mavsysid.planner.feasibility import check_rotor_headroom, check_segment
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.segments import Segment, VertexState, connect_free_end
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-from planner.belief import apply_transfer_logdet, edge_samples, edge_transfer, propagate_final
-from planner.feasibility import check_rotor_headroom, check_segment
-from planner.results import PlannerSettings
-from planner.segments import Segment, VertexState, connect_free_end
-from vehicle.config import VehicleConfig
-from vehicle.errors import InputError
-from vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
-from vehicle.trajectory import PiecewisePolynomial
+from mavsysid.errors import InputError
 
 __all__ = ["initial_covariance", "search_model", "segment_trajectory", "validate_settings",
            "warm_up"]

@@ -25,8 +25,7 @@ from functools import cached_property
 from math import factorial
 
 import numpy as np
-
-from vehicle.trajectory import FlatOutputs, PiecewisePolynomial
+from mavsysid.vehicle.trajectory import FlatOutputs, PiecewisePolynomial
 
 __all__ = [
     "POSITION_COEFFS", "YAW_COEFFS", "Segment", "VertexState", "connect_fixed",
@@ -170,7 +169,7 @@ class Segment:
     Notes
     -----
     Outside [0, T] the segment holds its end points at rest, like
-    `vehicle.trajectory.PiecewisePolynomial`, so a segment is a ``Trajectory``.
+    `mavsysid.vehicle.trajectory.PiecewisePolynomial`, so a segment is a ``Trajectory``.
     """
 
     duration: float
@@ -398,7 +397,7 @@ def duration_range(distance: float, speed_max: float, budget_left: float,
 
 
 def to_piecewise(segments: Sequence[Segment]) -> PiecewisePolynomial:
-    """Chain segments into one `vehicle.trajectory.PiecewisePolynomial`."""
+    """Chain segments into one `mavsysid.vehicle.trajectory.PiecewisePolynomial`."""
     return PiecewisePolynomial(np.array([s.duration for s in segments]),
                                np.array([s.position_coeffs for s in segments]),
                                np.array([s.yaw_coeffs for s in segments]))

@@ -6,8 +6,7 @@ whole turns so that a flight's yaw is continuous."""
 from __future__ import annotations
 
 import numpy as np
-
-from planner.segments import Segment, VertexState
+from mavsysid.planner.segments import Segment, VertexState
 
 __all__ = ["nearest_yaw_branch", "shift_segment_yaw", "shift_vertex_yaw", "wrap_angle"]
 

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from vehicle.config import SHIPPED_VEHICLES, VehicleConfig, load_vehicle
-from vehicle.trajectory import PiecewisePolynomial
+from mavsysid.vehicle.config import SHIPPED_VEHICLES, VehicleConfig, load_vehicle
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 
 @pytest.fixture(params=SHIPPED_VEHICLES)

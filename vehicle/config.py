@@ -1,10 +1,10 @@
-"""Vehicle configurations: the TOML schema of DESIGN.md as frozen dataclasses.
+"""Vehicle configurations: the TOML schema of docs/architecture.md as frozen dataclasses.
 
 A configuration holds what is known about a vehicle before a flight: its mass and
 rotor geometry (taken as known), the nominal (prior) physical parameters
 θ = [c_T, c_D, c_M, j_x, j_y, j_z], its limits, its motors, its noise, and the model
 effects beyond the paper's model that are known to act on it (``[effects.NAME]`` tables,
-`vehicle.model_effects`).
+`mavsysid.vehicle.model_effects`).
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from mavsysid.vehicle.config_schema import check_vehicle, validate_document
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
-from vehicle.config_schema import check_vehicle, validate_document
-from vehicle.constants import GRAVITY
-from vehicle.errors import ConfigError
-from vehicle.model_effects import ModelEffect, effect_from_values
+from mavsysid.errors import ConfigError
 
 __all__ = [
     "GRAVITY",
@@ -235,7 +235,7 @@ def default_noise_densities(
 
     Stated as unmodelled accelerations so that one default suits a 30 g quad and a 3 kg
     hexacopter alike: 0.02 m/s²·√s of linear and 0.02 rad/s²·√s of angular acceleration
-    noise. Estimation can fit the level to a flight (`estimation.noise_fit`).
+    noise. Estimation can fit the level to a flight (`mavsysid.estimation.noise_fit`).
 
     Parameters
     ----------

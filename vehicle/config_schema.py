@@ -1,4 +1,4 @@
-"""Validation of vehicle TOML documents against the schema of DESIGN.md.
+"""Validation of vehicle TOML documents against the schema of docs/architecture.md.
 
 Validation runs in two phases. `validate_document` checks the parsed TOML key by key
 (unknown keys, missing keys, types, signs) and returns plain, normalised values;
@@ -10,7 +10,7 @@ Every problem raises `ConfigError` with one line ``"<file>: <key>: <expected>, g
 ``[effects.motor_lag].tau``.
 
 Known model effects are optional tables ``[effects.NAME]`` (NAME from
-`vehicle.model_effects.EFFECTS`) of the effect's parameters in SI units; a parameter
+`mavsysid.vehicle.model_effects.EFFECTS`) of the effect's parameters in SI units; a parameter
 left out is 0.
 """
 
@@ -22,13 +22,13 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.model_effects import EFFECTS
 
-from vehicle.constants import GRAVITY
-from vehicle.errors import ConfigError
-from vehicle.model_effects import EFFECTS
+from mavsysid.errors import ConfigError
 
 if TYPE_CHECKING:
-    from vehicle.config import VehicleConfig
+    from mavsysid.vehicle.config import VehicleConfig
 
 __all__ = ["MIN_ROTORS", "check_vehicle", "validate_document"]
 
@@ -100,7 +100,7 @@ _EFFECT_SIGNS: dict[tuple[str, str], str] = {
     ("rotor_drag_linear", "k"): "nonnegative",
 }
 
-# The RotorS Firefly inertia (the reference vehicle of DESIGN.md) has j_z 21 % above
+# The RotorS Firefly inertia (the reference vehicle of docs/architecture.md) has j_z 21 % above
 # j_x + j_y, which no rigid body can have. Tolerating that much keeps the reference
 # loadable while still catching decimal-point slips and swapped units (factors ≥ 10).
 _INERTIA_TRIANGLE_SLACK = 0.25
@@ -371,7 +371,9 @@ def _rank_ok(rows: np.ndarray) -> bool:
 
 def _check_allocation(file: str, config: VehicleConfig) -> None:
     """Check the 4×k allocation [c_T; c_T y; -c_T x; -ε c_M] has rank 4, naming the gap."""
-    from vehicle.allocation import allocation_matrix  # imports vehicle.config: not at the top
+    from mavsysid.vehicle.allocation import (
+        allocation_matrix,  # imports mavsysid.vehicle.config: not at the top
+    )
 
     thrust, roll, pitch, yaw = allocation_matrix(config)
     eps = config.rotor_directions

@@ -4,7 +4,7 @@ State x, shape (13,): position p (world ENU, m), velocity v_B (body FLU, m/s),
 attitude q (``[w, x, y, z]``, body → world), body rates ω (rad/s). Input u = n, the k
 rotor speeds (rad/s). Parameters θ = [c_T, c_D, c_M, j_x, j_y, j_z].
 
-In DESIGN.md's conventions (gravity g = [0, 0, -9.81], R = R(q) body → world):
+In docs/architecture.md's conventions (gravity g = [0, 0, -9.81], R = R(q) body → world):
 
     ṗ   = R v_B                                  (paper: position kinematics)
     v̇_B = F_B / m - ω × v_B + Rᵀ g               (paper Eq. newton)
@@ -24,8 +24,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-
-from vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 
 __all__ = [
     "ATT",

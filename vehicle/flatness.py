@@ -16,11 +16,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-
-from vehicle.allocation import allocation_pinv
-from vehicle.config import GRAVITY, VehicleConfig
-from vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
-from vehicle.trajectory import FlatOutputs
+from mavsysid.vehicle.allocation import allocation_pinv
+from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
+from mavsysid.vehicle.trajectory import FlatOutputs
 
 __all__ = ["SAMPLE_SIZE", "FlatState", "flat_sample", "flat_to_state"]
 

@@ -1,4 +1,4 @@
-"""ENU/FLU ↔ NED/FRD, for the MAVLink link and for flight logs (DESIGN.md conventions).
+"""ENU/FLU ↔ NED/FRD, for the MAVLink link and for flight logs (docs/architecture.md conventions).
 
 mavsysid works in world ENU and body FLU; MAVLink, ArduPilot and PX4 (and so their logs)
 use world NED and body FRD. Every conversion, in `flight/` at the link and in

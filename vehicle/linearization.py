@@ -19,11 +19,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-
-from vehicle.config import VehicleConfig
-from vehicle.constants import GRAVITY
-from vehicle.dynamics import ATT, POS, RATE, VEL, rotation_kernel
-from vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.dynamics import ATT, POS, RATE, VEL, rotation_kernel
+from mavsysid.vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
 
 __all__ = [
     "ERROR_DIM",

@@ -1,6 +1,6 @@
 """Named physical effects beyond the paper's model: one definition for truth and model.
 
-Each effect of DESIGN.md's stable list (``body_drag``, ``rotor_drag_linear``,
+Each effect of docs/architecture.md's stable list (``body_drag``, ``rotor_drag_linear``,
 ``motor_lag``, ``pose_delay``, ``marker_offset``, ``cog_offset``, ``wind``,
 ``thrust_drift``, ``ground_effect``) is a `ModelEffect` subclass carrying its parameter
 values. An effect enters the model through up to three channels:
@@ -13,7 +13,8 @@ values. An effect enters the model through up to three channels:
 * ``rotor_speeds`` — the logged rotor speeds are not the speeds acting on the body
   (`ModelEffect.acting_rotor_speeds`).
 
-The simulator's hidden truth (`flight.effects`), a vehicle config's ``[effects.NAME]``
+The simulator's hidden truth (`mavsysid.flight.offline.effects`), a vehicle config's
+``[effects.NAME]``
 tables, the EKF and the discrepancy workflow all use these definitions, so the effect
 that is hidden is exactly the effect that is fitted.
 """
@@ -24,9 +25,9 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+from mavsysid.vehicle.rotation import quat_to_matrix
 
-from vehicle.errors import InputError
-from vehicle.rotation import quat_to_matrix
+from mavsysid.errors import InputError
 
 __all__ = [
     "EFFECTS",
@@ -306,7 +307,7 @@ class PoseDelay(ModelEffect):
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
-        from vehicle.rotation import quat_normalize
+        from mavsysid.vehicle.rotation import quat_normalize
 
         d = self.values[0]
         ts = np.clip(t - d, t[0], t[-1])
@@ -446,7 +447,7 @@ class GroundEffect(ModelEffect):
         return _rotor_wrench(inputs, forces)
 
 
-#: The catalogue, by stable name (DESIGN.md).
+#: The catalogue, by stable name (docs/architecture.md).
 EFFECTS: dict[str, type[ModelEffect]] = {
     cls.name: cls for cls in (BodyDrag, RotorDragLinear, MotorLag, PoseDelay, MarkerOffset,
                               CogOffset, Wind, ThrustDrift, GroundEffect)

@@ -2,7 +2,7 @@
 
 Formats, by file extension: ``.csv`` (mavsysid's pose log), ``.tlog`` (MAVLink telemetry),
 ``.ulg`` (PX4 ULog), ``.bin`` (ArduPilot DataFlash). One module per format returns the
-pose and rotor speeds it found (`estimation.readers.streams.LogStreams`, already in
+pose and rotor speeds it found (`mavsysid.estimation.readers.streams.LogStreams`, already in
 ENU/FLU and rad/s); `merge` optionally replaces the pose by an external motion-capture
 file; `streams.to_flight_data` resamples the rotor speeds to the pose times and
 `checks.validate_flight` checks the result.
@@ -13,15 +13,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from estimation.flight_data import FlightData
-from estimation.readers.dataflash import read_dataflash
-from estimation.readers.merge import merge_pose
-from estimation.readers.pose_csv import read_pose_csv
-from estimation.readers.streams import LogStreams, to_flight_data
-from estimation.readers.tlog import read_tlog
-from estimation.readers.ulog import read_ulog
-from vehicle.config import VehicleConfig
-from vehicle.errors import InputError
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.readers.dataflash import read_dataflash
+from mavsysid.estimation.readers.merge import merge_pose
+from mavsysid.estimation.readers.pose_csv import read_pose_csv
+from mavsysid.estimation.readers.streams import LogStreams, to_flight_data
+from mavsysid.estimation.readers.tlog import read_tlog
+from mavsysid.estimation.readers.ulog import read_ulog
+from mavsysid.vehicle.config import VehicleConfig
+
+from mavsysid.errors import InputError
 
 __all__ = ["READERS", "load_flight"]
 
@@ -73,7 +74,7 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     InputError
         An unsupported extension or a missing file.
     LogFormatError
-        A log that cannot be read or fails a check (`estimation.readers.checks`); the
+        A log that cannot be read or fails a check (`mavsysid.estimation.readers.checks`); the
         message is one line naming the file.
     """
     path = _existing_file(path, "flight log")

@@ -14,11 +14,11 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import GRAVITY
 
-from estimation.flight_data import FlightData
-from vehicle.config import VehicleConfig
-from vehicle.constants import GRAVITY
-from vehicle.errors import LogFormatError
+from mavsysid.errors import LogFormatError
 
 __all__ = [
     "HOVER_FACTOR",

@@ -25,17 +25,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from estimation.readers.guard import import_parser, parsing
-from estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
-from estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
-from vehicle.config import VehicleConfig
-from vehicle.errors import LogFormatError
-from vehicle.frames import (
+from mavsysid.estimation.readers.guard import import_parser, parsing
+from mavsysid.estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
+from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.frames import (
     euler_ned_to_quaternion,
     ned_to_enu,
     quaternion_ned_to_enu,
 )
+
+from mavsysid.errors import LogFormatError
 
 __all__ = ["read_dataflash"]
 

@@ -1,14 +1,13 @@
 """Interpolation of pose samples at the log boundary.
 
-Frame conversions (NED/FRD → ENU/FLU) live in `vehicle.frames`, shared with the MAVLink
+Frame conversions (NED/FRD → ENU/FLU) live in `mavsysid.vehicle.frames`, shared with the MAVLink
 link in `flight/`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-from vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
+from mavsysid.vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
 
 __all__ = ["interpolate_quaternions"]
 

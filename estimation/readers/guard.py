@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
-from vehicle.errors import InputError, LogFormatError, MavsysidError
+from mavsysid.errors import InputError, LogFormatError, MavsysidError
 
 __all__ = ["import_parser", "one_line", "parsing"]
 

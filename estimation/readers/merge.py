@@ -2,7 +2,7 @@
 
 The merged flight keeps the flight log's clock and rotor speeds and takes its pose from
 the motion-capture file (``pose_source = "motion_capture"``), shifted by the clock
-offset: given, or found by `estimation.readers.time_align.estimate_time_offset`. Either
+offset: given, or found by `mavsysid.estimation.readers.time_align.estimate_time_offset`. Either
 way the offset is reported as an ``info:`` line in the warnings.
 """
 
@@ -11,12 +11,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation.readers.checks import normalise_quaternions, repair_samples
+from mavsysid.estimation.readers.pose_csv import read_external_pose
+from mavsysid.estimation.readers.streams import LogStreams, Series
+from mavsysid.estimation.readers.time_align import estimate_time_offset
 
-from estimation.readers.checks import normalise_quaternions, repair_samples
-from estimation.readers.pose_csv import read_external_pose
-from estimation.readers.streams import LogStreams, Series
-from estimation.readers.time_align import estimate_time_offset
-from vehicle.errors import LogFormatError
+from mavsysid.errors import LogFormatError
 
 __all__ = ["merge_pose"]
 

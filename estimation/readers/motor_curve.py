@@ -13,8 +13,7 @@ keys of the vehicle config (``pwm_min``, ``pwm_max``, ``thrust_expo``) set it.
 from __future__ import annotations
 
 import numpy as np
-
-from vehicle.config import VehicleConfig
+from mavsysid.vehicle.config import VehicleConfig
 
 __all__ = ["describe_curve", "rotor_speed_from_pwm", "rotor_speed_from_throttle",
            "throttle_from_pwm"]

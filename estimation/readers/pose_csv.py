@@ -1,8 +1,8 @@
 """Pose CSV files: mavsysid's own flight log ``pose.csv`` and external motion-capture poses.
 
-Both have the header of DESIGN.md's pose log (``t, x, y, z, qw, qx, qy, qz`` in world ENU,
+Both have the pose-log header (docs/architecture.md) (``t, x, y, z, qw, qx, qy, qz`` in world ENU,
 body FLU → world ENU). A flight's ``pose.csv`` also has the rotor speeds ``n1..nk`` and is
-read strictly by `vehicle.poselog.read_pose_log`; a simulated flight's ``meta.json`` next
+read strictly by `mavsysid.formats.poselog.read_pose_log`; a simulated flight's ``meta.json`` next
 to it supplies the truth. An external pose file (``--pose``) needs no rotor columns.
 """
 
@@ -13,12 +13,12 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation.readers.streams import LogStreams, Series
+from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.poselog import POSE_COLUMNS, read_pose_log, read_text_file
+from mavsysid.vehicle.config import VehicleConfig
 
-from estimation.readers.streams import LogStreams, Series
-from vehicle.config import VehicleConfig
-from vehicle.errors import LogFormatError
-from vehicle.flight_dir import read_meta
-from vehicle.poselog import POSE_COLUMNS, read_pose_log, read_text_file
+from mavsysid.errors import LogFormatError
 
 __all__ = ["read_external_pose", "read_pose_csv"]
 

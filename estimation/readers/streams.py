@@ -3,7 +3,7 @@
 Each reader returns `LogStreams`: the pose samples (already in ENU/FLU) and one or more
 rotor-speed series (already in rad/s), each on its own clock samples. `to_flight_data`
 resamples the rotor speeds to the pose times (linear interpolation; pose samples outside
-the rotor-speed time span are dropped) and runs the checks of `estimation.readers.checks`.
+the rotor-speed time span are dropped) and runs the checks of `mavsysid.estimation.readers.checks`.
 Keeping the streams apart until then lets `--pose` swap in a motion-capture pose first.
 """
 
@@ -13,22 +13,22 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-
-from estimation.flight_data import FlightData
-from estimation.readers.checks import (
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.readers.checks import (
     check_sampling,
     normalise_quaternions,
     repair_samples,
     validate_flight,
 )
-from estimation.readers.frames import interpolate_quaternions
-from vehicle.config import VehicleConfig
-from vehicle.errors import LogFormatError
-from vehicle.frames import ned_to_enu, quaternion_ned_to_enu
+from mavsysid.estimation.readers.frames import interpolate_quaternions
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
+
+from mavsysid.errors import LogFormatError
 
 __all__ = ["LogStreams", "PoseSource", "Series", "combine_pose", "to_flight_data"]
 
-#: Where a pose came from (see `estimation.flight_data.POSE_SOURCES`).
+#: Where a pose came from (see `mavsysid.estimation.flight_data.POSE_SOURCES`).
 PoseSource = Literal["motion_capture", "autopilot"]
 
 

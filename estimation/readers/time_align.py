@@ -13,14 +13,14 @@ peak, gives the offset.
 from __future__ import annotations
 
 import numpy as np
+from mavsysid.estimation.readers.checks import repair_samples
+from mavsysid.estimation.readers.frames import interpolate_quaternions
+from mavsysid.estimation.readers.streams import LogStreams, Series
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.rotation import quat_conjugate, quat_log, quat_multiply, quat_to_matrix
 from scipy.signal import correlate, correlation_lags, savgol_filter
 
-from estimation.readers.checks import repair_samples
-from estimation.readers.frames import interpolate_quaternions
-from estimation.readers.streams import LogStreams, Series
-from vehicle.constants import GRAVITY
-from vehicle.errors import LogFormatError
-from vehicle.rotation import quat_conjugate, quat_log, quat_multiply, quat_to_matrix
+from mavsysid.errors import LogFormatError
 
 __all__ = ["MIN_CORRELATION", "estimate_time_offset"]
 

@@ -8,14 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from estimation.flight_data import FlightData
-from flight.effects import TruthEffect
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.simulator import SimulationSettings, Simulator
-from vehicle.config import VehicleConfig
-from vehicle.flight_dir import read_meta
-from vehicle.poselog import read_pose_log
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.flight.offline.effects import TruthEffect
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.poselog import read_pose_log
+from mavsysid.vehicle.config import VehicleConfig
 
 SimulateFlight = Callable[..., FlightData]
 

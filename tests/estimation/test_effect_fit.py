@@ -8,13 +8,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mavsysid.estimation.estimator import (
+    EstimatorSettings,
+    estimate_parameters,
+    estimate_with_effects,
+)
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.flight.offline.effects import ProcessNoise, hidden_effect
+from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.model_effects import BodyDrag, MotorLag, PoseDelay, Wind
 
-from estimation.estimator import EstimatorSettings, estimate_parameters, estimate_with_effects
-from estimation.flight_data import FlightData
-from flight.effects import ProcessNoise, hidden_effect
-from vehicle.config import load_vehicle
-from vehicle.errors import InputError
-from vehicle.model_effects import BodyDrag, MotorLag, PoseDelay, Wind
+from mavsysid.errors import InputError
 
 GOLDEN = Path(__file__).parent / "golden" / "no_effects_regression"
 FILTER_ONLY = EstimatorSettings(refine=False)

@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from estimation.estimator import estimate_parameters
-from estimation.flight_data import FlightData
-from vehicle.config import load_vehicle
+from mavsysid.estimation.estimator import estimate_parameters
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.config import load_vehicle
 
 GOLDEN = Path(__file__).parent / "golden" / "no_effects_regression"
 

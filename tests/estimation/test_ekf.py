@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
+from mavsysid.estimation.ekf import ParameterEKF
+from mavsysid.estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
+from mavsysid.flight.offline.effects import ProcessNoise
+from mavsysid.vehicle.config import load_vehicle
 from scipy.stats import chi2
-
-from estimation.ekf import ParameterEKF
-from estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
-from flight.effects import ProcessNoise
-from vehicle.config import load_vehicle
 
 
 def _filter(config, flight):

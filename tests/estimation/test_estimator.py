@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.vehicle.config import load_vehicle
 
-from estimation.estimator import EstimatorSettings, estimate_parameters
-from vehicle.config import load_vehicle
-from vehicle.errors import InputError
+from mavsysid.errors import InputError
 
 CORE = [0, 2, 3, 4, 5]  # c_T, c_M, j_x, j_y, j_z
 

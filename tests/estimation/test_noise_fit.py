@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-
-from estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
-from estimation.noise_fit import fit_noise_scale
-from flight.effects import ProcessNoise
-from vehicle.config import load_vehicle
+from mavsysid.estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
+from mavsysid.estimation.noise_fit import fit_noise_scale
+from mavsysid.flight.offline.effects import ProcessNoise
+from mavsysid.vehicle.config import load_vehicle
 
 
 def test_fit_recovers_the_injected_noise_level(simulate_flight, prior_config, with_noise):

@@ -10,13 +10,13 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pytest
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.recording import APPLICATION_ID, recording_id_for, write_estimation_rrd
+from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.vehicle.config import PARAMETER_NAMES
 from rerun.chunk import RrdReader
 
-from estimation.flight_data import FlightData
-from estimation.recording import APPLICATION_ID, recording_id_for, write_estimation_rrd
-from estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
 from tests.support.rrd import series, temporal_rows
-from vehicle.config import PARAMETER_NAMES
 
 TRUE_THETA = np.array([8.54858e-6, 0.0176, 1.36777e-7, 0.0347563, 0.0458929, 0.0977])
 SOURCE = "logs/synthetic/pose.csv"

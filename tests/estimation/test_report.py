@@ -10,8 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from estimation.report import (
+from mavsysid.estimation.report import (
     convergence_time,
     format_table,
     result_to_json,
@@ -19,8 +18,8 @@ from estimation.report import (
     updated_vehicle,
     write_estimate_json,
 )
-from estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
-from vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle, save_vehicle
+from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle, save_vehicle
 
 GOLDEN = Path(__file__).parent / "golden"
 TRUE_THETA = np.array([8.54858e-6, 0.0176, 1.36777e-7, 0.0347563, 0.0458929, 0.0977])

@@ -5,9 +5,9 @@ from __future__ import annotations
 import hashlib
 
 import pytest
+from mavsysid.flight.mavlink_setup import load_mavutil, parse_connect, signing_key_from_file
 
-from flight.mavlink_setup import load_mavutil, parse_connect, signing_key_from_file
-from vehicle.errors import InputError
+from mavsysid.errors import InputError
 
 
 def test_signing_key_file(tmp_path):

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from planner.belief import (
+from mavsysid.planner.belief import (
     apply_transfer,
     edge_samples,
     edge_transfer,
@@ -17,10 +16,10 @@ from planner.belief import (
     star,
     steps_transfer,
 )
-from planner.segments import VertexState, connect_fixed, to_piecewise
-from vehicle.config import load_vehicle
-from vehicle.linearization import E_THETA, ErrorStateModel, initial_state_sigma
-from vehicle.trajectory import PiecewisePolynomial, hermite_coefficients
+from mavsysid.planner.segments import VertexState, connect_fixed, to_piecewise
+from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel, initial_state_sigma
+from mavsysid.vehicle.trajectory import PiecewisePolynomial, hermite_coefficients
 
 
 def _random_segments(count: int, seed: int) -> list[PiecewisePolynomial]:

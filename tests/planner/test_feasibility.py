@@ -8,20 +8,26 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-from planner.feasibility import (
+from mavsysid.planner.feasibility import (
     CONSTRAINTS,
     check_rotor_headroom,
     check_segment,
     check_vertex_state,
     rotor_square_range,
 )
-from planner.segments import Segment, VertexState, connect_fixed, connect_free_end, stop_segment
-from vehicle.config import VehicleConfig
-from vehicle.errors import InputError
-from vehicle.flatness import flat_to_state
+from mavsysid.planner.segments import (
+    Segment,
+    VertexState,
+    connect_fixed,
+    connect_free_end,
+    stop_segment,
+)
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.flatness import flat_to_state
 
-# The planner's default flight volume (planner.results.PlannerSettings.box), m.
+from mavsysid.errors import InputError
+
+# The planner's default flight volume (mavsysid.planner.results.PlannerSettings.box), m.
 BOX = np.array([-2.0, -2.0, 0.5, 2.0, 2.0, 2.5])
 # Sizes of velocity … snap (m/s … m/s⁴) and yaw rate, acceleration at derivative scale 1.
 POS_SCALES = np.array([1.0, 4.0, 20.0, 100.0])

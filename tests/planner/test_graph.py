@@ -1,13 +1,12 @@
-"""Belief pruning at a vertex (paper Eq. compare), `planner.graph.Vertex.keep`."""
+"""Belief pruning at a vertex (paper Eq. compare), `mavsysid.planner.graph.Vertex.keep`."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from planner.belief import identity_transfer
-from planner.graph import Belief, Vertex
-from planner.segments import VertexState
+from mavsysid.planner.belief import identity_transfer
+from mavsysid.planner.graph import Belief, Vertex
+from mavsysid.planner.segments import VertexState
 
 
 def _vertex() -> Vertex:

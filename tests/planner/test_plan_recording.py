@@ -9,20 +9,20 @@ from typing import Any
 
 import numpy as np
 import pytest
-from rerun.chunk import RrdReader
-from scipy.spatial.transform import Rotation
-
-from planner.recording import (
+from mavsysid.planner.recording import (
     APPLICATION_ID,
     PATH_RATE,
     recording_id_for,
     time_colors,
     write_plan_rrd,
 )
-from planner.results import PlanResult
+from mavsysid.planner.results import PlanResult
+from mavsysid.vehicle.config import PARAMETER_NAMES
+from rerun.chunk import RrdReader
+from scipy.spatial.transform import Rotation
+
 from tests.support.plans import fake_plan
 from tests.support.rrd import series, temporal_rows
-from vehicle.config import PARAMETER_NAMES
 
 SIGMA = [f"/planner/{kind}/{name}" for kind in ("sigma", "relative_sigma")
          for name in PARAMETER_NAMES]

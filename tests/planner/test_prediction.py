@@ -6,15 +6,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from estimation.estimator import EstimatorSettings, estimate_parameters
-from estimation.readers import load_flight
-from flight.effects import ProcessNoise
-from flight.simulator import SimulationSettings, Simulator
-from planner.results import PlannerSettings
-from planner.rrbt import plan
-from vehicle.config import load_vehicle
-from vehicle.flatness import flat_to_state
+from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.readers import load_flight
+from mavsysid.flight.offline.effects import ProcessNoise
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.rrbt import plan
+from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.flatness import flat_to_state
 
 
 @pytest.mark.parametrize("seed", [0, 1])

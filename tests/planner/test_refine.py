@@ -6,15 +6,21 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from mavsysid.planner.belief import apply_transfer, identity_transfer
+from mavsysid.planner.feasibility import check_segment
+from mavsysid.planner.refine import (
+    FlightPricing,
+    PathRefiner,
+    RefinablePath,
+    StopChoice,
+    split_path,
+)
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.rrbt import GraphSearch, plan
+from mavsysid.planner.segments import VertexState, connect_fixed, to_piecewise
+from mavsysid.vehicle.config import load_vehicle
 
-from planner.belief import apply_transfer, identity_transfer
-from planner.feasibility import check_segment
-from planner.refine import FlightPricing, PathRefiner, RefinablePath, StopChoice, split_path
-from planner.results import PlannerSettings
-from planner.rrbt import GraphSearch, plan
-from planner.segments import VertexState, connect_fixed, to_piecewise
-from vehicle.config import load_vehicle
-from vehicle.errors import InputError
+from mavsysid.errors import InputError
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 import scipy.integrate
 import scipy.linalg
-
-from planner.segments import (
+from mavsysid.planner.segments import (
     Segment,
     VertexState,
     connect_fixed,
@@ -20,7 +19,7 @@ from planner.segments import (
     to_piecewise,
     yaw_rate_cost,
 )
-from vehicle.trajectory import PiecewisePolynomial, Trajectory
+from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
 
 BOX_LO = np.array([-2.0, -2.0, 0.5])
 BOX_HI = np.array([2.0, 2.0, 4.5])  # a 4 m cube

@@ -1,7 +1,8 @@
 """Hidden-truth flights for the diagnosis tests and bench.
 
 `hidden_flight` flies a trajectory in the simulator with catalogue effects
-(`vehicle.model_effects`) made true through `flight.effects.hidden_effect` and returns
+(`mavsysid.vehicle.model_effects`) made true through
+`mavsysid.flight.offline.effects.hidden_effect` and returns
 the pose log as `FlightData`; `ground_trajectory` is an excitation that also descends
 within one rotor diameter of the ground.
 """
@@ -12,16 +13,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-
-from estimation.flight_data import FlightData
-from flight.effects import hidden_effect
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.simulator import SimulationSettings, Simulator
-from vehicle.config import VehicleConfig
-from vehicle.flight_dir import read_meta
-from vehicle.model_effects import ModelEffect
-from vehicle.poselog import read_pose_log
-from vehicle.trajectory import PiecewisePolynomial, Trajectory
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.flight.offline.effects import hidden_effect
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.poselog import read_pose_log
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.model_effects import ModelEffect
+from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
 
 __all__ = ["ground_trajectory", "hidden_flight"]
 

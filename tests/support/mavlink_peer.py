@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from flight.mavlink_setup import load_mavutil
+from mavsysid.flight.mavlink_setup import load_mavutil
 
 __all__ = ["ScriptedVehicle"]
 

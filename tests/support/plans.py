@@ -5,10 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from planner.results import PlannerGraph, PlannerSettings, PlannerStats, PlanResult
-from vehicle.config import load_vehicle
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.planner.results import PlannerGraph, PlannerSettings, PlannerStats, PlanResult
+from mavsysid.vehicle.config import load_vehicle
 
 __all__ = ["fake_plan"]
 

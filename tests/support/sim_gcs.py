@@ -15,10 +15,10 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from flight.loopback_ports import free_tcp_port
-from flight.sim_endpoint import SimEndpoint, SimSettings
-from flight.sim_link import mavlink, mavutil
-from vehicle.config import load_vehicle
+from mavsysid.flight.loopback_ports import free_tcp_port
+from mavsysid.flight.simvehicle.endpoint import SimEndpoint, SimSettings
+from mavsysid.flight.simvehicle.link import mavlink, mavutil
+from mavsysid.vehicle.config import load_vehicle
 
 __all__ = ["Gcs", "running_sim"]
 

@@ -15,10 +15,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from flight.excitation import ExcitationSpec, excitation_trajectory
-from flight.mavlink_setup import load_mavutil
-from planner.trajectory_file import trajectory_file_for, write_trajectory_file
-from vehicle.config import load_vehicle
+from mavsysid.flight.mavlink_setup import load_mavutil
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+from mavsysid.vehicle.config import load_vehicle
 
 __all__ = [
     "BOX",

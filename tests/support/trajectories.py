@@ -5,10 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
-from planner.trajectory_file import trajectory_file_for, write_trajectory_file
-from vehicle.config import VehicleConfig
-from vehicle.trajectory import PiecewisePolynomial
+from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 __all__ = ["ground_descent", "write_trajectory_json"]
 

@@ -8,8 +8,7 @@ import math
 from pathlib import Path
 
 import pytest
-
-from vehicle.config import (
+from mavsysid.vehicle.config import (
     GRAVITY,
     SHIPPED_VEHICLES,
     Limits,
@@ -19,7 +18,8 @@ from vehicle.config import (
     save_vehicle,
     vehicle_to_toml,
 )
-from vehicle.errors import ConfigError, InputError
+
+from mavsysid.errors import ConfigError, InputError
 
 BAD_VEHICLES = Path(__file__).resolve().parents[1] / "data" / "bad_vehicles"
 
@@ -94,7 +94,7 @@ def test_shipped_config_hovers_with_margin(name: str) -> None:
 
 
 def test_firefly_matches_design_reference_table() -> None:
-    """firefly.toml holds exactly the DESIGN.md reference values (AscTec Firefly)."""
+    """firefly.toml holds exactly the docs/architecture.md reference values (AscTec Firefly)."""
     config = load_vehicle("firefly")
     assert config.mass == 1.56779
     assert config.rotor_count == 6

@@ -6,10 +6,10 @@ import dataclasses
 from pathlib import Path
 
 import pytest
+from mavsysid.vehicle.config import load_vehicle, save_vehicle, vehicle_to_toml
+from mavsysid.vehicle.model_effects import GroundEffect, MotorLag, Wind
 
-from vehicle.config import load_vehicle, save_vehicle, vehicle_to_toml
-from vehicle.errors import ConfigError
-from vehicle.model_effects import GroundEffect, MotorLag, Wind
+from mavsysid.errors import ConfigError
 
 FIREFLY = Path(__file__).resolve().parents[2] / "vehicle" / "configs" / "firefly.toml"
 

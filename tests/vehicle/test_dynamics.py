@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from vehicle.allocation import allocation_matrix, allocation_pinv, rotor_speeds_squared
-from vehicle.config import GRAVITY
-from vehicle.dynamics import ATT, POS, RATE, VEL, hover_state, state_derivative
-from vehicle.rotation import quat_exp, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.allocation import allocation_matrix, allocation_pinv, rotor_speeds_squared
+from mavsysid.vehicle.config import GRAVITY
+from mavsysid.vehicle.dynamics import ATT, POS, RATE, VEL, hover_state, state_derivative
+from mavsysid.vehicle.rotation import quat_exp, quat_multiply, quat_to_matrix
 
 
 def _hover_speeds(cfg, theta=None):

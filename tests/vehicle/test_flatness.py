@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from vehicle.allocation import allocation_matrix
-from vehicle.config import GRAVITY
-from vehicle.dynamics import ATT, POS, VEL, state_derivative
-from vehicle.flatness import flat_to_state
-from vehicle.rotation import quat_conjugate, quat_log, quat_multiply, quat_to_matrix
-from vehicle.trajectory import FlatOutputs
+from mavsysid.vehicle.allocation import allocation_matrix
+from mavsysid.vehicle.config import GRAVITY
+from mavsysid.vehicle.dynamics import ATT, POS, VEL, state_derivative
+from mavsysid.vehicle.flatness import flat_to_state
+from mavsysid.vehicle.rotation import quat_conjugate, quat_log, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.trajectory import FlatOutputs
 
 
 def _flat_at(traj, t, cfg):
@@ -96,7 +95,7 @@ def test_body_rates_and_angular_acceleration_are_derivatives(firefly, aggressive
 @pytest.mark.parametrize("yaw", [0.0, 2.0, -3.0])
 def test_hover_flat_state_is_level_with_given_yaw(firefly, yaw):
     """A resting flat state maps to level attitude with the requested yaw and hover thrust."""
-    from vehicle.trajectory import FlatOutputs
+    from mavsysid.vehicle.trajectory import FlatOutputs
 
     z = np.zeros((1, 3))
     flat = FlatOutputs(z + [1, 2, 3], z, z, z, z, np.array([yaw]), np.zeros(1), np.zeros(1))

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from vehicle.frames import (
+from mavsysid.vehicle.frames import (
     enu_to_ned,
     euler_ned_to_quaternion,
     flu_to_frd,
@@ -16,7 +15,7 @@ from vehicle.frames import (
     yaw_enu_to_ned,
     yaw_ned_to_enu,
 )
-from vehicle.rotation import quat_exp, quat_to_matrix
+from mavsysid.vehicle.rotation import quat_exp, quat_to_matrix
 
 SWAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # ENU ↔ NED
 FLIP = np.diag([1.0, -1.0, -1.0])  # FLU ↔ FRD

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from vehicle.dynamics import ATT, RATE, state_derivative
-from vehicle.flatness import flat_to_state
-from vehicle.linearization import (
+from mavsysid.vehicle.dynamics import ATT, RATE, state_derivative
+from mavsysid.vehicle.flatness import flat_to_state
+from mavsysid.vehicle.linearization import (
     E_ATT,
     E_POS,
     E_RATE,
@@ -16,7 +15,7 @@ from vehicle.linearization import (
     ERROR_DIM,
     ErrorStateModel,
 )
-from vehicle.rotation import quat_conjugate, quat_exp, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.rotation import quat_conjugate, quat_exp, quat_multiply, quat_to_matrix
 
 _BLOCKS = (E_POS, E_VEL, E_ATT, E_RATE, E_THETA)
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from vehicle.rotation import (
+from mavsysid.vehicle.rotation import (
     exp_kernel,
     log_kernel,
     matrix_to_quat,

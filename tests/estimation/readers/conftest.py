@@ -21,11 +21,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from estimation.flight_data import FlightData
-from vehicle.config import VehicleConfig
-from vehicle.constants import GRAVITY
-from vehicle.rotation import matrix_to_quat, quat_exp, quat_to_matrix
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.rotation import matrix_to_quat, quat_exp, quat_to_matrix
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 

@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from estimation.readers import load_flight
-from vehicle.config import VehicleConfig
-from vehicle.rotation import quat_exp, quat_multiply
+from mavsysid.estimation.readers import load_flight
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.rotation import quat_exp, quat_multiply
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 
@@ -24,7 +23,7 @@ def _write_mocap(path: Path, truth: Truth, noisy: bool = True) -> Path:
     t_log = 19.0 + PERIOD * np.arange(600)
     x = truth(t_log)
     p, q = x["position"], x["quaternion"]
-    if noisy:  # DESIGN.md: 0.5 mm, 0.1° (σ)
+    if noisy:  # docs/architecture.md: 0.5 mm, 0.1° (σ)
         p = p + rng.normal(0.0, 0.0005, p.shape)
         q = quat_multiply(q, quat_exp(rng.normal(0.0, np.radians(0.1), (q.shape[0], 3))))
     table = np.column_stack([t_log - OFFSET, p, q])

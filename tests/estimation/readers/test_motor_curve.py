@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from estimation.readers.motor_curve import (
+from mavsysid.estimation.readers.motor_curve import (
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
     throttle_from_pwm,
 )
-from vehicle.config import VehicleConfig
+from mavsysid.vehicle.config import VehicleConfig
 
 
 @pytest.mark.parametrize(("u", "expo", "expected"), [

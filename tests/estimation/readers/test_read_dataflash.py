@@ -8,9 +8,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from estimation.readers import load_flight
-from vehicle.config import VehicleConfig
+from mavsysid.estimation.readers import load_flight
+from mavsysid.vehicle.config import VehicleConfig
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 

@@ -9,12 +9,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from mavsysid.estimation.readers import load_flight
+from mavsysid.formats.poselog import PoseLog
+from mavsysid.formats.poselog_writer import write_pose_log
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
-from estimation.readers import load_flight
-from vehicle.config import VehicleConfig, load_vehicle
-from vehicle.errors import LogFormatError
-from vehicle.poselog import PoseLog
-from vehicle.poselog_writer import write_pose_log
+from mavsysid.errors import LogFormatError
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 TRUTH = {"parameters": {"c_T": 8.6e-6, "c_D": 0.018, "c_M": 1.4e-7, "j_x": 0.035,

@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from mavsysid.estimation.readers import load_flight
+from mavsysid.vehicle.config import VehicleConfig
 
-from estimation.readers import load_flight
-from vehicle.config import VehicleConfig
-from vehicle.errors import LogFormatError
+from mavsysid.errors import LogFormatError
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 

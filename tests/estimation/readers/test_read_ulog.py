@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from estimation.readers import load_flight
-from vehicle.config import VehicleConfig
+from mavsysid.estimation.readers import load_flight
+from mavsysid.vehicle.config import VehicleConfig
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mavsysid.estimation.readers import load_flight
+from mavsysid.vehicle.config import VehicleConfig
 
-from estimation.readers import load_flight
-from vehicle.config import VehicleConfig
-from vehicle.errors import InputError, LogFormatError
+from mavsysid.errors import InputError, LogFormatError
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 Rows = dict[str, list[dict[str, float]]]

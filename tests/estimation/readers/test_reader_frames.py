@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-
-from estimation.readers.frames import interpolate_quaternions
-from vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
-from vehicle.rotation import quat_exp, quat_normalize, quat_to_matrix
+from mavsysid.estimation.readers.frames import interpolate_quaternions
+from mavsysid.vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
+from mavsysid.vehicle.rotation import quat_exp, quat_normalize, quat_to_matrix
 
 SWAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # ENU ↔ NED
 FLIP = np.diag([1.0, -1.0, -1.0])  # FLU ↔ FRD

@@ -1,0 +1,128 @@
+"""The candidate library: catalogue effects as regressors or profiles of the residual.
+
+Every candidate is a `mavsysid.vehicle.model_effects` effect; nothing here re-derives its physics.
+With r(v) the residual (`ResidualProblem.residual`) with the effect at parameter values
+v, a *linear* candidate contributes the columns
+
+    A_j = −(r(s_j e_j) − r(0)) / s_j          (sensitivity, exact when r is linear in v)
+
+so that r(0) ≈ A v (the effect explains the residual with v). The same finite
+difference of the model gives the θ columns (relative step) that every regression
+carries, so a candidate is never credited with what a small change of θ explains.
+A *profile* candidate (motor lag, pose delay, ground effect: nonlinear in their one
+parameter) is evaluated on a grid of values, each giving a new residual.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from mavsysid.discrepancy.residuals import ResidualProblem
+from mavsysid.vehicle.model_effects import EFFECTS, ModelEffect
+
+__all__ = [
+    "PROFILE_GRIDS",
+    "Candidate",
+    "candidate_library",
+    "effect_columns",
+    "theta_columns",
+]
+
+#: Search grids of the profile candidates (SI), physically plausible ranges.
+PROFILE_GRIDS: dict[str, np.ndarray] = {
+    "motor_lag": np.arange(0.0, 0.1201, 0.006),
+    "pose_delay": np.arange(0.0, 0.0801, 0.005),
+    "ground_effect": np.arange(0.0, 0.2501, 0.0125),
+}
+
+#: Relative step of the θ finite differences.
+_THETA_STEP = 1e-3
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate effect of the library.
+
+    Attributes
+    ----------
+    effect : type of ModelEffect
+        The catalogue class (name, title, description, parameters).
+    kind : {"linear", "profile"}
+        How it is fitted: regression columns, or a one-parameter profile search.
+    grid : ndarray or None
+        Profile grid, SI (profile candidates only).
+    """
+
+    effect: type[ModelEffect]
+    kind: str
+    grid: np.ndarray | None = None
+
+    @property
+    def name(self) -> str:
+        return self.effect.name
+
+    @property
+    def size(self) -> int:
+        """Number of parameters."""
+        return len(self.effect.parameters)
+
+
+def candidate_library(names: Sequence[str] | None = None) -> tuple[Candidate, ...]:
+    """The candidates (all nine catalogue effects by default), in catalogue order."""
+    chosen = list(EFFECTS) if names is None else list(names)
+    return tuple(
+        Candidate(EFFECTS[n], "profile", PROFILE_GRIDS[n]) if n in PROFILE_GRIDS
+        else Candidate(EFFECTS[n], "linear") for n in chosen
+    )
+
+
+def theta_columns(problem: ResidualProblem, fixed: Sequence[ModelEffect], r0: np.ndarray
+                  ) -> np.ndarray:
+    """∂r/∂θ as regressors A (N, 6, 6): r(θ) ≈ r(θ̂) − A Δθ, Δθ in SI.
+
+    Parameters
+    ----------
+    problem : ResidualProblem
+    fixed : sequence of ModelEffect
+        Effects already in the model.
+    r0 : ndarray, shape (N, 6)
+        The residual at θ̂ with ``fixed``.
+    """
+    theta = problem.theta
+    cols = np.empty(r0.shape + (6,))
+    for j in range(6):
+        step = _THETA_STEP * (abs(theta[j]) if theta[j] != 0.0 else 1e-3)
+        shifted = theta.copy()
+        shifted[j] += step
+        cols[..., j] = -(problem.residual(fixed, shifted) - r0) / step
+    return cols
+
+
+def effect_columns(problem: ResidualProblem, candidate: Candidate,
+                   fixed: Sequence[ModelEffect], r0: np.ndarray,
+                   at: ModelEffect | None = None) -> np.ndarray:
+    """Regressors of a linear candidate, shape (N, 6, P): r(v₀) − r(v₀ + Δv) ≈ A Δv, SI.
+
+    Parameters
+    ----------
+    problem : ResidualProblem
+    candidate : Candidate
+    fixed : sequence of ModelEffect
+        The other effects in the model.
+    r0 : ndarray, shape (N, 6)
+        The residual with ``fixed`` (and ``at``).
+    at : ModelEffect, optional
+        The candidate's current values v₀ (zero when not given): the columns are the
+        sensitivity there, so a fit gives the increment Δv (Gauss–Newton).
+    """
+    cls = candidate.effect
+    v0 = np.zeros(candidate.size) if at is None else np.asarray(at.values, float)
+    cols = np.empty(r0.shape + (candidate.size,))
+    for j, p in enumerate(cls.parameters):
+        v = v0.copy()
+        v[j] += p.scale
+        effect = cls(**dict(zip(cls.parameter_names(), map(float, v), strict=True)))
+        cols[..., j] = -(problem.residual([*fixed, effect]) - r0) / p.scale
+    return cols

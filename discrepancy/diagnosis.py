@@ -1,0 +1,399 @@
+"""The model-discrepancy workflow behind ``mavsysid diagnose``.
+
+1. *Where they disagree*: the identified model is replayed along the logged rotor speeds
+   and compared with the accelerations of the smoothed pose (`mavsysid.discrepancy.residuals`):
+   residual per axis, its whiteness (Ljung–Box), the time windows and flight regimes
+   (speed, tilt, yaw rate, thrust) where it is large, and the EKF's NIS.
+2. *Which effect*: forward selection over the catalogue (`mavsysid.discrepancy.selection`) on the
+   first 70 % of the flight.
+3. *Add it*: the fitted effects and θ re-fitted with them form the augmented model.
+4. *The gap*: residual RMS per axis, Ljung–Box p-values and NIS before and after, on the
+   held-out last 30 % of the flight.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from mavsysid.discrepancy.candidates import candidate_library
+from mavsysid.discrepancy.regression import fit_theta
+from mavsysid.discrepancy.residuals import ResidualProblem, SmoothedPose, SmootherSettings
+from mavsysid.discrepancy.selection import (
+    CandidateScore,
+    FittedEffect,
+    SelectionSettings,
+    Tie,
+    forward_select,
+)
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.model_effects import ModelEffect
+from scipy.stats import chi2
+from statsmodels.stats.diagnostic import acorr_ljungbox
+
+from mavsysid.errors import InputError
+
+__all__ = [
+    "MASS_NOTE",
+    "AxisStats",
+    "Diagnosis",
+    "DiagnosisSettings",
+    "Gap",
+    "Where",
+    "diagnose_flight",
+    "reestimate",
+]
+
+#: docs/architecture.md: why a wrong mass cannot be seen from pose and rotor speeds.
+MASS_NOTE = ("a wrong mass cannot be detected from pose and rotor speeds: scaling the mass, "
+             "c_T, c_M and the inertia by one factor leaves the motion unchanged, so a mass "
+             "error is absorbed into θ; weigh the vehicle")
+
+#: χ²(6) 95 % band of the NIS of a consistent filter with 6 measurement dimensions.
+NIS_BAND = (float(chi2.ppf(0.025, 6)), float(chi2.ppf(0.975, 6)))
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """Choices of the diagnosis.
+
+    Attributes
+    ----------
+    smoother : SmootherSettings
+        0.6 s keeps the 0.5 mm / 0.1° noise of the second derivatives near 5 mm/s² and
+        0.02 rad/s² while passing the rotors' effect up to ≈ 2 Hz, which is what
+        separates a motor lag from a pose delay (they differ in attenuation only).
+    selection : SelectionSettings
+    holdout : float
+        Fraction of the flight (its end) kept out of all fitting.
+    candidates : tuple of str or None
+        Candidate effect names (all nine by default).
+    window : float
+        Length of the time windows of the "where" report, s.
+    """
+
+    smoother: SmootherSettings = field(default_factory=SmootherSettings)
+    selection: SelectionSettings = field(default_factory=SelectionSettings)
+    holdout: float = 0.3
+    candidates: tuple[str, ...] | None = None
+    window: float = 1.0
+
+
+@dataclass(frozen=True)
+class AxisStats:
+    """Residual statistics per axis (order `AXIS_NAMES`) on one set of samples.
+
+    Attributes
+    ----------
+    rms : ndarray, shape (6,)
+        m/s² (forces) and rad/s² (angular accelerations).
+    ljung_box_p : ndarray, shape (6,)
+        p-value of the Ljung–Box test (10 lags) on samples one smoother window apart.
+    nis_mean : float or None
+        Mean NIS of the EKF over these samples (None if not computed).
+    nis_outside : float or None
+        Fraction of the NIS outside its χ²(6) 95 % band.
+    """
+
+    rms: np.ndarray
+    ljung_box_p: np.ndarray
+    nis_mean: float | None = None
+    nis_outside: float | None = None
+
+
+@dataclass(frozen=True)
+class Gap:
+    """The gap between model and measurement before and after the augmentation.
+
+    Attributes
+    ----------
+    before, after : AxisStats
+        On the held-out samples.
+    flagged_axes : tuple of int
+        Axes on which the named effects act (their fitted contribution at least the size
+        of what remains): the headline is computed on these.
+    shrink : float
+        1 − RMS_after / RMS_before over the flagged axes (each axis in units of its
+        remaining noise), or 0 with no effect.
+    bic_before, bic_after : float
+        Effective BIC of the base and augmented regressions on the training data.
+    """
+
+    before: AxisStats
+    after: AxisStats
+    flagged_axes: tuple[int, ...]
+    shrink: float
+    bic_before: float
+    bic_after: float
+
+
+@dataclass(frozen=True)
+class Where:
+    """Where the base model's residual is large or not white (training and held-out).
+
+    Attributes
+    ----------
+    windows : tuple of (float, float, int, float)
+        Time windows (start s, end s, worst axis, normalised RMS) with a residual more
+        than twice the noise level, largest first (at most 5).
+    regimes : dict
+        ``{regime: {"bins": [lo, hi] edges…, "rms": [[6 values] per bin]}}`` for
+        ``speed`` (m/s), ``tilt`` (rad), ``yaw_rate`` (rad/s), ``thrust`` (N), the
+        normalised RMS per axis in each tercile of the regime variable.
+    worst_regime : tuple of (str, str) or None
+        The regime and tercile where the residual is largest (e.g. ("speed", "high")).
+    ljung_box_p : ndarray, shape (6,)
+        Whiteness of the base residual on the training data.
+    noise : ndarray, shape (6,)
+        The noise level used to normalise, per axis.
+    """
+
+    windows: tuple[tuple[float, float, int, float], ...]
+    regimes: dict
+    worst_regime: tuple[str, str] | None
+    ljung_box_p: np.ndarray
+    noise: np.ndarray
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """The result of `diagnose_flight`.
+
+    Attributes
+    ----------
+    effects : tuple of FittedEffect
+        Named effects, most important first; empty = no significant discrepancy.
+    ties : tuple of Tie
+    scores : tuple of CandidateScore
+    gap : Gap
+    where : Where
+    theta_identified : ndarray, shape (6,)
+        θ the diagnosis started from (the estimate, or the config's).
+    theta_before, theta_after : ndarray, shape (6,)
+        θ re-fitted on the training data without and with the named effects.
+    augmented_effects : tuple of ModelEffect
+        The config's known effects plus the named ones: the augmented model.
+    t : ndarray, shape (N,)
+        Sample times, s.
+    residual_before, residual_after : ndarray, shape (N, 6)
+        Residuals of the base and augmented models over the whole flight.
+    pose : SmoothedPose
+    used : ndarray of bool, shape (N,)
+        Samples away from the smoother's edges.
+    split_time : float
+        Start of the held-out part, s.
+    notes : tuple of str
+    """
+
+    effects: tuple[FittedEffect, ...]
+    ties: tuple[Tie, ...]
+    scores: tuple[CandidateScore, ...]
+    gap: Gap
+    where: Where
+    theta_identified: np.ndarray
+    theta_before: np.ndarray
+    theta_after: np.ndarray
+    augmented_effects: tuple[ModelEffect, ...]
+    t: np.ndarray
+    residual_before: np.ndarray
+    residual_after: np.ndarray
+    pose: SmoothedPose
+    used: np.ndarray
+    split_time: float
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def significant(self) -> bool:
+        """True when at least one effect was named."""
+        return bool(self.effects)
+
+
+def _ljung_box(r: np.ndarray, step: int) -> np.ndarray:
+    """Ljung–Box p-value (10 lags, or fewer on short data) per axis of r[::step]."""
+    x = r[::max(step, 1)]
+    lags = max(1, min(10, len(x) // 5))
+    out = np.empty(r.shape[1])
+    for a in range(r.shape[1]):
+        if len(x) < 8 or np.allclose(x[:, a], x[0, a]):
+            out[a] = np.nan
+            continue
+        out[a] = float(acorr_ljungbox(x[:, a], lags=[lags])["lb_pvalue"].iloc[0])
+    return out
+
+
+def _rms(r: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(r**2, axis=0))
+
+
+def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect]
+         ) -> np.ndarray:
+    """The parameter EKF's NIS per sample with ``effects`` in the model at their values.
+
+    The estimator's effect channels (`mavsysid.estimation.estimator.estimate_with_effects`, held
+    values, filter only) carry every catalogue effect, wrenches included.
+    """
+    from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
+
+    result = estimate_with_effects(flight, config, tuple(effects),
+                                   EstimatorSettings(refine=False), fit_effects=False)
+    return result.history.nis
+
+
+def _nis_stats(nis: np.ndarray | None, rows: np.ndarray) -> tuple[float | None, float | None]:
+    if nis is None:
+        return None, None
+    x = nis[rows]
+    x = x[np.isfinite(x)]
+    outside = np.mean((x < NIS_BAND[0]) | (x > NIS_BAND[1]))
+    return float(np.mean(x)), float(outside)
+
+
+def _where(problem: ResidualProblem, pose: SmoothedPose, r: np.ndarray, used: np.ndarray,
+           noise: np.ndarray, train: np.ndarray, window: float) -> Where:
+    t = problem.flight.t
+    z = r / noise
+    windows = []
+    for t0 in np.arange(t[used][0], t[used][-1] - 0.5 * window, window):
+        m = used & (t >= t0) & (t < t0 + window)
+        if m.sum() < 3:
+            continue
+        per_axis = _rms(z[m])
+        total = float(np.sqrt(np.mean(per_axis**2)))
+        if total > 2.0:
+            windows.append((float(t0), float(t0 + window), int(np.argmax(per_axis)), total))
+    windows.sort(key=lambda w: -w[3])
+    n = problem.flight.rotor_speeds
+    rates = pose.rates
+    R = pose.rotation()
+    variables = {
+        "speed": np.linalg.norm(pose.velocity, axis=1),
+        "tilt": np.arccos(np.clip(R[:, 2, 2], -1.0, 1.0)),
+        "yaw_rate": np.abs(rates[:, 2]),
+        "thrust": problem.theta[0] * np.sum(n**2, axis=1),
+    }
+    regimes: dict = {}
+    worst, worst_value = None, -np.inf
+    for name, v in variables.items():
+        edges = np.quantile(v[used], [0.0, 1 / 3, 2 / 3, 1.0])
+        rms_bins = []
+        for i, label in enumerate(("low", "mid", "high")):
+            m = used & (v >= edges[i]) & (v <= edges[i + 1])
+            per_axis = _rms(z[m]) if m.any() else np.full(6, np.nan)
+            rms_bins.append(per_axis)
+            value = float(np.sqrt(np.nanmean(per_axis**2)))
+            if value > worst_value:
+                worst, worst_value = (name, label), value
+        regimes[name] = {"edges": edges, "rms": np.array(rms_bins)}
+    return Where(tuple(windows[:5]), regimes, worst,
+                 _ljung_box(r[train], problem.window_samples), noise)
+
+
+def diagnose_flight(
+    flight: FlightData, config: VehicleConfig, theta: np.ndarray | None = None,
+    settings: DiagnosisSettings | None = None, known_effects: Sequence[ModelEffect] = (),
+    progress: Callable[[str], None] | None = None, with_nis: bool = True,
+) -> Diagnosis:
+    """Find, name and fit what the model gets wrong on a flight; show the gap shrink.
+
+    Parameters
+    ----------
+    flight : FlightData
+    config : VehicleConfig
+        Mass and geometry (known); its θ is the starting point if ``theta`` is None.
+    theta : ndarray, shape (6,), optional
+        The identified θ (an ``estimate`` result), SI.
+    settings : DiagnosisSettings, optional
+    known_effects : sequence of ModelEffect
+        Effects already in the model (not candidates).
+    progress : callable, optional
+        Receives one-line progress messages.
+    with_nis : bool
+        Run the parameter EKF for the NIS (needs its compiled kernels).
+
+    Returns
+    -------
+    Diagnosis
+    """
+    settings = settings or DiagnosisSettings()
+    if flight.rotor_count != config.rotor_count:
+        raise InputError(f"{flight.source}: {flight.rotor_count} rotor-speed columns, but "
+                         f"vehicle {config.name} has {config.rotor_count} rotors")
+    if not 0.05 <= settings.holdout <= 0.5:
+        raise InputError(f"held-out fraction {settings.holdout:g}: expected 0.05 … 0.5")
+    theta0 = config.theta.copy() if theta is None else np.asarray(theta, float).reshape(6)
+    if not np.all(np.isfinite(theta0)) or theta0[0] <= 0.0 or np.any(theta0[3:] <= 0.0):
+        raise InputError("θ to diagnose must be finite with c_T > 0 and a positive inertia")
+    known = tuple(known_effects)
+    names = settings.candidates
+    known_names = {e.name for e in known}
+    library = tuple(c for c in candidate_library(names) if c.name not in known_names)
+    problem = ResidualProblem(flight, config, theta0, settings.smoother, known)
+    used = problem.keep()
+    t = flight.t
+    split = float(t[0] + (1.0 - settings.holdout) * flight.duration)
+    train = np.flatnonzero(used & (t < split))
+    test = np.flatnonzero(used & (t >= split + settings.smoother.window))
+    if len(train) < 10 * problem.window_samples or len(test) < 2 * problem.window_samples:
+        raise InputError(f"{flight.source}: {flight.duration:.1f} s is too short to diagnose "
+                         "(needs ≈ 10 s: training, held-out and smoother edges)")
+    if progress:
+        progress("fitting θ to the flight's accelerations")
+    base, weights = fit_theta(problem, train)
+    selection = forward_select(base, library, train, weights, settings.selection, progress)
+    fitted = tuple(f.effect for f in selection.effects)
+    measured, model, pose = base.evaluate()
+    r_before = measured - model
+    r_after = base.residual(fitted, selection.theta_after)
+    nis_before = nis_after = None
+    if with_nis:
+        nis_before = _nis(flight, config, known)
+        nis_after = _nis(flight, config, (*known, *fitted)) if fitted else nis_before
+    before = AxisStats(_rms(r_before[test]), _ljung_box(r_before[test], base.window_samples),
+                       *_nis_stats(nis_before, test))
+    after = AxisStats(_rms(r_after[test]), _ljung_box(r_after[test], base.window_samples),
+                      *_nis_stats(nis_after, test))
+    noise = _rms(r_after[train])
+    flagged: tuple[int, ...] = ()
+    shrink = 0.0
+    if fitted:
+        contribution = _rms((r_before - r_after)[train])
+        flagged = tuple(int(a) for a in np.flatnonzero(contribution >= noise))
+        if not flagged:
+            flagged = (int(np.argmax(contribution / noise)),)
+        idx = list(flagged)
+        b = np.sqrt(np.sum((before.rms[idx] / noise[idx]) ** 2))
+        a = np.sqrt(np.sum((after.rms[idx] / noise[idx]) ** 2))
+        shrink = float(1.0 - a / b)
+    gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
+    where = _where(base, pose, r_before, used, noise, train, settings.window)
+    notes = [MASS_NOTE]
+    return Diagnosis(
+        effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
+        where=where, theta_identified=theta0, theta_before=selection.theta_before,
+        theta_after=selection.theta_after, augmented_effects=(*known, *fitted), t=t,
+        residual_before=r_before, residual_after=r_after, pose=pose, used=used,
+        split_time=split, notes=tuple(notes),
+    )
+
+
+def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
+               refine: bool = False) -> Any:
+    """Step 3 with the estimator: θ and ``effects``' parameters estimated jointly.
+
+    Runs `mavsysid.estimation.estimator.estimate_with_effects` (the EKF, and the batch refinement
+    if ``refine``) with ``effects`` as the model's complete list (a diagnosis'
+    ``augmented_effects``, or only the known ones for the comparison); their values
+    are the start of the fit.
+
+    Returns
+    -------
+    EstimationResult
+        (`mavsysid.estimation.results`; imported lazily, as the estimator loads compiled kernels.)
+    """
+    from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
+
+    return estimate_with_effects(flight, config, tuple(effects),
+                                 EstimatorSettings(refine=refine), fit_effects=True)

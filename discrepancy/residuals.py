@@ -1,0 +1,390 @@
+"""The model replayed along a flight and compared with the measurement, in acceleration space.
+
+The *equation-error residual* of a flight, per sample and axis, is
+
+    r = [f_meas − F_B/m,  ω̇_meas − J⁻¹(M_B − ω × J ω)]       (paper Eqs. newton, euler)
+
+with f_meas = Rᵀ(a − g) the body-frame specific force (m/s²) and ω̇_meas the angular
+acceleration (rad/s²), both derived from the pose log by a Savitzky–Golay smoother
+(`smooth_pose`), and F_B, M_B the model's wrench (paper Eq. drag plus the given
+`ModelEffect` wrenches) at the smoothed state and the logged rotor speeds. The model
+prediction goes through the same smoother (order-0 filter, same window) so that the
+smoother's attenuation of fast content applies to both sides and cancels.
+
+Effects enter through their catalogue channels: ``corrected_pose`` changes the measured
+side (marker and CoG offsets, pose delay), ``acting_rotor_speeds`` the speeds the model
+uses (motor lag), ``wrench`` the model's force and torque. The residual is linear in most
+effect parameters, which is what `mavsysid.discrepancy.candidates` exploits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property, lru_cache
+
+import numpy as np
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.model_effects import EffectInputs, ModelEffect, total_wrench
+from mavsysid.vehicle.rotation import quat_multiply, quat_to_matrix
+from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs
+
+from mavsysid.errors import InputError
+
+__all__ = [
+    "AXIS_NAMES",
+    "AXIS_UNITS",
+    "ResidualProblem",
+    "SmoothedPose",
+    "SmootherSettings",
+    "acceleration_kernel",
+    "model_accelerations",
+    "noise_gain",
+    "smooth_pose",
+]
+
+#: The six residual axes: body specific force (m/s²) and angular acceleration (rad/s²).
+AXIS_NAMES = ("f_x", "f_y", "f_z", "dw_x", "dw_y", "dw_z")
+AXIS_UNITS = ("m/s²",) * 3 + ("rad/s²",) * 3
+
+
+@dataclass(frozen=True)
+class SmootherSettings:
+    """The Savitzky–Golay smoother that turns poses into accelerations.
+
+    Attributes
+    ----------
+    window : float
+        Window length, s. 0.6 s (cubic) takes the 0.5 mm / 0.1° motion-capture noise of
+        the second derivatives down to ≈ 5 mm/s² and 0.02 rad/s² and still passes the
+        rotors' influence up to ≈ 2 Hz (0.15 s: 0.15 m/s², too noisy for the effects).
+    polyorder : int
+        Degree of the local polynomial (≥ 2 for a second derivative).
+    trim : float
+        Time cut off each end of the flight, s: the smoother's edges are one-sided.
+    input_window : float
+        Window of the light smoother that gives the model its inputs (attitude, rates,
+        velocity), s. The model's force is rotated to the world frame with this attitude:
+        the long window's attitude lags the true one by a fraction of a milliradian,
+        which times g is a spurious force of a few mm/s² — the size of the effects.
+    """
+
+    window: float = 0.6
+    polyorder: int = 3
+    trim: float = 0.5
+    input_window: float = 0.1
+
+    def samples(self, dt: float) -> int:
+        """Odd window length in samples for sample time ``dt``."""
+        n = max(self.polyorder + 2, round(self.window / dt))
+        return n + 1 - n % 2
+
+
+@dataclass(frozen=True)
+class SmoothedPose:
+    """A pose log smoothed and differentiated (N samples, uniform time step).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        s.
+    position : ndarray, shape (N, 3)
+        m, world ENU.
+    quaternion : ndarray, shape (N, 4)
+        Unit, body → world.
+    velocity : ndarray, shape (N, 3)
+        World velocity, m/s.
+    acceleration : ndarray, shape (N, 3)
+        World acceleration, m/s².
+    rates : ndarray, shape (N, 3)
+        Body rates ω, rad/s.
+    angular_acceleration : ndarray, shape (N, 3)
+        ω̇ in the body frame, rad/s².
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    rates: np.ndarray
+    angular_acceleration: np.ndarray
+
+    def rotation(self) -> np.ndarray:
+        """R(q) body → world, shape (N, 3, 3)."""
+        return self._rotation
+
+    @cached_property
+    def _rotation(self) -> np.ndarray:
+        # Read by every residual evaluation of the cached log smoothing.
+        rotation = quat_to_matrix(self.quaternion)
+        rotation.setflags(write=False)
+        return rotation
+
+    def velocity_body(self) -> np.ndarray:
+        """v_B = Rᵀ v, shape (N, 3), m/s."""
+        return np.einsum("nji,nj->ni", self.rotation(), self.velocity)
+
+    def specific_force(self) -> np.ndarray:
+        """f = Rᵀ(a − g), g = [0, 0, −9.81]: what the rotors and drag must produce, m/s²."""
+        a = self.acceleration + np.array([0.0, 0.0, GRAVITY])
+        return np.einsum("nji,nj->ni", self.rotation(), a)
+
+
+def _uniform_step(t: np.ndarray) -> float:
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    if not step > 0.0 or np.max(np.abs(dt - step)) > 0.05 * step:
+        raise InputError("the pose log is not sampled at a uniform rate (jitter > 5 %); "
+                         "the diagnosis smoother needs uniform samples")
+    return step
+
+
+def smooth_pose(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
+                settings: SmootherSettings) -> SmoothedPose:
+    """Savitzky–Golay smoothing and differentiation of a uniformly sampled pose log.
+
+    The quaternion's components are smoothed as a signal (after making its sign
+    continuous); ω = 2 Im(q* ⊗ q̇) and ω̇ = 2 Im(q* ⊗ q̈) (from q̇ = ½ q ⊗ [0, ω]: the
+    ω ⊗ ω term of q̈ is real, so it drops out of the imaginary part).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+    position : ndarray, shape (N, 3)
+    quaternion : ndarray, shape (N, 4)
+    settings : SmootherSettings
+
+    Returns
+    -------
+    SmoothedPose
+    """
+    dt = _uniform_step(t)
+    w = settings.samples(dt)
+    if len(t) < 2 * w:
+        raise InputError(f"{len(t)} pose samples: the diagnosis needs at least {2 * w}")
+    q = np.array(quaternion, dtype=float)
+    # Sign continuity: q and −q are the same attitude, but not the same signal.
+    flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2
+    q[flips == 1] *= -1.0
+
+    signal = np.hstack([q, np.asarray(position, float)])
+    # savgol_filter(mode="mirror") with the kernels computed once. Edge handling does not
+    # matter (the edges are trimmed, `ResidualProblem.keep`), so the cheap mirror mode
+    # rather than the default per-edge polynomial fits.
+    smooth, first, second = (convolve1d(signal, _savgol_kernel(w, settings.polyorder, d, dt),
+                                        axis=0, mode="mirror") for d in (0, 1, 2))
+    qs, qd, qdd = smooth[:, :4], first[:, :4], second[:, :4]
+    norm = np.linalg.norm(qs, axis=1, keepdims=True)
+    qs, qd, qdd = qs / norm, qd / norm, qdd / norm
+    conj = qs * np.array([1.0, -1.0, -1.0, -1.0])
+    rates = 2.0 * quat_multiply(conj, qd)[:, 1:]
+    angular_acceleration = 2.0 * quat_multiply(conj, qdd)[:, 1:]
+    return SmoothedPose(t=np.asarray(t, float), position=smooth[:, 4:], quaternion=qs,
+                        velocity=first[:, 4:], acceleration=second[:, 4:], rates=rates,
+                        angular_acceleration=angular_acceleration)
+
+
+@lru_cache(maxsize=64)
+def _savgol_kernel(window: int, polyorder: int, deriv: int, dt: float) -> np.ndarray:
+    kernel = savgol_coeffs(window, polyorder, deriv=deriv, delta=dt)
+    kernel.setflags(write=False)
+    return kernel
+
+
+def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.ndarray,
+                        config: VehicleConfig, effects: Sequence[ModelEffect] = ()
+                        ) -> np.ndarray:
+    """The model's [F_B/m, ω̇] at the smoothed states and given rotor speeds, shape (N, 6).
+
+    Parameters
+    ----------
+    pose : SmoothedPose
+    rotor_speeds : ndarray, shape (N, k)
+        Speeds acting on the body, rad/s.
+    theta : ndarray, shape (6,)
+    config : VehicleConfig
+        Mass and rotor geometry.
+    effects : sequence of ModelEffect
+        Effects whose wrench is added (paper F_ext, M_ext).
+    """
+    c_T, c_D, c_M = theta[0], theta[1], theta[2]
+    J = np.asarray(theta[3:6], float)
+    r = config.rotor_positions
+    eps = config.rotor_directions
+    v_b = pose.velocity_body()
+    w = pose.rates
+    n2 = rotor_speeds**2
+    thrust = c_T * n2                                          # (N, k)
+    hub = v_b[:, None, :] + np.cross(w[:, None, :], r[None, :, :])
+    forces = np.zeros(hub.shape)
+    # Paper Eq. drag: only the in-plane hub velocity is opposed.
+    forces[..., 0] = -thrust * c_D * hub[..., 0]
+    forces[..., 1] = -thrust * c_D * hub[..., 1]
+    forces[..., 2] = thrust
+    force = forces.sum(axis=1)
+    torque = np.cross(r[None], forces).sum(axis=1)
+    torque[:, 2] -= c_M * (n2 @ eps)
+    if effects:
+        inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, rotor_speeds,
+                              np.asarray(theta, float), r)
+        f_e, m_e = total_wrench(list(effects), inputs)
+        force = force + f_e
+        torque = torque + m_e
+    # Paper Eq. euler: ω̇ = J⁻¹ (M_B − ω × J ω).
+    omega_dot = (torque - np.cross(w, w * J)) / J
+    return np.hstack([force / config.mass, omega_dot])
+
+
+@dataclass(frozen=True)
+class ResidualProblem:
+    """One flight, a vehicle and its identified θ: the residual as a function of effects.
+
+    Attributes
+    ----------
+    flight : FlightData
+    config : VehicleConfig
+    theta : ndarray, shape (6,)
+        The identified θ the model is replayed with.
+    settings : SmootherSettings
+    known_effects : tuple of ModelEffect
+        Effects already part of the model (a config's ``[effects.*]``).
+    """
+
+    flight: FlightData
+    config: VehicleConfig
+    theta: np.ndarray
+    settings: SmootherSettings = field(default_factory=SmootherSettings)
+    known_effects: tuple[ModelEffect, ...] = ()
+
+    def __post_init__(self) -> None:
+        _ = self.dt  # refuses a log sampled at a non-uniform rate
+
+    # Caches on a frozen dataclass (cached_property writes the instance __dict__): each
+    # value is a pure function of the fields, and every residual evaluation reads them.
+    @cached_property
+    def dt(self) -> float:
+        """Sample time, s."""
+        return _uniform_step(self.flight.t)
+
+    @property
+    def window_samples(self) -> int:
+        """Smoother window, samples."""
+        return self.settings.samples(self.dt)
+
+    def keep(self) -> np.ndarray:
+        """Boolean mask of the samples used (the ends trimmed), shape (N,)."""
+        t = self.flight.t
+        edge = max(self.settings.trim, self.window_samples * self.dt)
+        return (t >= t[0] + edge) & (t <= t[-1] - edge)
+
+    def evaluate(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, SmoothedPose]:
+        """Measured and model accelerations with ``effects`` added to the known ones.
+
+        Returns
+        -------
+        measured, model : ndarray, shape (N, 6)
+            [f_B, ω̇] from the pose, and the model's [F_B/m, ω̇] smoothed the same way.
+        pose : SmoothedPose
+        """
+        theta = self.theta if theta is None else np.asarray(theta, float)
+        all_effects = (*self.known_effects, *effects)
+        fl = self.flight
+        t, p, q = fl.t, fl.position, fl.quaternion
+        n = np.asarray(fl.rotor_speeds, float)
+        for effect in all_effects:
+            if "rotor_speeds" in effect.channels:
+                n = effect.acting_rotor_speeds(fl.t, n)
+        for effect in all_effects:
+            if "pose" in effect.channels:
+                t, p, q = effect.corrected_pose(t, p, q)
+        if t is not fl.t:
+            # A delayed pose belongs to earlier times: the rotor speeds are read there.
+            n = np.column_stack([np.interp(t, fl.t, n[:, i]) for i in range(n.shape[1])])
+        if p is fl.position and q is fl.quaternion and t is fl.t:
+            pose, inputs = self._smoothed_log
+        else:
+            pose, inputs = self._smooth(t, p, q)
+        model = model_accelerations(inputs, n, theta, self.config, all_effects)
+        measured, model = _consistent_pair(pose, inputs, model, self.settings, self.dt)
+        return measured, model, pose
+
+    def _smooth(self, t: np.ndarray, p: np.ndarray, q: np.ndarray
+                ) -> tuple[SmoothedPose, SmoothedPose]:
+        light = replace(self.settings, window=self.settings.input_window)
+        return smooth_pose(t, p, q, self.settings), smooth_pose(t, p, q, light)
+
+    @cached_property
+    def _smoothed_log(self) -> tuple[SmoothedPose, SmoothedPose]:
+        """The logged pose smoothed (long and light windows), computed once per problem."""
+        fl = self.flight
+        return self._smooth(fl.t, fl.position, fl.quaternion)
+
+    def residual(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """measured − model, shape (N, 6) (all samples; use `keep` to drop the edges)."""
+        measured, model, _ = self.evaluate(effects, theta)
+        return measured - model
+
+
+def _filter(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    # np.convolve(mode="same") per column: zero padding, an odd kernel centred.
+    return convolve1d(x, kernel, axis=0, mode="constant", cval=0.0)
+
+
+def _consistent_pair(pose: SmoothedPose, inputs: SmoothedPose, model: np.ndarray,
+                     settings: SmootherSettings, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Measured and model [f_B, ω̇] that went through the same (linear) smoother.
+
+    Smoothing does not commute with the rotation to the body frame, so the comparison is
+    made where the smoother acted: world acceleration a − g for the force (model: R F_B/m,
+    paper Eq. newton in the world frame), and the quaternion's second derivative for the
+    rotation (model: q̈ = q ⊗ (½[0, ω̇] − ¼‖ω‖² [1, 0]), from q̇ = ½ q ⊗ [0, ω]). The model's
+    side is filtered by `acceleration_kernel`; both are then read in the smoothed body
+    frame: f = Rᵀ(a − g), ω̇ = 2 Im(q* ⊗ q̈).
+    """
+    kernel = acceleration_kernel(settings, dt)
+    world_model = _filter(np.einsum("nij,nj->ni", inputs.rotation(), model[:, :3]), kernel)
+    w2 = np.sum(inputs.rates**2, axis=1)
+    inner = np.column_stack([-0.25 * w2, 0.5 * model[:, 3:]])
+    qdd_model = _filter(quat_multiply(inputs.quaternion, inner), kernel)
+    # Read both in the long-window body frame (a rotation of the small difference only).
+    R = pose.rotation()
+    conj = pose.quaternion * np.array([1.0, -1.0, -1.0, -1.0])
+    measured = np.hstack([pose.specific_force(), pose.angular_acceleration])
+    model_b = np.hstack([np.einsum("nji,nj->ni", R, world_model),
+                         2.0 * quat_multiply(conj, qdd_model)[:, 1:]])
+    return measured, model_b
+
+
+def acceleration_kernel(settings: SmootherSettings, dt: float) -> np.ndarray:
+    """The smoother's action on an acceleration signal, shape (w,), unit sum.
+
+    The second-derivative Savitzky–Golay kernel c annihilates constants and ramps, so
+    c ∗ p = h ∗ Δ²p / dt² exactly with h = dt² · cumsum(cumsum(c)) (finite support), and
+    Δ²p / dt² is the acceleration to O(dt²). Filtering the model's acceleration with h
+    reproduces what the smoother does to the measured one, bias included.
+    """
+    return _acceleration_kernel(settings.samples(dt), settings.polyorder, dt)
+
+
+@lru_cache(maxsize=16)
+def _acceleration_kernel(window: int, polyorder: int, dt: float) -> np.ndarray:
+    c = _savgol_kernel(window, polyorder, 2, dt)
+    h = np.cumsum(np.cumsum(c))[:-1] * dt**2
+    # Centre h (length w − 1 after the double sum drops its zero tail) on w taps.
+    h = np.concatenate([[0.0], h]) if len(h) % 2 == 0 else h
+    h.setflags(write=False)
+    return h
+
+
+def noise_gain(settings: SmootherSettings, dt: float) -> float:
+    """‖c‖ of the second-derivative smoother: acceleration noise per unit position noise.
+
+    Used to document the noise floor: σ_a = σ_p ‖c‖ (white position noise, m → m/s²).
+    """
+    w = settings.samples(dt)
+    return float(np.linalg.norm(_savgol_kernel(w, settings.polyorder, 2, dt)))

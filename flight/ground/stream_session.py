@@ -1,0 +1,348 @@
+"""One streamed flight's resources and records: link, recorder, stream, guards, meta.json.
+
+`open_session` checks the plan (`mavsysid.flight.ground.preflight.check_plan`) before anything is
+created, then makes ``<log_dir>/<UTC time>_<name>/`` with ``flight.tlog`` (both
+directions, `MavlinkLink`), ``pose.csv`` (`TelemetryRecorder`) and ``meta.json``, which
+is written at once with status ``recording`` and rewritten at each milestone (vehicle
+identified, telemetry rates, trajectory start and end) and at the end with ``complete``
+or ``aborted`` and the reason. A killed streamer leaves a ``recording`` meta.json and
+both logs up to its last message.
+
+While a session is open (on the main thread), SIGINT and SIGTERM do not strike at once:
+the link raises `KeyboardInterrupt` from its next wait, so the flight can stop the stream
+and act safely; a second signal interrupts immediately.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import re
+import signal
+import tempfile
+import threading
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from mavsysid.flight.ground.mavlink_link import MavlinkLink
+from mavsysid.flight.ground.preflight import check_plan
+from mavsysid.flight.ground.stream_control import FlightGuards, SetpointStream
+from mavsysid.flight.ground.telemetry_recorder import STAMPING, SetpointHistory, TelemetryRecorder
+from mavsysid.flight.ground.tlog_writer import LinkClock
+from mavsysid.flight.ground.vehicle_commands import VehicleCommands
+from mavsysid.flight.mavlink_setup import parse_connect
+from mavsysid.formats.flight_dir import new_flight_dir, write_meta
+from mavsysid.formats.flight_log import software_version
+from mavsysid.formats.trajectory_file import TrajectoryFile, read_trajectory
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle, vehicle_to_toml
+
+from mavsysid.errors import InputError
+
+__all__ = ["StreamSession", "StreamSettings", "load_plan", "open_session"]
+
+
+@dataclass(frozen=True)
+class StreamSettings:
+    """How to fly a trajectory file (times in streamer seconds, see `LinkClock`).
+
+    Attributes
+    ----------
+    connect : str
+        The MAVLink connection (see `MavlinkLink`).
+    rate : float
+        Setpoints per second, Hz.
+    telemetry_rate : float
+        Rate asked for the estimator's telemetry, Hz.
+    land : bool
+        Land after the trajectory (else keep hovering at its end).
+    box : tuple of 6 float or None
+        Flight box [x_min, y_min, z_min, x_max, y_max, z_max], m; None: the trajectory's.
+    signing_key : bytes or None
+        MAVLink 2 signing key.
+    speedup : float
+        Streamer seconds per wall second (a faster-than-real-time simulator).
+    heartbeat_timeout : float
+        How long to wait for the vehicle's first heartbeat, wall s (not sped up).
+    heartbeat_loss : float
+        The vehicle is lost after this long without a heartbeat, s.
+    position_timeout : float
+        How long to wait for a usable local position, s.
+    max_tracking_error : float
+        Abort to hold beyond this distance from the setpoint in effect, m.
+    log_dir : Path
+        Root of the flight directories.
+    hold_time : float
+        Hover at the end of the trajectory before landing, s.
+    transfer_speed : float
+        Top speed of the moves to the start, m/s.
+    settle_tolerance, settle_time, settle_timeout : float
+        Settled at the start: within the tolerance (m) and below 0.1 m/s for settle_time
+        (s); give up waiting after settle_timeout (s).
+    land_timeout : float
+        How long to wait for the touchdown, s.
+    """
+
+    connect: str
+    rate: float = 50.0
+    telemetry_rate: float = 50.0
+    land: bool = True
+    box: tuple[float, ...] | None = None
+    signing_key: bytes | None = field(default=None, repr=False)
+    speedup: float = 1.0
+    heartbeat_timeout: float = 30.0
+    heartbeat_loss: float = 3.0
+    position_timeout: float = 90.0
+    max_tracking_error: float = 1.0
+    log_dir: Path = Path("logs")
+    hold_time: float = 2.0
+    transfer_speed: float = 1.0
+    settle_tolerance: float = 0.05
+    settle_time: float = 1.0
+    settle_timeout: float = 15.0
+    land_timeout: float = 60.0
+
+
+def _embedded_config(plan: TrajectoryFile, source: str) -> VehicleConfig:
+    """The vehicle configuration stored in a trajectory file."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{plan.vehicle_name or 'vehicle'}.toml"
+        path.write_text(plan.vehicle_toml, encoding="utf-8")
+        config = load_vehicle(path)
+    # The temporary path means nothing to a reader of the metadata.
+    return replace(config, source=f"{source} (embedded)")
+
+
+def load_plan(path: str | Path, vehicle: str | Path | None,
+              box: tuple[float, ...] | None) -> tuple[TrajectoryFile, VehicleConfig,
+                                                      tuple[float, ...]]:
+    """Read a trajectory file, its vehicle and box, and refuse a plan that cannot fly.
+
+    Parameters
+    ----------
+    path : str or Path
+        The trajectory file.
+    vehicle : str, Path or None
+        Shipped vehicle name or TOML path; None: the configuration stored in the file.
+    box : tuple of 6 float or None
+        Flight box, m; None: the file's.
+
+    Raises
+    ------
+    InputError
+        An unreadable file or vehicle, or no box at all.
+    JobFailedError
+        "flight refused: …": another vehicle's trajectory, or a sample outside the box.
+    """
+    plan = read_trajectory(path)
+    config = load_vehicle(vehicle) if vehicle is not None else _embedded_config(plan, str(path))
+    box = box if box is not None else plan.box
+    if box is None:
+        raise InputError(f"{path}: the trajectory has no flight box; give one with "
+                         "--box x_min,y_min,z_min,x_max,y_max,z_max")
+    if len(box) != 6 or any(lo >= hi for lo, hi in zip(box[:3], box[3:], strict=True)):
+        raise InputError(f"--box {','.join(f'{b:g}' for b in box)}: expected "
+                         "x_min,y_min,z_min,x_max,y_max,z_max with each min below its max")
+    check_plan(plan.trajectory, plan.vehicle_name, config, box).raise_if_refused()
+    return plan, config, tuple(float(b) for b in box)
+
+
+def _flight_dir(root: Path, stem: str) -> Path:
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    name = f"{stamp}_{re.sub(r'[^A-Za-z0-9._-]+', '-', stem) or 'flight'}"
+    for i in range(1, 1000):
+        try:
+            return new_flight_dir(root, name if i == 1 else f"{name}-{i}")
+        except InputError:
+            if not (root / (name if i == 1 else f"{name}-{i}")).exists():
+                raise
+    raise InputError(f"too many flight directories named {name}-* in {root}")
+
+
+class StreamSession:
+    """The resources and records of one streamed flight (see the module docstring).
+
+    Attributes
+    ----------
+    plan, config, box, settings, directory
+        What is flown, by which vehicle, where, how, and where it is recorded.
+    trajectory : PiecewisePolynomial
+    link, commands, history, recorder, stream, guards
+        The flight's machinery, wired together.
+    last_sys_status : message or None
+    """
+
+    def __init__(self, path: Path, plan: TrajectoryFile, config: VehicleConfig,
+                 box: tuple[float, ...], settings: StreamSettings) -> None:
+        self.plan, self.config, self.box, self.settings = plan, config, box, settings
+        self.trajectory = plan.trajectory
+        self.directory = _flight_dir(Path(settings.log_dir), Path(path).stem)
+        self.history = SetpointHistory()
+        self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history)
+        self.meta: dict[str, Any] = self._initial_meta(path)
+        write_meta(self.directory / "meta.json", self.meta)
+        clock = LinkClock(settings.speedup)
+        self.meta["tlog_epoch_unix_s"] = clock.epoch_us(0.0) * 1e-6
+        try:
+            # Spin the last 2 ms before each setpoint (at most a tenth of the period).
+            spin = min(0.002, 0.1 / (settings.rate * settings.speedup))
+            self.link = MavlinkLink(settings.connect, self.directory / "flight.tlog", clock,
+                                    settings.signing_key, settings.heartbeat_loss, spin)
+        except BaseException as error:
+            self.recorder.close()
+            self.note_failure(str(error))
+            self._write_final()
+            raise
+        self.commands = VehicleCommands(self.link, say=None)
+        self.stream = SetpointStream(self.link, self.history, settings.rate)
+        self.guards = FlightGuards(self.link, self.stream, self.recorder)
+        self.last_sys_status: Any = None
+        # Order matters: the guards read the row the recorder has just written.
+        self.link.add_listener(self.recorder.on_message)
+        self.link.add_listener(self._on_message)
+        self.link.add_listener(self.guards.on_message)
+        self._trajectory_start: float | None = None
+        self._old_handlers: dict[int, Any] = {}
+
+    def _on_message(self, msg: Any, _t: float) -> None:
+        if msg.get_type() == "SYS_STATUS":
+            self.last_sys_status = msg
+
+    # --- metadata --------------------------------------------------------------------------
+
+    def _initial_meta(self, path: Path) -> dict[str, Any]:
+        s, plan = self.settings, self.plan
+        return {
+            "format": "mavsysid-flight",
+            "format_version": 1,
+            "software": {"name": "mavsysid", "version": software_version()},
+            "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+            "source": "mavlink-stream",
+            "simulated": False,
+            "vehicle": {"name": self.config.name, "source": self.config.source,
+                        "config_toml": vehicle_to_toml(self.config)},
+            "files": {"pose": "pose.csv", "tlog": "flight.tlog"},
+            "connection": s.connect,
+            "speedup": s.speedup,
+            "signing": s.signing_key is not None,
+            "trajectory": {"file": str(path), "kind": plan.kind,
+                           "duration": self.trajectory.duration,
+                           "vehicle": plan.vehicle_name, "box": list(self.box),
+                           "start": list(plan.start), "predicted_dopt": plan.predicted_dopt},
+            "stream": {"setpoint_rate_hz": s.rate, "telemetry_rate_hz": s.telemetry_rate,
+                       "max_tracking_error_m": s.max_tracking_error, "land": s.land,
+                       "type_mask": 0, "frame": "MAV_FRAME_LOCAL_NED"},
+            "stamping": STAMPING,
+            "tlog_time": "tlog_epoch_unix_s + streamer time (wall time x speedup since the "
+                         "streamer started), us",
+            "status": "recording",
+            "samples": 0,
+        }
+
+    def _write(self) -> None:
+        self.meta["samples"] = self.recorder.rows
+        write_meta(self.directory / "meta.json", self.meta)
+
+    @property
+    def type_name(self) -> str:
+        """The vehicle's MAV_TYPE without its prefix (e.g. ``HEXAROTOR``)."""
+        return self.link.enum_name("MAV_TYPE", self.link.vehicle.mav_type).removeprefix(
+            "MAV_TYPE_")
+
+    @property
+    def sensor_names(self) -> dict[int, str]:
+        """MAV_SYS_STATUS_SENSOR bit → name."""
+        return {k: e.name for k, e in self.link.mavlink.enums["MAV_SYS_STATUS_SENSOR"].items()}
+
+    def note_vehicle(self) -> None:
+        """Record the vehicle's identity from its heartbeat."""
+        v = self.link.vehicle
+        self.meta["autopilot"] = {
+            "family": None if v.autopilot is None else v.autopilot.name.lower(),
+            "autopilot": self.link.enum_name("MAV_AUTOPILOT", v.autopilot_id),
+            "type": self.type_name, "system": v.system, "component": v.component}
+        self._write()
+
+    def note_rates(self, achieved: dict[str, float]) -> None:
+        """Record the telemetry rates measured before the flight, Hz."""
+        self.meta["telemetry_rates_hz"] = {"requested": self.settings.telemetry_rate,
+                                           "preflight": dict(sorted(achieved.items()))}
+        self._write()
+
+    def _vehicle_time(self, t: float) -> float | None:
+        offset = self.recorder.offset.value
+        return None if offset is None else t - offset
+
+    def note_trajectory_start(self, t: float) -> None:
+        """The trajectory's first setpoint went out at streamer time ``t``."""
+        self._trajectory_start = t
+        self.meta["trajectory_window"] = {
+            "start": self._vehicle_time(t), "end": None,
+            "clock": "pose.csv t (vehicle time_boot_ms), s",
+            "streamer_start": t, "streamer_end": None}
+        self._write()
+
+    def note_trajectory_end(self, t: float, statistics: dict[str, Any]) -> None:
+        """The trajectory ended (or was cut) at streamer time ``t``; its setpoint stats."""
+        window = self.meta.setdefault("trajectory_window", {})
+        window["end"], window["streamer_end"] = self._vehicle_time(t), t
+        self.meta["setpoints"] = {**statistics, "clock": "streamer time (wall x speedup)"}
+        self._write()
+
+    def note_failure(self, reason: str) -> None:
+        """The flight failed, was refused or interrupted: status ``aborted``, ``reason``."""
+        if self.meta.get("status") == "recording":
+            self.meta["status"] = "aborted"
+            self.meta["reason"] = reason
+
+    def note_complete(self) -> None:
+        """The flight went as planned."""
+        if self.meta.get("status") == "recording":
+            self.meta["status"] = "complete"
+
+    def _write_final(self) -> None:
+        if self.meta.get("status") == "recording":
+            self.meta["status"] = "aborted"
+            self.meta.setdefault("reason", "stopped before the end")
+        self.meta["tracking"] = self.recorder.tracking_summary()
+        self.meta.setdefault("telemetry_rates_hz", {})["flight"] = {
+            k: round(v, 3) for k, v in sorted(self.recorder.rates().items())}
+        if self.recorder.skipped:
+            self.meta["rows_skipped"] = dict(self.recorder.skipped)
+        link = getattr(self, "link", None)
+        if link is not None and (link.rejected_signed or link.rejected_unsigned):
+            self.meta["signing_rejects"] = {"wrong_signature": link.rejected_signed,
+                                            "unsigned": link.rejected_unsigned}
+        self._write()
+
+    # --- lifetime --------------------------------------------------------------------------
+
+    def _on_signal(self, _signum: int, _frame: Any) -> None:
+        if self.link.interrupt_pending:
+            raise KeyboardInterrupt
+        self.link.interrupt_pending = True
+
+    def __enter__(self) -> StreamSession:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old_handlers[sig] = signal.signal(sig, self._on_signal)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._old_handlers.items():
+            signal.signal(sig, handler)
+        self.close()
+
+    def close(self) -> None:
+        """Stop streaming, close the link and the logs, write the final meta.json."""
+        self.stream.stop()
+        self.link.close()
+        self.recorder.close()
+        self._write_final()
+
+
+def open_session(path: str | Path, settings: StreamSettings,
+                 vehicle: str | Path | None = None) -> StreamSession:
+    """Check the plan, then create the flight directory and connect (see `load_plan`)."""
+    parse_connect(settings.connect)  # bad input creates no flight directory
+    plan, config, box = load_plan(path, vehicle, settings.box)
+    return StreamSession(Path(path), plan, config, box, settings)

@@ -1,0 +1,328 @@
+"""Flying a trajectory file over MAVLink: the whole sequence of ``mavsysid stream``.
+
+1. Check the plan (vehicle name, every 100 Hz sample inside the box), create the flight
+   directory, connect, wait for the vehicle's heartbeat and tell ArduPilot from PX4.
+2. Ask for LOCAL_POSITION_NED, ATTITUDE_QUATERNION and ESC rpm at the telemetry rate
+   (SET_MESSAGE_INTERVAL), wait for a usable local position, measure the rates achieved,
+   and check the vehicle (airframe, health, rates): refuse, or warn.
+3. ArduPilot: GUIDED, arm, NAV_TAKEOFF to the start altitude. PX4: stream a hold
+   setpoint, then OFFBOARD, arm, and climb with setpoints.
+4. Fly to the trajectory's start with a smooth move and settle there; stream the
+   trajectory (position, velocity, acceleration, yaw, yaw rate) at the setpoint rate on
+   a drift-free clock; hold at the end; LAND (or keep hovering with ``land=False``).
+
+Failures stop the stream first and then act safely (see `mavsysid.flight.ground.stream_control`): a
+lost
+heartbeat leaves the vehicle to its own failsafe; a foreign mode change leaves it to the
+pilot; lost tracking switches to BRAKE (PX4: HOLD); an interrupt (Ctrl-C, SIGTERM)
+brakes, then lands. Everything is recorded as it arrives (`mavsysid.flight.ground.stream_session`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from mavsysid.flight.autopilot_modes import Autopilot
+from mavsysid.flight.gc_freeze import frozen_collector
+from mavsysid.flight.ground.mavlink_link import HeartbeatLost
+from mavsysid.flight.ground.preflight import check_vehicle
+from mavsysid.flight.ground.setpoints import SmoothMove, hold, trajectory_setpoint
+from mavsysid.flight.ground.stream_control import ModeTaken, ProgressLine
+from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["fly"]
+
+_TELEMETRY = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ESC_TELEMETRY_1_TO_4")
+
+
+def fly(session: StreamSession, say: Callable[[str], None], progress: bool = True,
+        at_end: Callable[[StreamSession], None] | None = None) -> None:
+    """Fly the session's trajectory (steps 1–4 of the module docstring, after the plan check).
+
+    Parameters
+    ----------
+    session : StreamSession
+        Opened (`mavsysid.flight.ground.stream_session.open_session`), plan already checked.
+    say : callable
+        Receives one-line progress messages.
+    progress : bool
+        Show the live progress line while the trajectory streams.
+    at_end : callable, optional
+        Called with the session while the vehicle hovers at the trajectory's end, before
+        landing (a benchmark's own experiment, say); it may stream other setpoints through
+        ``session.stream`` and should leave a hold streaming.
+
+    Raises
+    ------
+    JobFailedError
+        Refused or aborted, after the safe action (the session records why).
+    KeyboardInterrupt
+        After braking and landing.
+    """
+    _Flight(session, say, progress, at_end).run()
+
+
+class _Flight:
+    def __init__(self, s: StreamSession, say: Callable[[str], None], progress: bool,
+                 at_end: Callable[[StreamSession], None] | None) -> None:
+        self.s, self.say, self.progress, self.at_end = s, say, progress, at_end
+        self.settings: StreamSettings = s.settings
+        self.link, self.commands, self.stream, self.guards = s.link, s.commands, s.stream, s.guards
+        self.recorder = s.recorder
+
+    def run(self) -> None:
+        try:
+            self._connect()
+            self._prepare()
+            self._take_off()
+            self._to_start()
+            self._trajectory()
+            self._finish()
+        except KeyboardInterrupt:
+            self.stream.stop()
+            self._interrupted()
+            raise
+        except JobFailedError as error:
+            self.stream.stop()
+            self.s.note_failure(str(error))
+            # A lost link or a pilot in control: hands off. Anything else in the air: hold.
+            if not isinstance(error, HeartbeatLost | ModeTaken) and self.link.vehicle.armed:
+                self._hold_after_abort()
+            raise
+
+    # --- steps ---------------------------------------------------------------------------
+
+    def _connect(self) -> None:
+        link = self.link
+        self.say(f"waiting for a vehicle heartbeat on {link.connect}")
+        link.start_heartbeat()
+        v = link.wait_heartbeat(self.settings.heartbeat_timeout, self.say)
+        link.watch_heartbeat = True
+        if v.autopilot is None:
+            raise JobFailedError(f"flight refused: the vehicle's autopilot "
+                                 f"({link.enum_name('MAV_AUTOPILOT', v.autopilot_id)}) is "
+                                 "neither ArduPilot nor PX4")
+        link.poll(0.3)  # a few more messages: is the vehicle signing?
+        if (problem := link.signing_problem()) is not None:
+            raise JobFailedError(f"flight refused: {problem}")
+        self.s.note_vehicle()
+        self.say(f"connected: {v.autopilot.name.lower()} {self.s.type_name}, system "
+                 f"{v.system}, mode {v.mode}, {'armed' if v.armed else 'disarmed'}")
+
+    def _prepare(self) -> None:
+        rate = self.settings.telemetry_rate
+        names = list(_TELEMETRY)
+        if self.s.config.rotor_count > 4:
+            names.append("ESC_TELEMETRY_5_TO_8")
+        for name in names:
+            if (why := self.commands.set_message_interval(name, rate)) is not None:
+                self.say(f"warning: the vehicle did not accept {name} at {rate:g} Hz: {why}")
+        self.commands.wait_position(self.settings.position_timeout)
+        achieved = self._measure_rates(2.0)
+        shown = ", ".join(f"{n} {achieved.get(n, 0.0):.1f} Hz" for n in names)
+        self.say(f"telemetry (asked {rate:g} Hz): {shown}")
+        self.s.note_rates(achieved)
+        if self.s.last_sys_status is None:
+            self.commands.request_message("SYS_STATUS")
+            self.link.poll(1.0)
+        report = check_vehicle(self.s.config, self.link.vehicle, self.s.type_name,
+                               self.s.last_sys_status, self.s.sensor_names, achieved, rate,
+                               self._pose().position, self.s.box)
+        for warning in report.warnings:
+            self.say(f"warning: {warning}")
+        report.raise_if_refused()
+
+    def _measure_rates(self, seconds: float) -> dict[str, float]:
+        before, t0 = dict(self.recorder.counts), self.link.clock.now()
+        self.link.poll(seconds)
+        elapsed = self.link.clock.now() - t0
+        return {k: (n - before.get(k, 0)) / elapsed for k, n in self.recorder.counts.items()
+                if n > before.get(k, 0)}
+
+    def _set_mode(self, name: str) -> None:
+        self.guards.expected_mode = None
+        self.commands.set_mode(name)
+        self.guards.expected_mode = self.link.vehicle.custom_mode
+        self.say(f"mode {name}")
+
+    def _pose(self) -> Any:
+        latest = self.recorder.latest
+        if latest is None:
+            raise JobFailedError("no pose from the vehicle (LOCAL_POSITION_NED with attitude)")
+        return latest
+
+    def _take_off(self) -> None:
+        start_z = self.s.trajectory.flat_outputs(np.array([0.0])).position[0, 2]
+        ground = self._pose()
+        if self.link.vehicle.autopilot is Autopilot.ARDUPILOT:
+            self._set_mode("GUIDED")
+            self.commands.arm()
+            self.guards.expect_armed = True
+            self.say("armed")
+            altitude = max(0.3, float(start_z - ground.position[2]))
+            self.commands.takeoff(altitude)
+            self.say(f"taking off to {altitude:.2f} m")
+            self._wait_altitude(ground.position[2] + altitude)
+        else:
+            here = hold(ground.position, ground.yaw)
+            self.stream.start(lambda _t: here)
+            self.link.poll(1.5)  # PX4 wants setpoints for > 1 s before OFFBOARD
+            self._set_mode("OFFBOARD")
+            self.commands.arm()
+            self.guards.expect_armed = True
+            self.say("armed")
+            top = np.array([*ground.position[:2], max(start_z, ground.position[2] + 0.3)])
+            self._move(ground.position, ground.yaw, top, ground.yaw, "climbing")
+
+    def _wait_altitude(self, z: float) -> None:
+        timeout = 15.0 + 2.0 * abs(z)
+        deadline = self.link.clock.now() + timeout
+        while self._pose().position[2] < z - 0.1:
+            if self.link.clock.now() > deadline:
+                raise JobFailedError(f"take-off did not reach {z:.2f} m within {timeout:g} s "
+                                     f"(at {self._pose().position[2]:.2f} m)")
+            self.link.poll(0.05)
+
+    def _move(self, p0: np.ndarray, yaw0: float, p1: np.ndarray, yaw1: float,
+              what: str) -> None:
+        move = SmoothMove.between(p0, yaw0, p1, yaw1, self.settings.transfer_speed)
+        self.say(f"{what}: {np.linalg.norm(np.asarray(p1) - p0):.2f} m in "
+                 f"{move.duration:.1f} s")
+        self.guards.max_tracking_error = self.settings.max_tracking_error
+        self.stream.start(move.setpoint)
+        self.link.poll(move.duration)
+
+    def _to_start(self) -> None:
+        traj = self.s.trajectory
+        first = trajectory_setpoint(traj, 0.0)
+        start = hold(np.array(first.position), first.yaw)
+        pose = self._pose()
+        self._move(pose.position, pose.yaw, np.array(start.position), start.yaw,
+                   "flying to the trajectory's start")
+        self.stream.start(lambda _t: start)
+        st = self.settings
+        clock = self.link.clock
+        began = clock.now()
+        calm_since: float | None = None
+        while True:
+            self.link.poll(0.05)
+            p = self._pose()
+            now = clock.now()
+            calm = (p.tracking_error is not None and p.tracking_error < st.settle_tolerance
+                    and float(np.linalg.norm(p.velocity)) < 0.1)
+            calm_since = (calm_since or now) if calm else None
+            if calm_since is not None and now - calm_since >= st.settle_time:
+                self.say(f"settled at the start in {now - began:.1f} s")
+                return
+            if now - began > st.settle_timeout:
+                self.say(f"warning: not settled within {st.settle_timeout:g} s (error "
+                         f"{p.tracking_error or 0.0:.3f} m); starting anyway")
+                return
+
+    def _trajectory(self) -> None:
+        traj = self.s.trajectory
+        duration = traj.duration
+        st = self.settings
+        self.say(f"streaming the {duration:.1f} s trajectory at {st.rate:g} Hz")
+        line = ProgressLine(duration, enabled=self.progress)
+        # A collection can stall the stream: pause the collector while streaming. What is
+        # alive now is frozen rather than collected: a full collection of a large process
+        # (a caller's planner graph, freshly compiled kernels) took 0.9 s, long enough for
+        # the socket's receive buffer to overflow and lose a third of a second of telemetry.
+        with frozen_collector(pause=True):
+            schedule = self.stream.start(lambda t: trajectory_setpoint(traj, t))
+            self.s.note_trajectory_start(schedule.start)
+            clock = self.link.clock
+            last_sent, last_t = 0, schedule.start
+            try:
+                while (now := clock.now()) < schedule.start + duration:
+                    self.link.poll_until(min(schedule.start + duration, now + 0.1 * st.speedup))
+                    now = clock.now()
+                    rate = (schedule.sent - last_sent) / max(now - last_t, 1e-9)
+                    if now - last_t >= 1.0:
+                        last_sent, last_t = schedule.sent, now
+                    latest = self.recorder.latest
+                    line.update(now - schedule.start, rate,
+                                None if latest is None else latest.tracking_error,
+                                time.monotonic())
+            finally:
+                line.close()
+                self.s.note_trajectory_end(clock.now(), schedule.statistics())
+
+    def _finish(self) -> None:
+        last = trajectory_setpoint(self.s.trajectory, self.s.trajectory.duration)
+        end = hold(np.array(last.position), last.yaw)
+        self.stream.start(lambda _t: end)
+        self.link.poll(self.settings.hold_time)
+        if self.at_end is not None:
+            self.at_end(self.s)
+        self.guards.max_tracking_error = None
+        autopilot = self.link.vehicle.autopilot
+        if not self.settings.land:
+            if autopilot is Autopilot.PX4:
+                self.stream.stop()
+                self._set_mode("HOLD")  # OFFBOARD without setpoints would fail safe
+            else:
+                self.stream.stop()  # GUIDED holds the last position target
+            self.say("hovering at the trajectory's end (--no-land)")
+            self.s.note_complete()
+            return
+        self.stream.stop()
+        self.guards.expect_armed = False
+        self._set_mode("LAND")
+        self.say("landing")
+        deadline = self.link.clock.now() + self.settings.land_timeout
+        while self.link.vehicle.armed:
+            if self.link.clock.now() > deadline:
+                self.say(f"warning: still armed {self.settings.land_timeout:g} s after LAND")
+                break
+            self.link.poll(0.1)
+        else:
+            self.say("landed and disarmed")
+        self.s.note_complete()
+
+    # --- failures --------------------------------------------------------------------------
+
+    def _safe_mode(self) -> str:
+        return "BRAKE" if self.link.vehicle.autopilot is Autopilot.ARDUPILOT else "HOLD"
+
+    def _hold_after_abort(self) -> None:
+        """Lost tracking: let the autopilot hold position in BRAKE / HOLD."""
+        self.guards.disable()
+        mode = self._safe_mode()
+        try:
+            self.commands.set_mode(mode)
+            self.say(f"aborted to {mode}: the vehicle holds its position")
+        except JobFailedError as error:
+            self.say(f"warning: could not switch to {mode}: {error}")
+
+    def _interrupted(self) -> None:
+        """Ctrl-C: brake (PX4: hold), then land; skipped if never armed."""
+        self.guards.disable()
+        self.s.note_failure("interrupted (SIGINT/SIGTERM): braked, then landed")
+        if not self.link.vehicle.armed:
+            self.say("interrupted; the vehicle is not armed, nothing to do")
+            return
+        mode = self._safe_mode()
+        for step in (mode, "LAND"):
+            try:
+                self.commands.set_mode(step)
+                self.say(f"interrupted: mode {step}")
+            except JobFailedError as error:
+                self.say(f"warning: could not switch to {step}: {error}")
+                continue
+            if step == mode:
+                self._wait_stopped(3.0)
+
+    def _wait_stopped(self, seconds: float) -> None:
+        deadline = self.link.clock.now() + seconds
+        while self.link.clock.now() < deadline:
+            self.link.poll(0.05)
+            latest = self.recorder.latest
+            if latest is not None and float(np.linalg.norm(latest.velocity)) < 0.2:
+                return

@@ -1,0 +1,185 @@
+"""Parameters of the simulated vehicle, and the MAVLink parameter protocol.
+
+A handful of real-looking parameters per autopilot, some of which act on the
+simulation (GUID_TIMEOUT, WPNAV_SPEED, DISARM_DELAY, SR0_* stream rates, COM_OF_LOSS_T,
+…). The protocol follows the parameter microservice: PARAM_REQUEST_LIST answers every
+parameter with PARAM_VALUE (``param_count``, ``param_index``), PARAM_REQUEST_READ one of
+them (by name, or by index when ``param_index`` ≥ 0), and PARAM_SET of a known name
+stores the value and echoes it; an unknown name gets no answer, as on ArduPilot.
+ArduPilot sends integer parameters as their numeric value in the float field (C cast);
+PX4 copies their bytes into it (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+from mavsysid.flight.autopilot_modes import Autopilot
+from mavsysid.flight.simvehicle.link import mavlink
+from mavsysid.vehicle.config import VehicleConfig
+
+__all__ = ["Parameter", "ParameterProtocol", "ParameterTable", "default_parameters"]
+
+_INT_RANGES = {
+    mavlink.MAV_PARAM_TYPE_UINT8: (0, 255, "<B"),
+    mavlink.MAV_PARAM_TYPE_INT8: (-128, 127, "<b"),
+    mavlink.MAV_PARAM_TYPE_UINT16: (0, 65535, "<H"),
+    mavlink.MAV_PARAM_TYPE_INT16: (-32768, 32767, "<h"),
+    mavlink.MAV_PARAM_TYPE_UINT32: (0, 2**32 - 1, "<I"),
+    mavlink.MAV_PARAM_TYPE_INT32: (-(2**31), 2**31 - 1, "<i"),
+}
+_REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
+
+
+@dataclass
+class Parameter:
+    """One parameter: name (≤ 16 characters), value, MAV_PARAM_TYPE."""
+
+    name: str
+    value: float
+    type: int
+
+
+class ParameterTable:
+    """Ordered parameters with change listeners.
+
+    Parameters
+    ----------
+    entries : iterable of (name, value, MAV_PARAM_TYPE)
+    """
+
+    def __init__(self, entries) -> None:
+        self._params = [Parameter(n, float(v), t) for n, v, t in entries]
+        self._index = {p.name: i for i, p in enumerate(self._params)}
+        self._listeners: list[Callable[[str, float], None]] = []
+
+    def __len__(self) -> int:
+        return len(self._params)
+
+    def __iter__(self) -> Iterator[Parameter]:
+        return iter(self._params)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._index
+
+    def __getitem__(self, name: str) -> float:
+        return self._params[self._index[name]].value
+
+    def get(self, name: str, default: float) -> float:
+        """Value of ``name``, or ``default`` when this autopilot has no such parameter."""
+        i = self._index.get(name)
+        return default if i is None else self._params[i].value
+
+    def index(self, name: str) -> int | None:
+        """Position of ``name`` in the table, None when unknown."""
+        return self._index.get(name)
+
+    def at(self, index: int) -> Parameter:
+        """The parameter at ``index``."""
+        return self._params[index]
+
+    def add_listener(self, listener: Callable[[str, float], None]) -> None:
+        """Call ``listener(name, value)`` after every change."""
+        self._listeners.append(listener)
+
+    def set(self, name: str, value: float) -> bool:
+        """Store ``value`` (integers rounded and clamped to the type); False if unknown."""
+        i = self._index.get(name)
+        if i is None or value != value:  # unknown, or NaN
+            return False
+        p = self._params[i]
+        if p.type in _INT_RANGES:
+            lo, hi, _ = _INT_RANGES[p.type]
+            value = float(min(max(round(value), lo), hi))
+        else:
+            value = struct.unpack("<f", struct.pack("<f", value))[0]  # stored as float32
+        p.value = value
+        for listener in self._listeners:
+            listener(name, value)
+        return True
+
+
+def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> ParameterTable:
+    """The simulated parameter set of ``autopilot`` for the vehicle ``config``."""
+    u8, i8, i16, i32 = (mavlink.MAV_PARAM_TYPE_UINT8, mavlink.MAV_PARAM_TYPE_INT8,
+                        mavlink.MAV_PARAM_TYPE_INT16, mavlink.MAV_PARAM_TYPE_INT32)
+    if autopilot is Autopilot.ARDUPILOT:
+        frame_class = {4: 1, 6: 2, 8: 3, 3: 7}.get(config.rotor_count, 1)
+        return ParameterTable([
+            ("SYSID_THISMAV", 1, i16), ("FRAME_CLASS", frame_class, i8), ("FRAME_TYPE", 1, i8),
+            ("GUID_TIMEOUT", 3.0, _REAL32), ("WPNAV_SPEED", 500.0, _REAL32),
+            ("WPNAV_SPEED_UP", 250.0, _REAL32), ("WPNAV_SPEED_DN", 150.0, _REAL32),
+            ("WPNAV_ACCEL", 250.0, _REAL32), ("LAND_SPEED", 50, i16),
+            ("ANGLE_MAX", 3000, i16), ("DISARM_DELAY", 10, i8), ("FENCE_ENABLE", 0, i8),
+            # All pre-arm checks on (Copter's default; the sim does check before arming):
+            # ground stations such as MAVProxy warn "Arming checks disabled" without it.
+            ("ARMING_CHECK", 1, i32),
+            ("MOT_THST_EXPO", config.motor.thrust_expo, _REAL32), ("BATT_CAPACITY", 5000, i32),
+            ("SR0_EXT_STAT", 1, i16), ("SR0_POSITION", 3, i16), ("SR0_EXTRA1", 4, i16),
+            ("SR0_EXTRA3", 1, i16),
+        ])
+    return ParameterTable([
+        ("MAV_SYS_ID", 1, i32), ("COM_OF_LOSS_T", 1.0, _REAL32), ("COM_OBL_RC_ACT", 0, i32),
+        ("COM_DISARM_PRFLT", 10.0, _REAL32), ("MPC_XY_VEL_MAX", 12.0, _REAL32),
+        ("MPC_Z_VEL_MAX_UP", 3.0, _REAL32), ("MPC_Z_VEL_MAX_DN", 1.5, _REAL32),
+        ("MPC_ACC_HOR", 3.0, _REAL32), ("MPC_LAND_SPEED", 0.7, _REAL32),
+        ("MIS_TAKEOFF_ALT", 2.5, _REAL32), ("NAV_DLL_ACT", 0, i32),
+        ("CA_ROTOR_COUNT", config.rotor_count, i32), ("SYS_AUTOSTART", 4001, i32),
+        ("SDLOG_MODE", 0, i32), ("BAT1_CAPACITY", 5000.0, _REAL32), ("COM_ARM_WO_GPS", 1, u8),
+    ])
+
+
+class ParameterProtocol:
+    """Answers the parameter messages of a ground station.
+
+    Parameters
+    ----------
+    table : ParameterTable
+    bytewise : bool
+        Encode integer values bytewise (PX4) instead of by C cast (ArduPilot).
+    """
+
+    def __init__(self, table: ParameterTable, bytewise: bool) -> None:
+        self.table = table
+        self.bytewise = bytewise
+
+    def encode(self, p: Parameter) -> float:
+        """The float sent in PARAM_VALUE for ``p``."""
+        if self.bytewise and p.type in _INT_RANGES:
+            raw = struct.pack(_INT_RANGES[p.type][2], int(p.value)).ljust(4, b"\0")
+            return struct.unpack("<f", raw)[0]
+        return p.value
+
+    def decode(self, p: Parameter, value: float) -> float:
+        """The number meant by the float of a PARAM_SET for ``p``."""
+        if self.bytewise and p.type in _INT_RANGES:
+            fmt = _INT_RANGES[p.type][2]
+            raw = struct.pack("<f", value)[:struct.calcsize(fmt)]
+            return float(struct.unpack(fmt, raw)[0])
+        return value
+
+    def value_message(self, index: int):
+        """PARAM_VALUE of the parameter at ``index``."""
+        p = self.table.at(index)
+        return mavlink.MAVLink_param_value_message(
+            p.name.encode("ascii"), self.encode(p), p.type, len(self.table), index)
+
+    def handle(self, msg) -> list:
+        """The replies (PARAM_VALUE messages) to one parameter message."""
+        kind = msg.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            return [self.value_message(i) for i in range(len(self.table))]
+        if kind == "PARAM_REQUEST_READ":
+            index = msg.param_index if msg.param_index >= 0 else self.table.index(msg.param_id)
+            if index is None or index >= len(self.table):
+                return []
+            return [self.value_message(index)]
+        if kind == "PARAM_SET":
+            index = self.table.index(msg.param_id)
+            if index is None:
+                return []
+            self.table.set(msg.param_id, self.decode(self.table.at(index), msg.param_value))
+            return [self.value_message(index)]
+        return []

@@ -1,0 +1,137 @@
+"""The ``mavsysid`` console script: argument parsing, dispatch and exit codes.
+
+Exit codes (docs/architecture.md): 0 success, 2 bad input or usage (one line, no traceback), 3 the
+job could not be done, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from mavsysid import __version__
+from mavsysid.errors import MavsysidError
+
+__all__ = ["build_parser", "main"]
+
+EXIT_INTERRUPTED = 130
+
+#: Built commands: (name, module with add_arguments/main, --help line, description).
+#: Modules are imported only for the command being run: the estimation and diagnosis
+#: stack takes seconds to import, which a ``sim`` or ``stream`` start should not pay.
+_COMMANDS = (
+    ("demo", "mavsysid.cli.demo", "the whole experiment on the simulated vehicle",
+     "Run the whole experiment on the simulated reference vehicle: plan an informative "
+     "flight for the nominal model, start the simulated MAVLink vehicle (whose true θ is "
+     "hidden from the model), stream the plan to it and record the flight, estimate θ; with "
+     "--iterations, re-plan with the updated model and fly again. Prints planned vs achieved "
+     "σ and the estimates against the simulator's truth."),
+    ("simulate", "mavsysid.cli.simulate", "fly the offline simulator and write a pose log",
+     "Simulate a vehicle flying the built-in excitation trajectory (physics ≥ 500 Hz, "
+     "geometric controller, motor lag, motion-capture noise) and write pose.csv, truth.csv "
+     "and meta.json into a new flight directory."),
+    ("estimate", "mavsysid.cli.estimate", "estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a log",
+     "Estimate the thrust, drag and moment coefficients and the inertia, with uncertainties, "
+     "from a flight log (pose.csv, .tlog, .ulg or .bin): a parameter EKF, then a "
+     "process-noise fit and a batch MAP refinement."),
+    ("diagnose", "mavsysid.cli.diagnose", "find, name and fit what the model still gets wrong",
+     "Replay the identified model along the logged rotor speeds, compare it with the "
+     "accelerations of the smoothed pose, and report where they disagree; name the "
+     "physical effect(s) that explain the difference (forward selection on BIC over a "
+     "catalogue of nine), fit them with confidence intervals, and show how much the gap "
+     "shrinks on held-out data (the last 30 %% of the flight)."),
+    ("plan", "mavsysid.cli.plan", "plan a maximally informative calibration flight",
+     "Plan a calibration flight that minimises the predicted parameter uncertainty "
+     "(D-optimality) within a flight-time budget and a flight box, using the vehicle's "
+     "nominal parameters as the model; or, with --random, the paper's random baseline. "
+     "Writes the trajectory file, and on request sampled setpoints and a Rerun recording."),
+    ("evaluate", "mavsysid.cli.evaluate", "run the paper's repeatability experiment",
+     "The paper's evaluation: N experiments, each drawing the unknown parameters ±50 % "
+     "around the truth, planning a D-optimal and a random flight with the same budget, "
+     "flying both in the simulator and running the EKF. Writes runs.csv, the paper's table "
+     "(table.md) and plots; finished experiments are reused when run again. Runs on a "
+     "local process pool or an existing Dask cluster."),
+    ("sim", "mavsysid.cli.sim", "run a simulated MAVLink vehicle endpoint",
+     "Run a simulated multirotor that speaks MAVLink 2 like ArduPilot Copter (or PX4 with "
+     "--autopilot px4): heartbeat, telemetry at settable rates, parameters, modes, arming, "
+     "takeoff and landing, GUIDED/OFFBOARD setpoints, with the offline simulator's physics "
+     "in real time (or --speedup K faster), optional signing and a ground-truth log."),
+    ("stream", "mavsysid.cli.stream",
+     "stream a trajectory to a vehicle over MAVLink and record the flight",
+     "Fly a trajectory file with a MAVLink vehicle (ArduPilot Copter or PX4, real or "
+     "`mavsysid sim`): check the plan and the vehicle, take off, stream position, velocity, "
+     "acceleration and yaw setpoints at a fixed rate, land, and record flight.tlog, pose.csv "
+     "and meta.json into a new flight directory."),
+)
+
+
+def _requested_command(argv: Sequence[str]) -> str | None:
+    # Top-level options take no values, so the first bare word names the command.
+    return next((arg for arg in argv if not arg.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of the console script.
+
+    Parameters
+    ----------
+    command : str, optional
+        Only this command's options are added (its module alone is imported); all
+        commands' options when None.
+    """
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-v", "--verbose", dest="verbosity", action="count",
+                        default=argparse.SUPPRESS, help="print more detail")
+    common.add_argument("-q", "--quiet", dest="quiet", action="store_true",
+                        default=argparse.SUPPRESS, help="print only the essential result")
+
+    parser = argparse.ArgumentParser(
+        prog="mavsysid", parents=[common],
+        description="Plan, fly, estimate and diagnose multirotor system-identification flights.",
+    )
+    parser.add_argument("--version", action="version", version=f"mavsysid {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    for name, module_name, summary, description in _COMMANDS:
+        subparser = sub.add_parser(name, parents=[common], help=summary,
+                                   description=description)
+        if command is None or command == name:
+            module = importlib.import_module(module_name)
+            module.add_arguments(subparser)
+            subparser.set_defaults(run=module.main)
+
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``mavsysid`` console script; returns the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_requested_command(argv) or "")
+    args = parser.parse_args(argv)
+    verbosity = getattr(args, "verbosity", 0)
+    args.verbosity = -1 if getattr(args, "quiet", False) else verbosity
+    try:
+        return args.run(args)
+    except MavsysidError as error:
+        print(f"mavsysid {args.command}: error: {error}", file=sys.stderr)
+        return error.exit_code
+    except (KeyboardInterrupt, SystemError) as error:
+        if not _caused_by_interrupt(error):
+            raise
+        print(f"mavsysid {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _caused_by_interrupt(error: BaseException) -> bool:
+    # A Ctrl-C that lands inside a compiled numba kernel surfaces as a SystemError
+    # ("returned a result with an exception set") chained onto the KeyboardInterrupt.
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False

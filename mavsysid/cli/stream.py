@@ -1,0 +1,159 @@
+"""``mavsysid stream``: fly a trajectory file over MAVLink and record the flight.
+
+A thin layer over `run_stream` (which tests call directly): parse the options, open the
+session (plan checks, flight directory, connection), fly, and print where the flight
+was recorded with its tracking and rate figures. Exit codes: 0 flown, 2 bad input, 3
+refused or aborted (one line saying why), 130 interrupted after braking and landing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mavsysid.cli.plan import parse_numbers
+from mavsysid.errors import InputError
+from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings, open_session
+from mavsysid.flight.ground.streamer import fly
+from mavsysid.flight.mavlink_setup import signing_key_from_file
+
+__all__ = ["StreamOutcome", "add_arguments", "format_summary", "main", "run_stream"]
+
+
+@dataclass(frozen=True)
+class StreamOutcome:
+    """A finished flight: its directory and the final metadata."""
+
+    directory: Path
+    meta: dict[str, Any]
+
+
+def run_stream(trajectory: str | Path, settings: StreamSettings,
+               vehicle: str | Path | None = None, say: Callable[[str], None] | None = None,
+               progress: bool = True, at_end: Callable[[StreamSession], None] | None = None,
+               ) -> StreamOutcome:
+    """Fly ``trajectory`` with ``settings`` (see `flight.ground.streamer.fly`, also for ``at_end``).
+
+    Raises
+    ------
+    InputError
+        Bad trajectory, vehicle, box or connection string.
+    JobFailedError
+        Refused or aborted; the flight directory keeps what was recorded.
+    KeyboardInterrupt
+        After the safe action.
+    """
+    say = say or (lambda _text: None)
+    with open_session(trajectory, settings, vehicle) as session:
+        session.commands.say = say
+        say(f"recording into {session.directory}")
+        fly(session, say, progress, at_end)
+    return StreamOutcome(session.directory, session.meta)
+
+
+def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
+    """The text printed after a flight (``verbosity`` < 0: only the flight directory)."""
+    d, meta = outcome.directory, outcome.meta
+    if verbosity < 0:
+        return str(d)
+    traj = meta["trajectory"]
+    tracking = meta.get("tracking", {})
+    sp = meta.get("setpoints", {})
+    rates = meta.get("telemetry_rates_hz", {}).get("flight", {})
+    shown = ", ".join(f"{k} {v:.1f} Hz" for k, v in rates.items()
+                      if k in ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION")
+                      or k.startswith("ESC_TELEMETRY"))
+    lines = [f"Flew the {traj['duration']:.1f} s trajectory {traj['file']} "
+             f"({meta.get('autopilot', {}).get('family', '?')}).",
+             f"  pose log   {d / 'pose.csv'}  ({meta['samples']} samples)",
+             f"  tlog       {d / 'flight.tlog'}",
+             f"  metadata   {d / 'meta.json'}"]
+    if tracking.get("rows"):
+        lines.append(f"  tracking   RMS {100 * tracking['rms_m']:.1f} cm, max "
+                     f"{100 * tracking['max_m']:.1f} cm")
+    if "rate_hz" in sp:
+        lines.append(f"  setpoints  {sp['rate_hz']:.2f} Hz achieved ({sp['sent']} sent, "
+                     f"{sp['dropped']} dropped, period p99 deviation "
+                     f"{1000 * sp['period_deviation_p99_s']:.2f} ms)")
+    if shown:
+        lines.append(f"  telemetry  {shown}")
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``mavsysid stream``."""
+    parser._negative_number_matcher = re.compile(r"-\.?\d")  # type: ignore[attr-defined]
+    parser.add_argument("trajectory", type=Path, help="trajectory file (JSON) to fly")
+    parser.add_argument("--connect", default="udp:127.0.0.1:14550", metavar="LINK",
+                        help="udp:HOST:PORT (listen), udpout:HOST:PORT, tcp:HOST:PORT, "
+                        "tcpin:HOST:PORT or a serial device[:BAUD] (default: "
+                        "udp:127.0.0.1:14550)")
+    parser.add_argument("--vehicle", metavar="NAME|TOML",
+                        help="shipped vehicle name or TOML path (default: the configuration "
+                        "stored in the trajectory file)")
+    parser.add_argument("--rate", type=float, default=50.0, metavar="HZ",
+                        help="setpoint rate (default: 50)")
+    parser.add_argument("--telemetry-rate", type=float, default=50.0, metavar="HZ",
+                        help="rate asked for pose, attitude and ESC telemetry (default: 50)")
+    parser.add_argument("--log-dir", type=Path, default=Path("logs"), metavar="DIR",
+                        help="where the flight directory is created (default: ./logs)")
+    parser.add_argument("--no-land", action="store_true",
+                        help="keep hovering at the end instead of landing")
+    parser.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
+                        help="flight box in m, world ENU (default: the trajectory's)")
+    parser.add_argument("--signing-key", type=Path, metavar="FILE",
+                        help="MAVLink 2 signing: a file holding the passphrase")
+    parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
+                        help="run the clock K times faster (only against `mavsysid sim "
+                        "--speedup K`; default: 1)")
+    parser.add_argument("--max-tracking-error", type=float, default=1.0, metavar="M",
+                        help="abort to hold beyond this distance from the setpoint "
+                        "(default: 1.0 m)")
+    parser.add_argument("--heartbeat-timeout", type=float, default=30.0, metavar="S",
+                        help="how long to wait for the vehicle's first heartbeat, wall "
+                        "time (default: 30 s)")
+    parser.add_argument("--heartbeat-loss", type=float, default=3.0, metavar="S",
+                        help="stop streaming after this long without a heartbeat "
+                        "(default: 3 s)")
+    parser.add_argument("--position-timeout", type=float, default=90.0, metavar="S",
+                        help="how long to wait for a usable local position (default: 90 s)")
+
+
+def _settings(args: argparse.Namespace) -> StreamSettings:
+    for option in ("rate", "telemetry_rate", "speedup", "max_tracking_error",
+                   "heartbeat_timeout", "heartbeat_loss", "position_timeout"):
+        value = getattr(args, option)
+        if not (value > 0.0 and value < float("inf")):
+            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
+                             "number")
+    if args.rate > 500.0:
+        raise InputError(f"--rate {args.rate:g}: at most 500 Hz")
+    box = None
+    if args.box is not None:
+        box = parse_numbers(args.box, 6, "--box", "x_min,y_min,z_min,x_max,y_max,z_max")
+    key = None if args.signing_key is None else signing_key_from_file(args.signing_key)
+    return StreamSettings(
+        connect=args.connect, rate=args.rate, telemetry_rate=args.telemetry_rate,
+        land=not args.no_land, box=box, signing_key=key, speedup=args.speedup,
+        heartbeat_timeout=args.heartbeat_timeout, heartbeat_loss=args.heartbeat_loss,
+        position_timeout=args.position_timeout, max_tracking_error=args.max_tracking_error,
+        log_dir=args.log_dir)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run the command; returns the exit code."""
+    settings = _settings(args)
+    verbose = args.verbosity >= 0
+
+    def say(text: str) -> None:
+        if verbose:
+            print(f"mavsysid stream: {text}", file=sys.stderr, flush=True)
+
+    outcome = run_stream(args.trajectory, settings, args.vehicle, say, progress=verbose)
+    print(format_summary(outcome, args.verbosity))
+    return 0

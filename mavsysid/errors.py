@@ -1,0 +1,42 @@
+"""Error types shared by every stage.
+
+The console script maps them to exit codes (docs/architecture.md): an `InputError` is the
+user's to fix (exit 2, one line, no traceback); a `JobFailedError` means the
+input was fine but the job could not be done (exit 3).
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ConfigError",
+    "InputError",
+    "JobFailedError",
+    "LogFormatError",
+    "MavsysidError",
+]
+
+
+class MavsysidError(Exception):
+    """Base class of every error mavsysid reports to a user as one line."""
+
+    exit_code = 1
+
+
+class InputError(MavsysidError, ValueError):
+    """Bad input: a malformed file, an invalid option, an impossible request (exit code 2)."""
+
+    exit_code = 2
+
+
+class ConfigError(InputError):
+    """A vehicle configuration file that does not satisfy the schema."""
+
+
+class LogFormatError(InputError):
+    """A flight log that cannot be read: missing columns, bad values, wrong rotor count."""
+
+
+class JobFailedError(MavsysidError, RuntimeError):
+    """The input was valid but the job could not be done (exit code 3)."""
+
+    exit_code = 3

@@ -1,0 +1,230 @@
+"""Tests of ``mavsysid plan``: validation, outputs, exit codes and determinism."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import types
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.formats.trajectory_file import read_trajectory
+from mavsysid.planner.results import (
+    PlannerGraph,
+    PlannerSettings,
+    PlannerStats,
+    PlanProgress,
+    PlanResult,
+)
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle, save_vehicle
+
+from mavsysid.cli import main
+from mavsysid.cli.plan import run_plan
+from mavsysid.errors import InputError, JobFailedError
+
+HEADER = "t,x,y,z,vx,vy,vz,ax,ay,az,yaw,yaw_rate"
+
+
+def fake_result(config: VehicleConfig, settings: PlannerSettings, kind: str) -> PlanResult:
+    """A hand-made plan for the given request: the 12 s excitation figure, made-up σ."""
+    trajectory = excitation_trajectory(ExcitationSpec(duration=12.0))
+    t = np.linspace(0.0, trajectory.duration, 13)
+    sigma = 0.5 * config.theta * np.exp(-t[:, None] / 4.0)
+    covariance = np.diag(sigma[-1] ** 2)
+    stats = PlannerStats(40, 12, 30, 50, 60, 80, 1.5, 0.2, 0.5, 0.7, np.zeros((0, 2)))
+    graph = PlannerGraph(np.zeros((1, 4)), np.zeros((0, 2), dtype=int), [], [0])
+    return PlanResult(kind, trajectory, float(np.prod(sigma[-1]) ** (1 / 3)), covariance, t,
+                      sigma, config, settings, stats, graph)
+
+
+@pytest.fixture
+def fake_planner(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, PlannerSettings]]:
+    """Stand-ins for the planner's rrbt.plan and baseline.plan_random; records the calls."""
+    calls: list[tuple[str, PlannerSettings]] = []
+
+    def make(kind: str):
+        def plan(config, settings, progress=None):
+            calls.append((kind, settings))
+            if progress is not None:
+                progress(PlanProgress(0.5, 20, 7, 12, 30, None))
+                progress(PlanProgress(1.0, 40, 12, 30, 50, 1e-6))
+            return fake_result(config, settings, kind)
+        return plan
+
+    rrbt = types.ModuleType("mavsysid.planner.rrbt")
+    baseline = types.ModuleType("mavsysid.planner.baseline")
+    rrbt.plan = make("dopt")  # type: ignore[attr-defined]
+    baseline.plan_random = make("random")  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "mavsysid.planner.rrbt", rrbt)
+    monkeypatch.setitem(sys.modules, "mavsysid.planner.baseline", baseline)
+    return calls
+
+
+def _vehicle_with(tmp_path: Path, **limits: float) -> str:
+    config = load_vehicle("firefly")
+    path = tmp_path / "changed.toml"
+    save_vehicle(replace(config, limits=replace(config.limits, **limits)), path)
+    return str(path)
+
+
+BAD_OPTIONS = {
+    "box with 3 numbers": (["--box", "1,2,3"], "--box"),
+    "box with a word": (["--box", "-2,-2,0.5,2,2,high"], "--box"),
+    "box min above max": (["--box", "2,-2,0.5,-2,2,2.5"], "x_min"),
+    "box too small": (["--box", "-2,-2,1,2,2,1.3"], "z side"),
+    "budget 0": (["--budget", "0"], "--budget"),
+    "negative budget": (["--budget", "-5"], "--budget"),
+    "time 0 without samples": (["--time", "0"], "--time"),
+    "samples 0": (["--samples", "0"], "--samples"),
+    "start at the wall": (["--start", "1.95,0,1.5,0"], "--start"),
+    "start with 2 numbers": (["--start", "0,0"], "--start"),
+    "negative seed": (["--seed", "-1"], "--seed"),
+    "unknown vehicle": (["--vehicle", "fireflyy"], "did you mean firefly"),
+    "negative rotor headroom": (["--rotor-headroom", "-0.1"], "--rotor-headroom"),
+    "rotor headroom without hover": (["--rotor-headroom", "0.45"], "hover speed"),
+}
+
+
+@pytest.mark.parametrize("options", BAD_OPTIONS.values(), ids=BAD_OPTIONS.keys())
+def test_bad_request_exits_2_with_one_line(options, tmp_path, monkeypatch, capsys,
+                                           fake_planner):
+    """Each impossible request: exit 2, one stderr line naming the option, nothing planned."""
+    argv, fragment = options
+    monkeypatch.chdir(tmp_path)
+    assert main(["plan", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("mavsysid plan: error: ")
+    assert fragment in err
+    assert not fake_planner and not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(("limits", "key"), [
+    ({"thrust_min_ratio": 1.2}, "thrust_min_ratio"),
+    ({"thrust_max_ratio": 0.9, "thrust_min_ratio": 0.5}, "thrust_max_ratio"),
+    ({"rotor_speed_min": 600.0}, "rotor_speed_min"),
+])
+def test_limits_without_hover_exit_2(limits, key, tmp_path, monkeypatch, capsys, fake_planner):
+    """T_min > m g, T_max < m g or an idle speed lifting more than m g: exit 2, one line."""
+    vehicle = _vehicle_with(tmp_path, **limits)
+    monkeypatch.chdir(tmp_path)
+    assert main(["plan", "--vehicle", vehicle]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "changed.toml" in err and key in err
+    assert not fake_planner and sorted(p.name for p in tmp_path.iterdir()) == ["changed.toml"]
+
+
+def test_output_directory_is_refused_before_planning(tmp_path, capsys, fake_planner):
+    """-o naming a directory is exit 2 before any planning time is spent."""
+    assert main(["plan", "-o", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err and not fake_planner
+
+
+def test_plan_writes_files_and_summary(tmp_path, capsys, fake_planner):
+    """Exit 0; JSON, CSV and RRD written; summary names D-opt, each σ and the outputs."""
+    out, csv, rrd = tmp_path / "calib.json", tmp_path / "calib.csv", tmp_path / "calib.rrd"
+    code = main(["plan", "--box", "-3,-3,0.5,3,3,2.5", "--budget", "12", "--seed", "7",
+                 "--samples", "40", "-o", str(out), "--csv", str(csv), "--rrd", str(rrd)])
+    text = capsys.readouterr().out
+    assert code == 0
+    ((kind, settings),) = fake_planner
+    assert kind == "dopt" and settings.box == (-3.0, -3.0, 0.5, 3.0, 3.0, 2.5)
+    assert (settings.seed, settings.max_samples, settings.budget) == (7, 40, 12.0)
+    assert math.isinf(settings.planning_time), "--samples alone: no wall-clock limit"
+    assert read_trajectory(out).kind == "dopt"
+    assert csv.read_text().splitlines()[0] == HEADER
+    assert rrd.stat().st_size > 1000
+    assert "D-opt" in text and all(name in text for name in PARAMETER_NAMES)
+    assert "40 samples, 12 vertices, 30 edges, 50 beliefs" in text
+    assert str(out) in text and str(csv) in text and str(rrd) in text
+
+
+def test_quiet_prints_only_the_trajectory_file(tmp_path, capsys, fake_planner):
+    """-q prints the trajectory file's path alone, so scripts can capture it."""
+    out = tmp_path / "t.json"
+    assert main(["-q", "plan", "-o", str(out)]) == 0
+    assert capsys.readouterr().out == f"{out}\n"
+    assert fake_planner[0][1].planning_time == 30.0
+
+
+def test_random_uses_the_baseline(tmp_path, fake_planner):
+    """--random runs the paper's random baseline and says so in the file."""
+    out = tmp_path / "r.json"
+    assert main(["plan", "--random", "-o", str(out)]) == 0
+    assert fake_planner[0][0] == "random" and read_trajectory(out).kind == "random"
+
+
+def test_no_feasible_plan_exits_3_and_writes_nothing(tmp_path, monkeypatch, capsys,
+                                                      fake_planner):
+    """A planner failure is exit 3 with one line, and no file is written."""
+    def fail(config, settings, progress=None):
+        raise JobFailedError("no feasible trajectory found in 2.0 s of planning (40 samples, "
+                             "1 vertices, 0 edges)")
+
+    monkeypatch.setattr(sys.modules["mavsysid.planner.rrbt"], "plan", fail)
+    assert main(["plan", "-o", str(tmp_path / "t.json"), "--csv", str(tmp_path / "t.csv")]) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no feasible trajectory found" in err
+    assert not any(tmp_path.iterdir())
+
+
+def test_failure_message_says_how_far_planning_got(fake_planner, monkeypatch):
+    """A planner failure without the standard wording is prefixed with time and graph size."""
+    def fail(config, settings, progress=None):
+        progress(PlanProgress(3.5, 90, 17, 4, 20, None))
+        raise JobFailedError("every edge leaves the box")
+
+    monkeypatch.setattr(sys.modules["mavsysid.planner.rrbt"], "plan", fail)
+    with pytest.raises(JobFailedError, match=r"^no feasible trajectory found in 3\.5 s "
+                       r"\(17 vertices, 4 edges\): every edge leaves the box$"):
+        run_plan("firefly", PlannerSettings(), progress=False)
+
+
+def test_run_plan_forwards_progress(fake_planner):
+    """A progress callable given to run_plan receives the planner's reports."""
+    seen: list[PlanProgress] = []
+    result = run_plan(load_vehicle("firefly"), PlannerSettings(max_samples=40),
+                      progress=seen.append)
+    assert [p.samples for p in seen] == [20, 40] and result.kind == "dopt"
+
+
+def test_run_plan_checks_before_planning(fake_planner):
+    """run_plan refuses an impossible request itself, without calling the planner."""
+    with pytest.raises(InputError, match="--budget"):
+        run_plan("firefly", PlannerSettings(budget=0.0))
+    assert not fake_planner
+
+
+# --- with the real planner -------------------------------------------------------------
+
+
+def _real_plan(tmp_path: Path, name: str, *extra: str) -> Path:
+    pytest.importorskip("mavsysid.planner.rrbt")
+    out = tmp_path / f"{name}.json"
+    # 120 samples: with seed 1 the planner connects its first vertex only after ~60.
+    code = main(["plan", "--vehicle", "firefly", "--samples", "120", "--time", "60",
+                 "--seed", "1", "--refine-steps", "300", "-o", str(out), *extra])
+    assert code == 0
+    return out
+
+
+def test_real_plan_writes_readable_files(tmp_path, capsys):
+    """A short real plan exits 0 and writes a JSON read_trajectory reads and the CSV."""
+    csv = tmp_path / "a.csv"
+    out = _real_plan(tmp_path, "a", "--csv", str(csv))
+    read = read_trajectory(out)
+    assert read.kind == "dopt" and read.predicted_dopt is not None and read.predicted_dopt > 0
+    assert read.trajectory.duration <= 30.0 + 1e-9
+    assert csv.read_text().splitlines()[0] == HEADER
+    assert "D-opt" in capsys.readouterr().out
+
+
+def test_real_plan_is_deterministic(tmp_path):
+    """Two runs with the same seed and --samples give identical trajectories and D-opt."""
+    a = json.loads(_real_plan(tmp_path, "a").read_text())
+    b = json.loads(_real_plan(tmp_path, "b").read_text())
+    assert a["segments"] == b["segments"]
+    assert a["predicted_dopt"] == b["predicted_dopt"]
