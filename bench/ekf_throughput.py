@@ -18,8 +18,8 @@ from pathlib import Path
 from mavsysid.estimation.ekf import ParameterEKF
 from mavsysid.estimation.estimator import (
     EstimatorSettings,
-    _initial_state_sigma,
     estimate_parameters,
+    flight_initial_state_sigma,
     prior_from_config,
 )
 from mavsysid.estimation.readers import load_flight
@@ -41,7 +41,7 @@ def main() -> None:
         flight = load_flight(directory / "pose.csv", cfg)
     prior = prior_from_config(cfg, EstimatorSettings())
     sigma = (cfg.noise.position_sigma, cfg.noise.attitude_sigma)
-    state_sigma = _initial_state_sigma(flight, sigma)
+    state_sigma = flight_initial_state_sigma(flight, sigma)
     ParameterEKF(cfg, prior, sigma).run(flight, state_sigma)  # warm-up (numba cache load)
     walls = []
     for _ in range(args.repeats):

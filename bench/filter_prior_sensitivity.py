@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.experiments.evaluate_job import make_specs
 from mavsysid.experiments.evaluation_intervals import headline_intervals
 from mavsysid.experiments.experiment import (
     KINDS,
@@ -33,8 +34,6 @@ from mavsysid.experiments.experiment import (
     fly_plan,
 )
 from mavsysid.vehicle.config import load_vehicle
-
-from mavsysid.cli.evaluate import make_specs
 
 
 def _flight_dir(workdir: Path, spec: ExperimentSpec, kind: str) -> Path:

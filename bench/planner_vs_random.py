@@ -78,7 +78,8 @@ def time_to_90(result: PlanResult) -> float:
     return float(h[np.argmax(np.log(h[:, 1]) <= target), 0])
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
+    """The benchmark's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--budget", type=float, default=30.0)
@@ -90,8 +91,11 @@ def main() -> None:
                         help="θ the flight controller is tuned with (default: truth)")
     parser.add_argument("--process-noise", action="store_true",
                         help="fly in a world with the process noise the filter assumes")
-    args = parser.parse_args()
-    truth = load_vehicle(args.vehicle)
+    return parser.parse_args()
+
+
+def fly_seeds(args: argparse.Namespace, truth: VehicleConfig) -> list[dict]:
+    """Plan (D-optimal and random), fly and estimate for each seed; one row per seed."""
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
@@ -114,6 +118,11 @@ def main() -> None:
                   f"edges {p.stats.edges}, beliefs {p.stats.beliefs} | saturated "
                   f"{ps.saturated_fraction:.0%}/{rs.saturated_fraction:.0%}, tracking RMS "
                   f"{ps.position_rms:.2g}/{rs.position_rms:.2g} m", flush=True)
+    return rows
+
+
+def report_flights(args: argparse.Namespace, rows: list[dict]) -> None:
+    """Saturated and off-path flights, and the reached D-opt of both planners."""
     kinds = ("dopt", "random")
     reached = {k: np.array([r[k][1].filtered.d_optimality for r in rows]) for k in kinds}
     predicted = {k: np.array([r[k][0].predicted_dopt for r in rows]) for k in kinds}
@@ -134,6 +143,10 @@ def main() -> None:
     print(f"  ratio random/dopt of median reached D-opt: "
           f"{np.median(reached['random']) / np.median(reached['dopt']):.2f} (paper: 4.4; "
           f"95 % paired bootstrap interval over seeds {lo:.2f}–{hi:.2f})")
+
+
+def report_sigma(truth: VehicleConfig, rows: list[dict]) -> None:
+    """The planner's predicted σ against the estimator's, and the estimator's calibration."""
     sig_pred = np.array([r["dopt"][0].predicted_sigma[-1] for r in rows])
     sig_est = np.array([r["dopt"][1].filtered.sigma for r in rows])
     ratio = sig_pred / sig_est
@@ -163,6 +176,10 @@ def main() -> None:
                        for r in rows])
     print(f"  estimator error / σ over seeds (dopt): std per parameter "
           f"{np.round(errors.std(axis=0), 2).tolist()} (1 if σ matches the spread)")
+
+
+def report_planner(rows: list[dict]) -> None:
+    """Planning time to a good plan, search speed and refinement."""
     t90 = [time_to_90(r["dopt"][0]) for r in rows]
     first = [r["dopt"][0].stats.time_to_first_solution for r in rows]
     st = rows[0]["dopt"][0].stats
@@ -174,6 +191,15 @@ def main() -> None:
     steps = np.array([r["dopt"][0].stats.refine_steps for r in rows])
     kept = np.array([r["dopt"][0].stats.refine_accepted for r in rows])
     print(f"  refinement: median {np.median(steps):.0f} steps per plan, {np.median(kept):.0f} kept")
+
+
+def main() -> None:
+    args = parse_args()
+    truth = load_vehicle(args.vehicle)
+    rows = fly_seeds(args, truth)
+    report_flights(args, rows)
+    report_sigma(truth, rows)
+    report_planner(rows)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """The model-discrepancy workflow behind ``mavsysid diagnose``.
 
 1. *Where they disagree*: the identified model is replayed along the logged rotor speeds
-   and compared with the accelerations of the smoothed pose (`mavsysid.discrepancy.residuals`):
+   and compared with the accelerations of the smoothed pose (`mavsysid.discrepancy.residuals`,
+   statistics in `mavsysid.discrepancy.residual_stats`):
    residual per axis, its whiteness (Ljung–Box), the time windows and flight regimes
    (speed, tilt, yaw rate, thrust) where it is large, and the EKF's NIS.
 2. *Which effect*: forward selection over the catalogue (`mavsysid.discrepancy.selection`) on the
@@ -20,6 +21,14 @@ from typing import Any
 import numpy as np
 from mavsysid.discrepancy.candidates import candidate_library
 from mavsysid.discrepancy.regression import fit_theta
+from mavsysid.discrepancy.residual_stats import (
+    AxisStats,
+    Where,
+    axis_rms,
+    ljung_box,
+    nis_stats,
+    where_large,
+)
 from mavsysid.discrepancy.residuals import ResidualProblem, SmoothedPose, SmootherSettings
 from mavsysid.discrepancy.selection import (
     CandidateScore,
@@ -31,18 +40,14 @@ from mavsysid.discrepancy.selection import (
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
-from scipy.stats import chi2
-from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from mavsysid.errors import InputError
 
 __all__ = [
     "MASS_NOTE",
-    "AxisStats",
     "Diagnosis",
     "DiagnosisSettings",
     "Gap",
-    "Where",
     "diagnose_flight",
     "reestimate",
 ]
@@ -51,9 +56,6 @@ __all__ = [
 MASS_NOTE = ("a wrong mass cannot be detected from pose and rotor speeds: scaling the mass, "
              "c_T, c_M and the inertia by one factor leaves the motion unchanged, so a mass "
              "error is absorbed into θ; weigh the vehicle")
-
-#: χ²(6) 95 % band of the NIS of a consistent filter with 6 measurement dimensions.
-NIS_BAND = (float(chi2.ppf(0.025, 6)), float(chi2.ppf(0.975, 6)))
 
 
 @dataclass(frozen=True)
@@ -83,28 +85,6 @@ class DiagnosisSettings:
 
 
 @dataclass(frozen=True)
-class AxisStats:
-    """Residual statistics per axis (order `AXIS_NAMES`) on one set of samples.
-
-    Attributes
-    ----------
-    rms : ndarray, shape (6,)
-        m/s² (forces) and rad/s² (angular accelerations).
-    ljung_box_p : ndarray, shape (6,)
-        p-value of the Ljung–Box test (10 lags) on samples one smoother window apart.
-    nis_mean : float or None
-        Mean NIS of the EKF over these samples (None if not computed).
-    nis_outside : float or None
-        Fraction of the NIS outside its χ²(6) 95 % band.
-    """
-
-    rms: np.ndarray
-    ljung_box_p: np.ndarray
-    nis_mean: float | None = None
-    nis_outside: float | None = None
-
-
-@dataclass(frozen=True)
 class Gap:
     """The gap between model and measurement before and after the augmentation.
 
@@ -128,34 +108,6 @@ class Gap:
     shrink: float
     bic_before: float
     bic_after: float
-
-
-@dataclass(frozen=True)
-class Where:
-    """Where the base model's residual is large or not white (training and held-out).
-
-    Attributes
-    ----------
-    windows : tuple of (float, float, int, float)
-        Time windows (start s, end s, worst axis, normalised RMS) with a residual more
-        than twice the noise level, largest first (at most 5).
-    regimes : dict
-        ``{regime: {"bins": [lo, hi] edges…, "rms": [[6 values] per bin]}}`` for
-        ``speed`` (m/s), ``tilt`` (rad), ``yaw_rate`` (rad/s), ``thrust`` (N), the
-        normalised RMS per axis in each tercile of the regime variable.
-    worst_regime : tuple of (str, str) or None
-        The regime and tercile where the residual is largest (e.g. ("speed", "high")).
-    ljung_box_p : ndarray, shape (6,)
-        Whiteness of the base residual on the training data.
-    noise : ndarray, shape (6,)
-        The noise level used to normalise, per axis.
-    """
-
-    windows: tuple[tuple[float, float, int, float], ...]
-    regimes: dict
-    worst_regime: tuple[str, str] | None
-    ljung_box_p: np.ndarray
-    noise: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -211,23 +163,6 @@ class Diagnosis:
         return bool(self.effects)
 
 
-def _ljung_box(r: np.ndarray, step: int) -> np.ndarray:
-    """Ljung–Box p-value (10 lags, or fewer on short data) per axis of r[::step]."""
-    x = r[::max(step, 1)]
-    lags = max(1, min(10, len(x) // 5))
-    out = np.empty(r.shape[1])
-    for a in range(r.shape[1]):
-        if len(x) < 8 or np.allclose(x[:, a], x[0, a]):
-            out[a] = np.nan
-            continue
-        out[a] = float(acorr_ljungbox(x[:, a], lags=[lags])["lb_pvalue"].iloc[0])
-    return out
-
-
-def _rms(r: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.mean(r**2, axis=0))
-
-
 def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect]
          ) -> np.ndarray:
     """The parameter EKF's NIS per sample with ``effects`` in the model at their values.
@@ -242,53 +177,49 @@ def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffec
     return result.history.nis
 
 
-def _nis_stats(nis: np.ndarray | None, rows: np.ndarray) -> tuple[float | None, float | None]:
-    if nis is None:
-        return None, None
-    x = nis[rows]
-    x = x[np.isfinite(x)]
-    outside = np.mean((x < NIS_BAND[0]) | (x > NIS_BAND[1]))
-    return float(np.mean(x)), float(outside)
+def _split(problem: ResidualProblem, used: np.ndarray, settings: DiagnosisSettings
+           ) -> tuple[float, np.ndarray, np.ndarray]:
+    """Start of the held-out part (s), and the training and held-out sample indices.
+
+    The held-out samples start one smoother window after the split, so that no smoothed
+    acceleration mixes the two parts.
+    """
+    flight = problem.flight
+    t = flight.t
+    split = float(t[0] + (1.0 - settings.holdout) * flight.duration)
+    train = np.flatnonzero(used & (t < split))
+    test = np.flatnonzero(used & (t >= split + settings.smoother.window))
+    if len(train) < 10 * problem.window_samples or len(test) < 2 * problem.window_samples:
+        raise InputError(f"{flight.source}: {flight.duration:.1f} s is too short to diagnose "
+                         "(needs ≈ 10 s: training, held-out and smoother edges)")
+    return split, train, test
 
 
-def _where(problem: ResidualProblem, pose: SmoothedPose, r: np.ndarray, used: np.ndarray,
-           noise: np.ndarray, train: np.ndarray, window: float) -> Where:
-    t = problem.flight.t
-    z = r / noise
-    windows = []
-    for t0 in np.arange(t[used][0], t[used][-1] - 0.5 * window, window):
-        m = used & (t >= t0) & (t < t0 + window)
-        if m.sum() < 3:
-            continue
-        per_axis = _rms(z[m])
-        total = float(np.sqrt(np.mean(per_axis**2)))
-        if total > 2.0:
-            windows.append((float(t0), float(t0 + window), int(np.argmax(per_axis)), total))
-    windows.sort(key=lambda w: -w[3])
-    n = problem.flight.rotor_speeds
-    rates = pose.rates
-    R = pose.rotation()
-    variables = {
-        "speed": np.linalg.norm(pose.velocity, axis=1),
-        "tilt": np.arccos(np.clip(R[:, 2, 2], -1.0, 1.0)),
-        "yaw_rate": np.abs(rates[:, 2]),
-        "thrust": problem.theta[0] * np.sum(n**2, axis=1),
-    }
-    regimes: dict = {}
-    worst, worst_value = None, -np.inf
-    for name, v in variables.items():
-        edges = np.quantile(v[used], [0.0, 1 / 3, 2 / 3, 1.0])
-        rms_bins = []
-        for i, label in enumerate(("low", "mid", "high")):
-            m = used & (v >= edges[i]) & (v <= edges[i + 1])
-            per_axis = _rms(z[m]) if m.any() else np.full(6, np.nan)
-            rms_bins.append(per_axis)
-            value = float(np.sqrt(np.nanmean(per_axis**2)))
-            if value > worst_value:
-                worst, worst_value = (name, label), value
-        regimes[name] = {"edges": edges, "rms": np.array(rms_bins)}
-    return Where(tuple(windows[:5]), regimes, worst,
-                 _ljung_box(r[train], problem.window_samples), noise)
+def _shrink(before: AxisStats, after: AxisStats, contribution: np.ndarray, noise: np.ndarray,
+            fitted: bool) -> tuple[tuple[int, ...], float]:
+    """The axes the named effects act on and the gap's shrink over them (`Gap`).
+
+    Parameters
+    ----------
+    before, after : AxisStats
+        On the held-out samples.
+    contribution : ndarray, shape (M, 6)
+        Residual before minus after on the training samples: the effects' part.
+    noise : ndarray, shape (6,)
+        RMS of the augmented model's training residual per axis.
+    fitted : bool
+        Whether any effect was named (no axes and no shrink otherwise).
+    """
+    if not fitted:
+        return (), 0.0
+    size = axis_rms(contribution)
+    flagged = tuple(int(a) for a in np.flatnonzero(size >= noise))
+    if not flagged:
+        flagged = (int(np.argmax(size / noise)),)
+    idx = list(flagged)
+    b = np.sqrt(np.sum((before.rms[idx] / noise[idx]) ** 2))
+    a = np.sqrt(np.sum((after.rms[idx] / noise[idx]) ** 2))
+    return flagged, float(1.0 - a / b)
 
 
 def diagnose_flight(
@@ -333,12 +264,7 @@ def diagnose_flight(
     problem = ResidualProblem(flight, config, theta0, settings.smoother, known)
     used = problem.keep()
     t = flight.t
-    split = float(t[0] + (1.0 - settings.holdout) * flight.duration)
-    train = np.flatnonzero(used & (t < split))
-    test = np.flatnonzero(used & (t >= split + settings.smoother.window))
-    if len(train) < 10 * problem.window_samples or len(test) < 2 * problem.window_samples:
-        raise InputError(f"{flight.source}: {flight.duration:.1f} s is too short to diagnose "
-                         "(needs ≈ 10 s: training, held-out and smoother edges)")
+    split, train, test = _split(problem, used, settings)
     if progress:
         progress("fitting θ to the flight's accelerations")
     base, weights = fit_theta(problem, train)
@@ -351,24 +277,14 @@ def diagnose_flight(
     if with_nis:
         nis_before = _nis(flight, config, known)
         nis_after = _nis(flight, config, (*known, *fitted)) if fitted else nis_before
-    before = AxisStats(_rms(r_before[test]), _ljung_box(r_before[test], base.window_samples),
-                       *_nis_stats(nis_before, test))
-    after = AxisStats(_rms(r_after[test]), _ljung_box(r_after[test], base.window_samples),
-                      *_nis_stats(nis_after, test))
-    noise = _rms(r_after[train])
-    flagged: tuple[int, ...] = ()
-    shrink = 0.0
-    if fitted:
-        contribution = _rms((r_before - r_after)[train])
-        flagged = tuple(int(a) for a in np.flatnonzero(contribution >= noise))
-        if not flagged:
-            flagged = (int(np.argmax(contribution / noise)),)
-        idx = list(flagged)
-        b = np.sqrt(np.sum((before.rms[idx] / noise[idx]) ** 2))
-        a = np.sqrt(np.sum((after.rms[idx] / noise[idx]) ** 2))
-        shrink = float(1.0 - a / b)
+    before = AxisStats(axis_rms(r_before[test]), ljung_box(r_before[test], base.window_samples),
+                       *nis_stats(nis_before, test))
+    after = AxisStats(axis_rms(r_after[test]), ljung_box(r_after[test], base.window_samples),
+                      *nis_stats(nis_after, test))
+    noise = axis_rms(r_after[train])
+    flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
     gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
-    where = _where(base, pose, r_before, used, noise, train, settings.window)
+    where = where_large(base, pose, r_before, used, noise, train, settings.window)
     notes = [MASS_NOTE]
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,

@@ -8,7 +8,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mavsysid.discrepancy.diagnosis import NIS_BAND, Diagnosis
+from mavsysid.discrepancy.diagnosis import Diagnosis
+from mavsysid.discrepancy.residual_stats import NIS_BAND
 from mavsysid.discrepancy.residuals import AXIS_NAMES, AXIS_UNITS
 from mavsysid.formats.flight_dir import write_json_atomic
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, vehicle_to_toml

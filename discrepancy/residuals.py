@@ -26,6 +26,7 @@ from functools import cached_property, lru_cache
 import numpy as np
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
 from mavsysid.vehicle.model_effects import EffectInputs, ModelEffect, total_wrench
 from mavsysid.vehicle.rotation import quat_multiply, quat_to_matrix
 from scipy.ndimage import convolve1d
@@ -210,31 +211,20 @@ def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.
     effects : sequence of ModelEffect
         Effects whose wrench is added (paper F_ext, M_ext).
     """
-    c_T, c_D, c_M = theta[0], theta[1], theta[2]
-    J = np.asarray(theta[3:6], float)
+    theta = np.asarray(theta, float)
     r = config.rotor_positions
-    eps = config.rotor_directions
     v_b = pose.velocity_body()
     w = pose.rates
-    n2 = rotor_speeds**2
-    thrust = c_T * n2                                          # (N, k)
-    hub = v_b[:, None, :] + np.cross(w[:, None, :], r[None, :, :])
-    forces = np.zeros(hub.shape)
-    # Paper Eq. drag: only the in-plane hub velocity is opposed.
-    forces[..., 0] = -thrust * c_D * hub[..., 0]
-    forces[..., 1] = -thrust * c_D * hub[..., 1]
-    forces[..., 2] = thrust
-    force = forces.sum(axis=1)
-    torque = np.cross(r[None], forces).sum(axis=1)
-    torque[:, 2] -= c_M * (n2 @ eps)
+    # Paper Eq. drag and the rotor moments, summed (the kernel the dynamics use).
+    force, torque = rotor_wrench(rotor_speeds, theta, r, config.rotor_directions, v_b, w)
     if effects:
         inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, rotor_speeds,
-                              np.asarray(theta, float), r)
+                              theta, r)
         f_e, m_e = total_wrench(list(effects), inputs)
         force = force + f_e
         torque = torque + m_e
     # Paper Eq. euler: ω̇ = J⁻¹ (M_B − ω × J ω).
-    omega_dot = (torque - np.cross(w, w * J)) / J
+    omega_dot = euler_acceleration(torque, w, theta[3:6])
     return np.hstack([force / config.mass, omega_dot])
 
 

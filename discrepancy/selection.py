@@ -16,13 +16,14 @@ The statistics (effective samples, per-axis variances, block-inflated covariance
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import statsmodels.api as sm
-from mavsysid.discrepancy.candidates import Candidate, effect_columns, theta_columns
+from mavsysid.discrepancy.candidates import Candidate
 from mavsysid.discrepancy.regression import Regression, lr_p, profile_interval, refine_minimum
 from mavsysid.discrepancy.residuals import ResidualProblem
+from mavsysid.discrepancy.selection_model import SelectionModel
 from mavsysid.vehicle.model_effects import ModelEffect
 from scipy.stats import chi2
 
@@ -34,6 +35,7 @@ __all__ = [
     "Tie",
     "forward_select",
 ]
+
 
 @dataclass(frozen=True)
 class SelectionSettings:
@@ -150,100 +152,6 @@ class SelectionResult:
     block: int
 
 
-class _Model:
-    """The current model: θ (in the problem) and the chosen effects at their values.
-
-    ``design`` evaluates the residual with every chosen effect in place and the columns of
-    θ, of the chosen linear effects (at their values: increments) and of the candidates
-    not chosen yet (at zero).
-    """
-
-    def __init__(self, problem: ResidualProblem, library: Sequence[Candidate]) -> None:
-        self.problem = problem
-        self.library = {c.name: c for c in library}
-        self.effects: list[ModelEffect] = []
-
-    def candidate(self, name: str) -> Candidate:
-        return self.library[name]
-
-    @property
-    def linear(self) -> list[ModelEffect]:
-        return [e for e in self.effects if self.library[e.name].kind == "linear"]
-
-    @property
-    def n_profile(self) -> int:
-        return len(self.effects) - len(self.linear)
-
-    def design(self, candidates: Sequence[Candidate] = ()
-               ) -> tuple[np.ndarray, list[np.ndarray], dict[str, np.ndarray]]:
-        """r0 (N, 6); [θ columns, chosen linear columns …]; candidate columns by name."""
-        p, effects = self.problem, self.effects
-        r0 = p.residual(effects)
-        cols = [theta_columns(p, effects, r0)]
-        for e in self.linear:
-            others = [o for o in effects if o is not e]
-            cols.append(effect_columns(p, self.library[e.name], others, r0, at=e))
-        extra = {c.name: effect_columns(p, c, effects, r0) for c in candidates
-                 if c.kind == "linear"}
-        return r0, cols, extra
-
-    def k(self) -> int:
-        """Number of fitted parameters: θ, linear effects' and one per profile effect."""
-        return 6 + sum(len(e.values) for e in self.effects)
-
-    def relinearise(self, reg: Regression, iterations: int = 6) -> None:
-        """Damped Gauss–Newton on θ and the linear effects' values, profile effects held.
-
-        A step is halved until θ stays physical (c_T, J > 0) and the deviance does not
-        grow: from a θ that absorbed a large effect (a CoG offset's torque turns into a
-        wrong inertia) the full step overshoots.
-        """
-        r0, cols, _ = self.design()
-        dev0 = reg.deviance(reg.fit(*reg.stack(r0, cols))[0])
-        for _ in range(iterations):
-            _, beta, _ = reg.fit(*reg.stack(r0, cols))
-            start_problem, start_effects = self.problem, list(self.effects)
-            step = 1.0
-            while step > 1e-3:
-                theta = start_problem.theta + step * beta[:6]
-                if theta[0] > 0.0 and np.all(theta[3:] > 0.0):
-                    self.problem = replace(start_problem, theta=theta)
-                    self.effects = self._stepped(start_effects, step * beta)
-                    r1, cols1, _ = self.design()
-                    dev1 = reg.deviance(reg.fit(*reg.stack(r1, cols1))[0])
-                    if dev1 <= dev0 + 1e-9:
-                        break
-                step *= 0.5
-            else:
-                self.problem, self.effects = start_problem, start_effects
-                return
-            converged = dev0 - dev1 < 1e-6
-            r0, cols, dev0 = r1, cols1, dev1
-            if converged:
-                return
-
-    def _stepped(self, effects: list[ModelEffect], beta: np.ndarray) -> list[ModelEffect]:
-        out, offset = [], 6
-        for e in effects:
-            if self.library[e.name].kind == "linear":
-                n = len(e.values)
-                out.append(e.with_values(e.values + beta[offset:offset + n]))
-                offset += n
-            else:
-                out.append(e)
-        return out
-
-    def profile(self, reg: Regression, cand: Candidate, grid: np.ndarray,
-                cols: list[np.ndarray], others: list[ModelEffect]) -> np.ndarray:
-        """Deviance over ``grid`` of a profile candidate, ``cols`` re-fitted at each value."""
-        name = cand.effect.parameters[0].name
-        dev = np.empty(grid.size)
-        for i, v in enumerate(grid):
-            r = self.problem.residual([*others, cand.effect(**{name: float(v)})])
-            dev[i] = reg.deviance(reg.fit(*reg.stack(r, cols))[0])
-        return dev
-
-
 def forward_select(
     problem: ResidualProblem, candidates: Sequence[Candidate], rows: np.ndarray,
     weights: np.ndarray, settings: SelectionSettings | None = None,
@@ -270,7 +178,7 @@ def forward_select(
     """
     settings = settings or SelectionSettings()
     reg = Regression(rows, weights, problem.window_samples)
-    model = _Model(problem, candidates)
+    model = SelectionModel(problem, candidates)
     theta_base = problem.theta.copy()
     gains: dict[str, float] = {}
     scores: list[CandidateScore] = []
@@ -281,27 +189,8 @@ def forward_select(
         remaining = [c for c in candidates if c.name not in {e.name for e in model.effects}]
         if step > 0:
             r0, cols, extra = model.design(remaining)
-        k = model.k()
-        trial: dict[str, tuple[float, np.ndarray]] = {}
-        weak: set[str] = set()
-        for cand in remaining:
-            if cand.kind == "linear":
-                rss, beta, cov = reg.fit(*reg.stack(r0, [*cols, extra[cand.name]]))
-                b, c = beta[-cand.size:], cov[-cand.size:, -cand.size:]
-                trial[cand.name] = (reg.bic(rss, k + cand.size) - current, b)
-                # The BIC counts the effective samples but not the systematic leftovers of
-                # the effects already named; the Wald test on the block-inflated covariance
-                # (the reported CIs) must agree, or the effect is not named.
-                wald = float(b @ np.linalg.solve(c, b))
-                if chi2.sf(wald, cand.size) > settings.wald_p:
-                    weak.add(cand.name)
-            else:
-                dev = model.profile(reg, cand, cand.grid, cols, model.effects)
-                v = refine_minimum(cand.grid, dev)
-                dev_v = model.profile(reg, cand, np.array([v]), cols, model.effects)[0]
-                if dev_v > dev.min():
-                    v, dev_v = float(cand.grid[int(np.argmin(dev))]), float(dev.min())
-                trial[cand.name] = (dev_v + reg.penalty(k + 1) - current, np.array([v]))
+        trial, weak = _score_candidates(model, reg, remaining, (r0, cols, extra), current,
+                                        settings.wald_p)
         for name, (d, values) in trial.items():
             scores.append(CandidateScore(step, name, float(d), values))
         if not trial:
@@ -334,7 +223,55 @@ def forward_select(
     return _final_fit(model, reg, gains, scores, ties, bic_before, theta_base)
 
 
-def _final_fit(model: _Model, reg: Regression, gains: dict[str, float],
+def _score_candidates(
+    model: SelectionModel, reg: Regression, remaining: Sequence[Candidate],
+    design: tuple[np.ndarray, list[np.ndarray], dict[str, np.ndarray]], current: float,
+    wald_p: float,
+) -> tuple[dict[str, tuple[float, np.ndarray]], set[str]]:
+    """Each remaining candidate's ΔBIC against the current model and best values.
+
+    Parameters
+    ----------
+    design : tuple
+        ``model.design(remaining)``: r0 (N, 6), the current columns, candidate columns.
+    current : float
+        BIC of the current model.
+    wald_p : float
+        Level of the Wald test a linear candidate must pass.
+
+    Returns
+    -------
+    trial : dict
+        ``{name: (ΔBIC, values (P,))}``.
+    weak : set of str
+        Linear candidates whose parameters are not jointly distinguishable from zero.
+    """
+    r0, cols, extra = design
+    k = model.k()
+    trial: dict[str, tuple[float, np.ndarray]] = {}
+    weak: set[str] = set()
+    for cand in remaining:
+        if cand.kind == "linear":
+            rss, beta, cov = reg.fit(*reg.stack(r0, [*cols, extra[cand.name]]))
+            b, c = beta[-cand.size:], cov[-cand.size:, -cand.size:]
+            trial[cand.name] = (reg.bic(rss, k + cand.size) - current, b)
+            # The BIC counts the effective samples but not the systematic leftovers of
+            # the effects already named; the Wald test on the block-inflated covariance
+            # (the reported CIs) must agree, or the effect is not named.
+            wald = float(b @ np.linalg.solve(c, b))
+            if chi2.sf(wald, cand.size) > wald_p:
+                weak.add(cand.name)
+        else:
+            dev = model.profile(reg, cand, cand.grid, cols, model.effects)
+            v = refine_minimum(cand.grid, dev)
+            dev_v = model.profile(reg, cand, np.array([v]), cols, model.effects)[0]
+            if dev_v > dev.min():
+                v, dev_v = float(cand.grid[int(np.argmin(dev))]), float(dev.min())
+            trial[cand.name] = (dev_v + reg.penalty(k + 1) - current, np.array([v]))
+    return trial, weak
+
+
+def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
                scores: list[CandidateScore], ties: list[Tie], bic_before: float,
                theta_base: np.ndarray) -> SelectionResult:
     """Joint fit of θ and the chosen effects; intervals; likelihood-ratio p-values."""

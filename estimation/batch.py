@@ -25,7 +25,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from mavsysid.estimation.ekf import _rk4_kernel
+from mavsysid.estimation.ekf import rk4_step_kernel
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.vehicle.linearization import ErrorStateModel, jacobian_kernel, transition_kernel
@@ -126,7 +126,7 @@ def _shoot(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p
                 transition_kernel(A, G, Qc, dt, F, Qs)
                 Phi = F @ Phi
                 Qacc = F @ Qacc @ F.T + Qs
-            _rk4_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps, x_next)
+            rk4_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps, x_next)
             x[:] = x_next
         if k < K - 1:
             if want_q:
@@ -232,6 +232,16 @@ def _apply(model: ErrorStateModel, nodes: np.ndarray, theta: np.ndarray, step: n
     return new_nodes, theta + model.theta_scale * step[12 * K:]
 
 
+def _theta_covariance(J: sp.spmatrix, K: int, theta_scale: np.ndarray) -> np.ndarray:
+    """θ covariance (6, 6), SI: the θ block of (JᵀJ)⁻¹ at the optimum, K shooting nodes."""
+    JtJ = (J.T @ J).tocsc()
+    E = np.zeros((JtJ.shape[0], 6))
+    E[12 * K:, :] = np.eye(6)
+    cov_scaled = _solve_spd(JtJ, E)[12 * K:, :]
+    cov = np.asarray(cov_scaled) * np.outer(theta_scale, theta_scale)
+    return 0.5 * (cov + cov.T)
+
+
 def refine(
     flight: FlightData, filtered_states: np.ndarray, filtered: ParameterEstimate,
     model: ErrorStateModel, prior: ParameterEstimate, sigma: tuple[float, float],
@@ -301,15 +311,9 @@ def refine(
         if improvement <= 1e-9 * cost0 or np.max(np.abs(delta[12 * K:])) < 1e-7:
             break
 
-    # θ covariance: the θ block of (JᵀJ)⁻¹ at the optimum, in SI.
-    JtJ = (J.T @ J).tocsc()
-    E = np.zeros((JtJ.shape[0], 6))
-    E[12 * K:, :] = np.eye(6)
-    cov_scaled = _solve_spd(JtJ, E)[12 * K:, :]
-    s = model.theta_scale
-    cov = np.asarray(cov_scaled) * np.outer(s, s)
     return BatchResult(
-        estimate=ParameterEstimate(theta, 0.5 * (cov + cov.T)), states=nodes,
+        estimate=ParameterEstimate(theta, _theta_covariance(J, K, model.theta_scale)),
+        states=nodes,
         node_times=flight.t[node_idx[:-1]], iterations=iterations, cost_initial=cost0,
         cost_final=cost,
     )

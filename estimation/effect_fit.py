@@ -52,7 +52,7 @@ from mavsysid.vehicle.config import VehicleConfig
 
 # The schema's table of parameters that have a sign (tau ≥ 0 …): fitted values must load
 # back from the config they are written to. One table, so it is borrowed, not copied.
-from mavsysid.vehicle.config_schema import _EFFECT_SIGNS
+from mavsysid.vehicle.config_schema import EFFECT_PARAMETER_SIGNS
 from mavsysid.vehicle.model_effects import ModelEffect
 
 __all__ = ["EffectFit", "EffectFitSettings", "fit_effects", "reference_terms"]
@@ -126,7 +126,7 @@ class EffectFit:
 
 def _lower_bounds(effect: ModelEffect) -> np.ndarray:
     """Least value of each parameter, SI: the config schema's signs (−inf: any sign)."""
-    signs = [_EFFECT_SIGNS.get((effect.name, p.name)) for p in effect.parameters]
+    signs = [EFFECT_PARAMETER_SIGNS.get((effect.name, p.name)) for p in effect.parameters]
     return np.array([-np.inf if s is None else 0.0 if s == "nonnegative" else 1e-6 * p.scale
                      for s, p in zip(signs, effect.parameters, strict=True)])
 

@@ -45,7 +45,7 @@ from mavsysid.vehicle.rotation import (
     quat_to_matrix,
 )
 
-__all__ = ["FILTER_DIM", "FilterRun", "ParameterEKF"]
+__all__ = ["FILTER_DIM", "FilterRun", "ParameterEKF", "rk4_step_kernel"]
 
 #: Length of the nominal filter state x = [p, v_B, q, ω, θ].
 FILTER_DIM = STATE_DIM + 6
@@ -73,12 +73,34 @@ class FilterRun:
 
 
 @numba.njit(cache=True)
-def _rk4_kernel(x, n0, n1, w0, w1, theta, dt, mass, r, eps, out):
-    """One RK4 step of the model state x (13,) with rotor speeds linear from n0 to n1.
+def rk4_step_kernel(x, n0, n1, w0, w1, theta, dt, mass, r, eps, out):
+    """One RK4 step of the model state with rotor speeds linear from ``n0`` to ``n1``.
 
-    w0, w1 (6,) are the extra body force and torque [F_B, M_B] (N, N·m) of known model
-    effects at the step's ends, also linear in between; zeros leave the model unchanged
-    (0 + F is exact, so the no-effect path is bit-for-bit the plain model).
+    Shared by the filter's prediction and the batch refinement's shooting, so that both
+    integrate the model identically. Compiled (numba, nopython).
+
+    Parameters
+    ----------
+    x : ndarray, shape (13,)
+        Model state [p, v_B, q, ω] at the step's start (m, m/s, unit quaternion, rad/s).
+    n0, n1 : ndarray, shape (k,)
+        Rotor speeds at the step's start and end, rad/s.
+    w0, w1 : ndarray, shape (6,)
+        Extra body force and torque [F_B, M_B] (N, N·m) of known model effects at the
+        step's ends, also linear in between; zeros leave the model unchanged (0 + F is
+        exact, so the no-effect path is bit-for-bit the plain model).
+    theta : ndarray, shape (6,)
+        θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI.
+    dt : float
+        Step, s.
+    mass : float
+        kg.
+    r : ndarray, shape (k, 3)
+        Rotor positions, m, body frame.
+    eps : ndarray, shape (k,)
+        Rotor directions, ±1.
+    out : ndarray, shape (13,)
+        Receives the state at the step's end (quaternion renormalised).
     """
     nm = 0.5 * (n0 + n1)
     wm = 0.5 * (w0 + w1)
@@ -105,7 +127,7 @@ def _predict_kernel(x, P, n0, n1, w0, w1, dt, mass, r, eps, scale, Qc, A, G, F, 
     jacobian_kernel(x[:13], n0, theta, mass, r, eps, scale, A, G)
     transition_kernel(A, G, Qc, dt, F, Q)
     state = np.empty(13)
-    _rk4_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
+    rk4_step_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
     x[:13] = state
     P[:] = F @ P @ F.T + Q
     P[:] = 0.5 * (P + P.T)

@@ -21,9 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 from mavsysid.estimation import effect_fit
 from mavsysid.estimation.batch import refine
+from mavsysid.estimation.effect_channels import ModelTerms
 from mavsysid.estimation.effect_fit import EffectFit, reference_terms
 from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
 from mavsysid.estimation.noise_fit import fit_noise_scale
 from mavsysid.estimation.report import convergence_time
 from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
@@ -34,10 +35,7 @@ from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.errors import InputError
 
 __all__ = ["EstimatorSettings", "estimate_parameters", "estimate_with_effects",
-           "prior_from_config"]
-
-#: Least flight the estimator accepts, s.
-MIN_DURATION = 2.0
+           "flight_initial_state_sigma", "prior_from_config"]
 
 
 @dataclass(frozen=True)
@@ -86,10 +84,24 @@ def _measurement_sigma(flight: FlightData, config: VehicleConfig,
     return config.noise.position_sigma, config.noise.attitude_sigma
 
 
-def _initial_state_sigma(
+def flight_initial_state_sigma(
     flight: FlightData, sigma: tuple[float, float]
 ) -> tuple[float, float, float, float]:
-    """σ of the initial state for this flight (see `initial_state_sigma`)."""
+    """σ of the filter's initial state for this flight, at its first sample interval.
+
+    Parameters
+    ----------
+    flight : FlightData
+        The flight; its first two sample times set the interval, s.
+    sigma : tuple of 2 float
+        Measurement σ of position (m) and attitude (rad).
+
+    Returns
+    -------
+    tuple of 4 float
+        σ of position (m), velocity (m/s), attitude (rad) and body rates (rad/s);
+        see `mavsysid.vehicle.linearization.initial_state_sigma`.
+    """
     return initial_state_sigma(sigma[0], sigma[1], float(flight.t[1] - flight.t[0]))
 
 
@@ -185,7 +197,7 @@ def estimate_with_effects(
     effects = _check_inputs(flight, config, effects)
     prior = prior_from_config(config, settings)
     sigma = _measurement_sigma(flight, config, settings)
-    state_sigma = _initial_state_sigma(flight, sigma)
+    state_sigma = flight_initial_state_sigma(flight, sigma)
     notes = list(flight.warnings)
 
     fit = None
@@ -203,26 +215,7 @@ def estimate_with_effects(
 
     refined = None
     if settings.refine:
-        if fit is not None:
-            noise_cfg, scale, at_bound = fit.config, fit.noise_scale, fit.noise_at_bound
-            start, terms_r = fit.run, fit.terms
-        else:
-            nf = fit_noise_scale(terms.flight, config, prior, sigma, state_sigma,
-                                 wrench=terms.wrench)
-            noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
-                nf.run, terms
-        nz = noise_cfg.noise
-        notes.append(
-            f"process noise fitted to the flight: {scale:.3g} × the configured densities "
-            f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"
-            + ("; at the edge of the search range" if at_bound else ""))
-        batch = refine(terms_r.flight, start.states, start.estimate,
-                       ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma,
-                       wrench=terms_r.wrench)
-        refined = batch.estimate
-        log_likelihood = start.log_likelihood
-        notes.append(f"batch refinement: {batch.iterations} iterations, cost "
-                     f"{batch.cost_initial:.4g} → {batch.cost_final:.4g}")
+        refined, log_likelihood = _refine(terms, fit, config, prior, sigma, state_sigma, notes)
     increment = None if fit is None else fit.theta_covariance_increment()
     filtered = _with_increment(run.estimate, increment)
     refined = _with_increment(refined, increment)
@@ -232,7 +225,50 @@ def estimate_with_effects(
     reference = truth if truth is not None else final.value
     history = run.history
     conv = convergence_time(history.t - history.t[0], history.theta, reference)
-    if truth is not None:
+    notes.extend(_closing_notes(flight, sigma, final))
+    return EstimationResult(
+        prior=prior, filtered=filtered, refined=refined, history=history,
+        convergence_time=conv, true_theta=truth, measurement_sigma=sigma,
+        pose_source=flight.pose_source, notes=tuple(notes), effects=used,
+        log_likelihood=log_likelihood,
+    )
+
+
+def _refine(
+    terms: ModelTerms, fit: EffectFit | None, config: VehicleConfig, prior: ParameterEstimate,
+    sigma: tuple[float, float], state_sigma: tuple[float, float, float, float], notes: list[str],
+) -> tuple[ParameterEstimate, float]:
+    """Step 2: the process-noise level (the effect fit's, or fitted now) and the batch MAP.
+
+    Appends its notes to ``notes``; returns the refined θ and the log-likelihood of the
+    filter run at the fitted noise level.
+    """
+    if fit is not None:
+        noise_cfg, scale, at_bound = fit.config, fit.noise_scale, fit.noise_at_bound
+        start, terms_r = fit.run, fit.terms
+    else:
+        nf = fit_noise_scale(terms.flight, config, prior, sigma, state_sigma,
+                             wrench=terms.wrench)
+        noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
+            nf.run, terms
+    nz = noise_cfg.noise
+    notes.append(
+        f"process noise fitted to the flight: {scale:.3g} × the configured densities "
+        f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"
+        + ("; at the edge of the search range" if at_bound else ""))
+    batch = refine(terms_r.flight, start.states, start.estimate,
+                   ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma,
+                   wrench=terms_r.wrench)
+    notes.append(f"batch refinement: {batch.iterations} iterations, cost "
+                 f"{batch.cost_initial:.4g} → {batch.cost_final:.4g}")
+    return batch.estimate, start.log_likelihood
+
+
+def _closing_notes(flight: FlightData, sigma: tuple[float, float],
+                   final: ParameterEstimate) -> list[str]:
+    """Notes on the truth's source, an autopilot pose and weakly identified parameters."""
+    notes = []
+    if flight.true_theta is not None:
         notes.append("true parameters from the simulated flight's meta.json (not used by the "
                      "estimator)")
     if flight.pose_source == "autopilot":
@@ -242,9 +278,4 @@ def estimate_with_effects(
     if weak:
         notes.append(f"poorly identified (σ > 20 %): {', '.join(weak)}; the flight did not "
                      "excite them enough")
-    return EstimationResult(
-        prior=prior, filtered=filtered, refined=refined, history=history,
-        convergence_time=conv, true_theta=truth, measurement_sigma=sigma,
-        pose_source=flight.pose_source, notes=tuple(notes), effects=used,
-        log_likelihood=log_likelihood,
-    )
+    return notes

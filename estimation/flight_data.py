@@ -11,7 +11,11 @@ from typing import Literal
 
 import numpy as np
 
-__all__ = ["POSE_SOURCES", "FlightData"]
+__all__ = ["MIN_DURATION", "POSE_SOURCES", "FlightData"]
+
+#: Shortest flight worth estimating from, s: the log checks and the estimator both refuse
+#: less.
+MIN_DURATION = 2.0
 
 #: Where the pose came from: raw motion capture, or the autopilot's own (filtered,
 #: lagged) estimator, which calls for a larger measurement noise.

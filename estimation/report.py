@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from mavsysid.estimation.results import EstimationResult, ParameterEstimate
 from mavsysid.formats.flight_dir import write_json_atomic
-from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 
 __all__ = [
     "CONVERGENCE_TOLERANCE",
@@ -30,15 +30,6 @@ __all__ = [
 
 #: Relative band that counts as converged (the paper's "within 5 %").
 CONVERGENCE_TOLERANCE = 0.05
-
-_UNITS: dict[str, str] = {
-    "c_T": "N/(rad/s)²",
-    "c_D": "s/m",
-    "c_M": "N·m/(rad/s)²",
-    "j_x": "kg·m²",
-    "j_y": "kg·m²",
-    "j_z": "kg·m²",
-}
 
 _POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
 
@@ -159,7 +150,7 @@ def _main_block(result: EstimationResult) -> list[str]:
         value = float(final.value[j])
         row = [
             name,
-            _UNITS[name],
+            PARAMETER_UNITS[name],
             _fmt(float(result.prior.value[j]), ".3e"),
             _fmt(value, ".3e"),
             _fmt(float(final.sigma[j]), ".2e"),

@@ -3,8 +3,8 @@
 After the numba kernels are compiled (and a planner graph is built) a process holds so
 many objects that a full collection takes 0.1–0.9 s, and it holds the GIL meanwhile: the
 simulated vehicle ticks late, a stream overflows its socket buffer, a heartbeat thread
-misses beats. Freezing what is alive moves it out of the collector's view, so later
-collections only look at what the loop itself allocates.
+misses beats. Freezing what is alive (`gc.freeze`) moves it out of the collector's view,
+so later collections only look at what the loop itself allocates.
 """
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""Setting up a ground station's MAVLink: pymavlink's dialect, connection strings, signing key.
+"""MAVLink set-up shared by the ground station and the simulated vehicle.
+
+pymavlink's dialect, connection strings, the signing key and the ground station's identity.
 
 pymavlink picks the wire protocol and dialect from the environment when ``mavutil`` is
 imported, and a MAVLink 1 connection replaces its parser (losing the signing state) on
@@ -15,7 +17,13 @@ from typing import Any
 
 from mavsysid.errors import InputError
 
-__all__ = ["load_mavutil", "parse_connect", "signing_key_from_file"]
+__all__ = ["GCS_COMPONENT", "GCS_SYSTEM", "load_mavutil", "parse_connect",
+           "signing_key_from_file"]
+
+#: The ground station's MAVLink identity: system 255 (the usual GCS system id) and
+#: MAV_COMP_ID_MISSIONPLANNER (190), the usual component id of a ground station.
+GCS_SYSTEM = 255
+GCS_COMPONENT = 190
 
 
 def load_mavutil() -> Any:

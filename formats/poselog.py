@@ -24,7 +24,7 @@ from mavsysid.errors import LogFormatError
 
 __all__ = [
     "POSE_COLUMNS", "QUATERNION_TOLERANCE", "ROTOR_COLUMN", "PoseLog", "TruncatedLogWarning",
-    "read_pose_log", "read_text_file", "rotor_columns",
+    "check_positive_count", "read_pose_log", "read_text_file", "rotor_columns",
 ]
 
 #: Required leading columns of a pose log, in the order the writer emits them.
@@ -57,7 +57,23 @@ def _frozen(a: Any, shape: tuple[int | None, ...], name: str, want: str) -> np.n
     return arr
 
 
-def _check_count(value: Any, name: str, allow_none: bool = False) -> None:
+def check_positive_count(value: Any, name: str, allow_none: bool = False) -> None:
+    """Check that ``value`` is a positive int (a rotor count, a row count …).
+
+    Parameters
+    ----------
+    value : Any
+        The value to check; a bool is not an int here.
+    name : str
+        Its name in the message.
+    allow_none : bool
+        Accept None too (an optional count).
+
+    Raises
+    ------
+    ValueError
+        Not a positive int (a programming error of the caller, not a file problem).
+    """
     ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
     if not (ok or (allow_none and value is None)):
         raise ValueError(f"{name} must be a positive int, got {value!r}")
@@ -183,7 +199,7 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
         The last line lacks its newline and is incomplete (field count, or a field not
         a number), as a writer killed mid-row leaves it: it is dropped.
     """
-    _check_count(rotor_count, "rotor_count", allow_none=True)
+    check_positive_count(rotor_count, "rotor_count", allow_none=True)
     path = Path(path)
     text = read_text_file(path, "utf-8-sig")
     text = text.replace("\r\n", "\n") if "\r" in text else text
@@ -197,7 +213,22 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
     names = [c.strip() for c in next(csv.reader([lines[0]]))]
     cols = _locate_columns(path, names, rotor_count)
     body, ncol = lines[1:], len(names)
+    _check_rows(path, body, ncol, newline_at_end)
+    data = _parse_body(path, body, names)
+    q = _checked_quaternions(path, data, body, names, cols)
+    known = set(cols.values())
+    return PoseLog(
+        t=data[:, cols["t"]],
+        position=data[:, [cols[c] for c in POSE_COLUMNS[1:4]]],
+        quaternion=q,
+        rotor_speeds=data[:, [cols[c] for c in cols if c not in POSE_COLUMNS]],
+        extra={names[j]: data[:, j] for j in range(ncol) if j not in known},
+        path=path,
+    )
 
+
+def _check_rows(path: Path, body: list[str], ncol: int, newline_at_end: bool) -> None:
+    """Drop a truncated last row (with a warning); refuse no rows or a wrong field count."""
     # A writer killed mid-row leaves a last line without newline that is short or cut
     # inside a number. Anything else wrong is an error at its line.
     if body and not newline_at_end:
@@ -206,17 +237,21 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
             body.pop()
             if not body:
                 raise LogFormatError(f"{path}: no samples (the only data row is incomplete)")
+            # stacklevel 3: the warning names read_pose_log's caller.
             warnings.warn(f"{path}: line {len(body) + 2} is incomplete (truncated write?) and "
                           f"was dropped; kept the {len(body)} complete rows",
-                          TruncatedLogWarning, stacklevel=2)
+                          TruncatedLogWarning, stacklevel=3)
     if not body:
         raise LogFormatError(f"{path}: no samples, only a header row")
     if any(line.count(",") != ncol - 1 for line in body):
         i = next(i for i, line in enumerate(body) if line.count(",") != ncol - 1)
         found = "is empty" if not body[i].strip() else f"has {body[i].count(',') + 1} fields"
         raise LogFormatError(f"{path}: line {i + 2} {found}, the header has {ncol}")
-    data = _parse_body(path, body, names)
 
+
+def _checked_quaternions(path: Path, data: np.ndarray, body: list[str], names: list[str],
+                         cols: dict[str, int]) -> np.ndarray:
+    """Check values finite, t increasing and quaternions unit; the renormalised (N, 4)."""
     bad = ~np.isfinite(data)
     if bad.any():
         i, j = np.argwhere(bad)[0]
@@ -235,15 +270,7 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
         i = int(np.argmax(off))
         raise LogFormatError(f"{path}: line {i + 2}: quaternion (qw, qx, qy, qz) has norm "
                              f"{norm[i]:.6g}, not 1 within {QUATERNION_TOLERANCE:g}")
-    known = set(cols.values())
-    return PoseLog(
-        t=t,
-        position=data[:, [cols[c] for c in POSE_COLUMNS[1:4]]],
-        quaternion=q / norm[:, None],
-        rotor_speeds=data[:, [cols[c] for c in cols if c not in POSE_COLUMNS]],
-        extra={names[j]: data[:, j] for j in range(ncol) if j not in known},
-        path=path,
-    )
+    return q / norm[:, None]
 
 
 def _locate_columns(path: Path, names: list[str], rotor_count: int | None) -> dict[str, int]:

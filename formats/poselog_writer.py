@@ -15,7 +15,7 @@ from mavsysid.formats.poselog import (
     QUATERNION_TOLERANCE,
     ROTOR_COLUMN,
     PoseLog,
-    _check_count,
+    check_positive_count,
     rotor_columns,
 )
 
@@ -53,7 +53,7 @@ class PoseLogWriter:
 
     def __init__(self, path: str | Path, rotor_count: int, extra_columns: Iterable[str] = (),
                  *, overwrite: bool = False) -> None:
-        _check_count(rotor_count, "rotor_count")
+        check_positive_count(rotor_count, "rotor_count")
         extras = tuple(extra_columns)
         taken = set(POSE_COLUMNS)
         for c in extras:

@@ -1,4 +1,6 @@
-"""The trajectory file (docs/architecture.md, "User-facing contract") and sampled setpoints.
+"""The trajectory file (docs/architecture.md, "User-facing contract").
+
+Sampled setpoints of a trajectory are `mavsysid.formats.setpoints_csv`.
 
 A trajectory file is JSON::
 
@@ -32,8 +34,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -44,32 +44,23 @@ from typing import Any, NoReturn
 import numpy as np
 from mavsysid.formats.flight_dir import write_json_atomic
 from mavsysid.formats.poselog import read_text_file
-from mavsysid.planner.results import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, Limits, VehicleConfig, vehicle_to_toml
-from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import InputError
 
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
-    "SETPOINT_COLUMNS",
     "TrajectoryFile",
     "parse_trajectory",
-    "plan_file_for",
     "read_trajectory",
     "trajectory_file_for",
-    "write_setpoints_csv",
-    "write_trajectory",
     "write_trajectory_file",
 ]
 
 FORMAT = "mavsysid-trajectory"
 FORMAT_VERSION = 1
-
-#: Header of the sampled-setpoint CSV (world ENU, SI).
-SETPOINT_COLUMNS: tuple[str, ...] = ("t", "x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az",
-                                     "yaw", "yaw_rate")
 
 # JSON floats round-trip exactly, so a start that disagrees by more than rounding is a
 # hand-edited or corrupted file, not noise.
@@ -117,11 +108,6 @@ class TrajectoryFile:
 
 
 # --- writing -----------------------------------------------------------------------------
-
-
-def _finite_or_none(value: float | None) -> float | None:
-    """A JSON number, or None for a missing or non-finite value (an unlimited time, say)."""
-    return None if value is None or not math.isfinite(value) else float(value)
 
 
 def _software() -> dict[str, str]:
@@ -178,32 +164,6 @@ def trajectory_file_for(
     }
 
 
-def plan_file_for(result: PlanResult) -> dict[str, Any]:
-    """The trajectory-file document of a planned flight (prediction and planner included)."""
-    document = trajectory_file_for(result.trajectory, result.config, result.kind,
-                                   result.settings.box)
-    document["predicted_dopt"] = float(result.predicted_dopt)
-    document["predicted_covariance"] = np.asarray(result.predicted_covariance, float).tolist()
-    sigma = np.asarray(result.predicted_sigma, dtype=float)
-    if sigma.size:
-        document["predicted_sigma"] = {
-            "t": np.asarray(result.sigma_times, dtype=float).tolist(),
-            **{name: sigma[:, j].tolist() for j, name in enumerate(PARAMETER_NAMES)},
-        }
-    settings, stats = result.settings, result.stats
-    document["planner"] = {
-        **{k: getattr(settings, k) for k in ("seed", "budget", "max_samples",
-                                             "measurement_rate", "prior_relative_sigma")},
-        "planning_time": _finite_or_none(settings.planning_time),
-        **{k: getattr(stats, k) for k in ("samples", "vertices", "edges", "beliefs",
-                                          "edges_attempted", "beliefs_propagated", "elapsed")},
-        "time_to_first_solution": _finite_or_none(stats.time_to_first_solution),
-        "refinement": {"share": settings.refine_share, "max_steps": settings.refine_steps,
-                       "steps": stats.refine_steps, "accepted": stats.refine_accepted},
-    }
-    return document
-
-
 def write_trajectory_file(path: str | Path, document: Mapping[str, Any]) -> None:
     """Check `document` as `read_trajectory` would, then write it atomically.
 
@@ -216,57 +176,10 @@ def write_trajectory_file(path: str | Path, document: Mapping[str, Any]) -> None
     write_json_atomic(path, document)
 
 
-def write_trajectory(path: str | Path, result: PlanResult) -> None:
-    """Write a planned flight as a trajectory file, atomically (see `plan_file_for`)."""
-    write_trajectory_file(path, plan_file_for(result))
-
-
 def _plain(value: Any) -> Any:
     if isinstance(value, np.ndarray | np.generic):
         return value.tolist()
     raise TypeError(f"{type(value).__name__} is not JSON")
-
-
-def write_setpoints_csv(path: str | Path, trajectory: Trajectory, rate: float = 100.0) -> None:
-    """Write sampled setpoints ``t,x,y,z,vx,vy,vz,ax,ay,az,yaw,yaw_rate`` (world ENU, SI).
-
-    Parameters
-    ----------
-    path : str or Path
-        The CSV to write, atomically (its directory is created).
-    trajectory : Trajectory
-        Anything with ``duration`` and ``flat_outputs`` (a `PiecewisePolynomial`).
-    rate : float
-        Sample rate, Hz. Rows at t = k / rate from 0, plus a last row at the exact
-        duration when it is not on the grid, so the final hover is always included.
-
-    Notes
-    -----
-    Yaw is the trajectory's continuous yaw, not wrapped to (−π, π]. Values are written
-    with 6 decimals (µm, µrad).
-    """
-    if not (math.isfinite(rate) and rate > 0.0):
-        raise InputError(f"setpoint rate: a positive number of Hz, got {rate!r}")
-    duration = trajectory.duration
-    t = np.arange(math.floor(duration * rate + 1e-9) + 1) / rate
-    if duration - t[-1] > 1e-9:
-        t = np.append(t, duration)
-    flat = trajectory.flat_outputs(t)
-    table = np.column_stack([t, flat.position, flat.velocity, flat.acceleration,
-                             flat.yaw, flat.yaw_rate])
-    # Adding 0.0 after rounding turns -0.0 into 0.0, which reads better in a CSV.
-    table = np.round(table, 6) + 0.0
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            np.savetxt(f, table, fmt="%.6f", delimiter=",", header=",".join(SETPOINT_COLUMNS),
-                       comments="")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 # --- reading -----------------------------------------------------------------------------

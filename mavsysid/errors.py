@@ -1,8 +1,8 @@
 """Error types shared by every stage.
 
-The console script maps them to exit codes (docs/architecture.md): an `InputError` is the
-user's to fix (exit 2, one line, no traceback); a `JobFailedError` means the
-input was fine but the job could not be done (exit 3).
+Each says what kind of failure it is; the console script (`mavsysid.cli.main`) maps the
+kinds to exit codes (docs/architecture.md): an `InputError` is the user's to fix (one line,
+no traceback); a `JobFailedError` means the input was fine but the job could not be done.
 """
 
 from __future__ import annotations
@@ -19,13 +19,9 @@ __all__ = [
 class MavsysidError(Exception):
     """Base class of every error mavsysid reports to a user as one line."""
 
-    exit_code = 1
-
 
 class InputError(MavsysidError, ValueError):
-    """Bad input: a malformed file, an invalid option, an impossible request (exit code 2)."""
-
-    exit_code = 2
+    """Bad input: a malformed file, an invalid option, an impossible request."""
 
 
 class ConfigError(InputError):
@@ -37,6 +33,4 @@ class LogFormatError(InputError):
 
 
 class JobFailedError(MavsysidError, RuntimeError):
-    """The input was valid but the job could not be done (exit code 3)."""
-
-    exit_code = 3
+    """The input was valid but the job could not be done."""

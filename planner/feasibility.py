@@ -7,10 +7,7 @@ speeds (n² from the allocation) in [rotor_speed_min, rotor_speed_max]² — the
 so little yaw authority that without these the planner would plan yaw it cannot fly.
 
 The first four are polynomials in s = τ/T, decided exactly (to rounding) by Bernstein
-subdivision: a polynomial lies in the hull of its Bernstein coefficients on [0, 1], the
-end ones are its end values, and halving (de Casteljau) shrinks the hull quadratically
-onto the true range — the answer the derivative's roots give, cheaper and without
-companion-matrix trouble at clustered extrema. ω and n² are sampled on a grid (10 ms by
+subdivision (`mavsysid.planner.bernstein`). ω and n² are sampled on a grid (10 ms by
 default); Mueller-style, each interval where a sample comes within a conservative local
 bound of a limit (safety × |f'| × half the step) is split ten-fold, down to 0.1 ms, and
 rejected if still undecided there. The pointwise flatness is
@@ -21,10 +18,17 @@ the numba kernel `flat_to_state` runs too.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import ceil, comb
+from math import ceil
 
 import numba
 import numpy as np
+from mavsysid.planner.bernstein import (
+    bernstein_matrix,
+    linear_violation,
+    range_violation,
+    square_norm,
+    square_weights,
+)
 from mavsysid.planner.segments import Segment, VertexState
 from mavsysid.vehicle.allocation import allocation_pinv
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
@@ -45,10 +49,8 @@ __all__ = ["CONSTRAINTS", "FeasibilityResult", "check_rotor_headroom", "check_se
 CONSTRAINTS = ("box", "thrust", "speed", "yaw_acceleration", "body_rate", "rotor_speed")
 _BOX, _THRUST, _SPEED, _YAW_ACC, _RATE, _ROTOR = range(len(CONSTRAINTS))
 
-_MAX_DEPTH = 40  # hull excess shrinks as 4^-depth: at 40 it is far below rounding
 _REFINE = 10  # sub-intervals per refined grid interval
 _MIN_STEP = 1e-4  # s; a grid interval still undecided at this step is rejected
-_ROUNDING = 1e-14  # rounding allowance per unit of Σ|terms| (45 ε; ≤ 1 ε seen in tests)
 _SLACK = 1e-9  # sampled slacks this close to a limit are refined (and rejected at 0.1 ms)
 
 
@@ -77,68 +79,8 @@ class FeasibilityResult:
         return self.feasible
 
 
-def _bernstein(n: int) -> np.ndarray:
-    """B with Bernstein coefficients β = B a of Σ a_j s^j on [0, 1], degree n."""
-    return np.array([[comb(i, j) / comb(n, j) for j in range(n + 1)] for i in range(n + 1)])
-
-
-def _square_weights(m: int) -> np.ndarray:
-    """W with Bernstein coefficients of p² = Σ_(i+j=k) W_ij β_i β_j, degree m."""
-    return np.array([[comb(m, i) * comb(m, j) / comb(2 * m, i + j) for j in range(m + 1)]
-                     for i in range(m + 1)])
-
-
-_BERN_POS, _BERN_VEL, _BERN_ACC, _BERN_YAW = (_bernstein(n) for n in (9, 8, 7, 3))
-_SQUARE_VEL, _SQUARE_ACC = _square_weights(8), _square_weights(7)
-
-
-@numba.njit(cache=True)
-def _to_bernstein(bern: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Bernstein coefficients of Σ c_j s^j; ``bern`` is `_bernstein` of its degree."""
-    beta = np.zeros(c.size)
-    for i in range(c.size):
-        for j in range(i + 1):
-            beta[i] += bern[i, j] * c[j]
-    return beta
-
-
-@numba.njit(cache=True)
-def _range_violation(beta: np.ndarray, lo: float, hi: float) -> float:
-    """Where the polynomial with Bernstein coefficients β leaves [lo, hi] on [0, 1].
-
-    Returns s ≥ 0 where its value is outside (or the undecided spot at the maximum
-    depth), or −1 when the whole range is inside. Depth-first, left half first.
-    """
-    n = beta.size
-    stack = np.empty((_MAX_DEPTH + 2, n))
-    starts = np.empty(_MAX_DEPTH + 2)
-    depths = np.empty(_MAX_DEPTH + 2, dtype=np.int64)
-    stack[0] = beta
-    starts[0], depths[0], top = 0.0, 0, 1
-    while top > 0:
-        top -= 1
-        b, a, depth = stack[top].copy(), starts[top], depths[top]
-        width = 0.5**depth
-        if not lo <= b[0] <= hi:
-            return a
-        if not lo <= b[n - 1] <= hi:
-            return a + width
-        if lo <= b.min() and b.max() <= hi:
-            continue
-        if depth >= _MAX_DEPTH:
-            return a
-        # de Casteljau at ½: the halves' coefficients are the first and last entries of
-        # the successive averaging rows.
-        left, right = np.empty(n), np.empty(n)
-        left[0], right[n - 1] = b[0], b[n - 1]
-        for r in range(1, n):
-            for i in range(n - r):
-                b[i] = 0.5 * (b[i] + b[i + 1])
-            left[r], right[n - 1 - r] = b[0], b[n - 1 - r]
-        stack[top], starts[top], depths[top] = right, a + 0.5 * width, depth + 1
-        stack[top + 1], starts[top + 1], depths[top + 1] = left, a, depth + 1
-        top += 2
-    return -1.0
+_BERN_POS, _BERN_VEL, _BERN_ACC, _BERN_YAW = (bernstein_matrix(n) for n in (9, 8, 7, 3))
+_SQUARE_VEL, _SQUARE_ACC = square_weights(8), square_weights(7)
 
 
 @numba.njit(cache=True)
@@ -175,61 +117,30 @@ def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
 
 
 @numba.njit(cache=True)
-def _linear_violation(bern: np.ndarray, c: np.ndarray, lo: float, hi: float) -> float:
-    """`_range_violation` of Σ c_j s^j, the limits tightened by _ROUNDING × Σ|c_j|."""
-    tol = _ROUNDING * np.sum(np.abs(c))
-    return _range_violation(_to_bernstein(bern, c), lo + tol, hi - tol)
-
-
-@numba.njit(cache=True)
-def _square_norm(dc: np.ndarray, column: int, bern: np.ndarray, weights: np.ndarray,
-                 lift: float) -> tuple[np.ndarray, float]:
-    """Bernstein coefficients of Σ_axis q_axis(s)², q = dc[:, column + axis] (+ lift on z).
-
-    Squared in the Bernstein basis, whose coefficients are of the size of the values:
-    squaring the monomial coefficients instead loses up to 1e-8 relative to cancellation.
-    Also returns the rounding allowance: Σ_axis max|β| (Σ|q| + max|β|) × _ROUNDING.
-    """
-    n = weights.shape[0]
-    out = np.zeros(2 * n - 1)
-    tol = 0.0
-    for axis in range(3):
-        q = dc[:n, column + axis].copy()
-        if axis == 2:
-            q[0] += lift
-        beta = _to_bernstein(bern, q)
-        top = np.max(np.abs(beta))
-        tol += _ROUNDING * top * (np.sum(np.abs(q)) + top)
-        for i in range(n):
-            for j in range(n):
-                out[i + j] += weights[i, j] * beta[i] * beta[j]
-    return out, tol
-
-
-@numba.njit(cache=True)
 def _polynomial_scan(dc: np.ndarray, box: np.ndarray, lim: np.ndarray) -> tuple[int, float]:
     """Exact checks of the polynomial constraints: (constraint index, s) or (-1, 0).
 
     ``dc`` is `Segment.derivative_coeffs`: column 3k + axis the k-th τ-derivative of
     position in powers of s, column 15 + k of yaw. Each limit is tightened by the
-    rounding error the monomial coefficients may carry (_ROUNDING × Σ|terms|), so that
-    no sampler, this one or another, sees a violation where this accepts.
+    rounding error the monomial coefficients may carry (`mavsysid.planner.bernstein`:
+    a small multiple of ε × Σ|terms|), so that no sampler, this one or another, sees a
+    violation where this accepts.
     """
     for axis in range(3):
-        s = _linear_violation(_BERN_POS, dc[:, axis].copy(), box[axis], box[axis + 3])
+        s = linear_violation(_BERN_POS, dc[:, axis].copy(), box[axis], box[axis + 3])
         if s >= 0.0:
             return _BOX, s
     # Paper Eq. (constraints): thrust per mass ‖a + [0, 0, g]‖, compared squared.
-    f, tol = _square_norm(dc, 6, _BERN_ACC, _SQUARE_ACC, GRAVITY)
-    s = _range_violation(f, lim[1] + tol, lim[2] - tol)
+    f, tol = square_norm(dc, 6, _BERN_ACC, _SQUARE_ACC, GRAVITY)
+    s = range_violation(f, lim[1] + tol, lim[2] - tol)
     if s >= 0.0:
         return _THRUST, s
-    f, tol = _square_norm(dc, 3, _BERN_VEL, _SQUARE_VEL, 0.0)
-    s = _range_violation(f, -np.inf, lim[3] - tol)
+    f, tol = square_norm(dc, 3, _BERN_VEL, _SQUARE_VEL, 0.0)
+    s = range_violation(f, -np.inf, lim[3] - tol)
     if s >= 0.0:
         return _SPEED, s
     # Paper Eq. (constraints): |ψ̈| ≤ ψ̈_max, a cubic.
-    s = _linear_violation(_BERN_YAW, dc[:4, 17].copy(), -lim[4], lim[4])
+    s = linear_violation(_BERN_YAW, dc[:4, 17].copy(), -lim[4], lim[4])
     if s >= 0.0:
         return _YAW_ACC, s
     return -1, 0.0

@@ -16,7 +16,7 @@ from mavsysid.vehicle.trajectory import PiecewisePolynomial
 from mavsysid.errors import JobFailedError
 
 if TYPE_CHECKING:
-    from mavsysid.planner.rrbt import GraphSearch
+    from mavsysid.planner.graph_search import GraphSearch
 
 __all__ = ["plan_result"]
 

@@ -1,5 +1,6 @@
-"""What a planning run needs before its search starts: the checked request, the search's
-lumped measurement model, the estimator's initial covariance and warm numba kernels."""
+"""What a planning run needs before its search starts: the search's lumped measurement
+model, the estimator's initial covariance and warm numba kernels (the request itself is
+checked by `mavsysid.planner.plan_request`)."""
 
 from __future__ import annotations
 
@@ -12,17 +13,14 @@ from mavsysid.planner.belief import (
     edge_transfer,
     propagate_final,
 )
-from mavsysid.planner.feasibility import check_rotor_headroom, check_segment
+from mavsysid.planner.feasibility import check_segment
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.segments import Segment, VertexState, connect_free_end
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-from mavsysid.errors import InputError
-
-__all__ = ["initial_covariance", "search_model", "segment_trajectory", "validate_settings",
-           "warm_up"]
+__all__ = ["initial_covariance", "search_model", "segment_trajectory", "warm_up"]
 
 
 def segment_trajectory(segment: Segment) -> PiecewisePolynomial:
@@ -66,25 +64,3 @@ def warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
     apply_transfer_logdet(np.eye(ERROR_DIM), transfer)
     propagate_final(model, np.eye(ERROR_DIM), states, n, config.theta, dt)
 
-
-def validate_settings(config: VehicleConfig, settings: PlannerSettings) -> None:
-    """Refuse a bad box, budget, refinement setting, start or limits (one line)."""
-    box = np.asarray(settings.box, dtype=float)
-    if box.shape != (6,) or np.any(box[:3] >= box[3:]):
-        raise InputError(f"box {list(settings.box)}: expected x_min,y_min,z_min,x_max,y_max,z_max "
-                         "with each min below its max")
-    if not settings.budget > 0.0:
-        raise InputError(f"budget {settings.budget:g} s: expected a positive flight time")
-    if (not 0.0 <= settings.refine_share < 1.0 or settings.refine_steps < 0
-            or settings.refine_split < 1):
-        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1), "
-                         f"steps {settings.refine_steps} must be ≥ 0 and split "
-                         f"{settings.refine_split} ≥ 1")
-    start = settings.start_pose
-    if np.any(start[:3] < box[:3]) or np.any(start[:3] > box[3:]):
-        raise InputError(f"start {list(start[:3])} lies outside the box {list(box)}")
-    lim = config.limits
-    if lim.thrust_min_ratio > 1.0 or lim.thrust_max_ratio < 1.0:
-        raise InputError(f"{config.source}: [limits] thrust ratios [{lim.thrust_min_ratio:g}, "
-                         f"{lim.thrust_max_ratio:g}] × m g exclude hover (1.0)")
-    check_rotor_headroom(config, settings.rotor_headroom)

@@ -9,12 +9,8 @@ the end position and yaw, and leaves the end derivatives free; it minimises
 yaw segments, read as the yaw *rate*, derivative order 1). Every other connection is
 fully constrained (Hermite interpolation).
 
-The closed form is Richter et al. (2013): with the boundary derivatives d = A c of the
-coefficients c and the cost cᵀ Q c, the free part of d minimises dᵀ A⁻ᵀ Q A⁻¹ d. Time is
-nondimensionalised, s = τ / T ∈ [0, 1], before solving: with b_j = c_j T^j and
-d^k p/dτ^k = T^(-k) d^k p/ds^k, every matrix of the problem is the one of the unit
-interval, so they are computed once at import and each connection is a small matrix
-product. This is also what keeps T = 0.1 s and T = 10 s equally well conditioned.
+The closed form's matrices, the same for every segment, are in
+`mavsysid.planner.unit_interval`.
 """
 
 from __future__ import annotations
@@ -22,93 +18,28 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from math import factorial
 
 import numpy as np
+from mavsysid.planner.unit_interval import (
+    DERIVATIVE_MAP,
+    POSITION_COEFFS,
+    POSITION_COST,
+    POSITION_DERIVS,
+    POSITION_FREE_END,
+    POSITION_HERMITE,
+    POWERS,
+    YAW_COEFFS,
+    YAW_COST,
+    YAW_DERIVS,
+    YAW_FREE_END,
+    YAW_HERMITE,
+)
 from mavsysid.vehicle.trajectory import FlatOutputs, PiecewisePolynomial
 
 __all__ = [
-    "POSITION_COEFFS", "YAW_COEFFS", "Segment", "VertexState", "connect_fixed",
-    "connect_free_end", "duration_range", "snap_cost", "stop_segment", "to_piecewise",
-    "yaw_rate_cost",
+    "Segment", "VertexState", "connect_fixed", "connect_free_end", "duration_range",
+    "snap_cost", "stop_segment", "to_piecewise", "yaw_rate_cost",
 ]
-
-#: Coefficients per position axis (degree 9: continuity up to snap at both ends).
-POSITION_COEFFS = 10
-#: Coefficients of the yaw polynomial (degree 5: continuity up to yaw acceleration).
-YAW_COEFFS = 6
-_POS_DERIVS = POSITION_COEFFS // 2  # position … snap
-_YAW_DERIVS = YAW_COEFFS // 2  # yaw, yaw rate, yaw acceleration
-_SNAP = 4  # derivative order minimised in position
-_YAW_RATE = 1  # derivative order minimised in yaw
-
-
-def _derivative_factors(n_coeffs: int, order: int) -> np.ndarray:
-    """j!/(j-k)! for j = 0…N-1 (zero below the order), shape (N,)."""
-    return np.array(
-        [factorial(j) / factorial(j - order) if j >= order else 0.0 for j in range(n_coeffs)]
-    )
-
-
-def _boundary_matrix(n_coeffs: int) -> np.ndarray:
-    """A of the unit interval: rows d^k/ds^k at s = 0, then at s = 1, k < N/2."""
-    m = n_coeffs // 2
-    at_zero = [np.eye(n_coeffs)[k] * factorial(k) for k in range(m)]
-    at_one = [_derivative_factors(n_coeffs, k) for k in range(m)]
-    return np.array(at_zero + at_one)
-
-
-def _cost_matrix(n_coeffs: int, order: int) -> np.ndarray:
-    """Q of the unit interval: bᵀ Q b = ∫₀¹ (d^r p/ds^r)² ds for r = ``order``."""
-    f = _derivative_factors(n_coeffs, order)
-    j = np.arange(n_coeffs)
-    power = j[:, None] + j[None, :] - 2 * order + 1
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = np.outer(f, f) / power
-    return np.where(np.outer(f, f) != 0.0, q, 0.0)
-
-
-def _free_end_map(n_coeffs: int, order: int) -> np.ndarray:
-    """M with b = M [d_start (N/2); p_end], the end derivatives chosen optimally.
-
-    Richter et al. (2013): R = A⁻ᵀ Q A⁻¹, d_P* = -R_PP⁻¹ R_PF d_F, b = A⁻¹ [d_F; d_P*],
-    with d_F the start derivatives and the end value and d_P the end derivatives.
-    """
-    m = n_coeffs // 2
-    a_inv = np.linalg.inv(_boundary_matrix(n_coeffs))
-    r = a_inv.T @ _cost_matrix(n_coeffs, order) @ a_inv
-    fixed, free = np.arange(m + 1), np.arange(m + 1, n_coeffs)
-    d_free = -np.linalg.solve(r[np.ix_(free, free)], r[np.ix_(free, fixed)])
-    return a_inv[:, fixed] + a_inv[:, free] @ d_free
-
-
-# Constant unit-interval matrices (the only part of the problem that can be cached).
-_POS_HERMITE = np.linalg.inv(_boundary_matrix(POSITION_COEFFS))
-_YAW_HERMITE = np.linalg.inv(_boundary_matrix(YAW_COEFFS))
-_POS_FREE = _free_end_map(POSITION_COEFFS, _SNAP)
-_YAW_FREE = _free_end_map(YAW_COEFFS, _YAW_RATE)
-_POS_COST = _cost_matrix(POSITION_COEFFS, _SNAP)
-_YAW_COST = _cost_matrix(YAW_COEFFS, _YAW_RATE)
-_POWERS = np.arange(POSITION_COEFFS)
-
-
-def _derivative_map() -> np.ndarray:
-    """W with (W c).reshape(10, 18) · T^i = `Segment.derivative_coeffs`, shape (180, 36).
-
-    The k-th τ-derivative of Σ c_j τ^j, written in s = τ/T, has the coefficient
-    c_(i+k) (i+k)!/i! T^i at s^i; c stacks the x, y, z and yaw coefficients.
-    """
-    w = np.zeros((POSITION_COEFFS, 3 * _POS_DERIVS + _YAW_DERIVS, 3 * POSITION_COEFFS + YAW_COEFFS))
-    columns = [(3 * k + a, POSITION_COEFFS * a, POSITION_COEFFS, k)
-               for k in range(_POS_DERIVS) for a in range(3)]
-    columns += [(3 * _POS_DERIVS + k, 3 * POSITION_COEFFS, YAW_COEFFS, k) for k in range(3)]
-    for column, offset, n, k in columns:
-        for i in range(n - k):
-            w[i, column, offset + i + k] = factorial(i + k) / factorial(i)
-    return w.reshape(-1, w.shape[-1])
-
-
-_DERIVATIVE_MAP = _derivative_map()
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -135,7 +66,7 @@ class VertexState:
     def __post_init__(self) -> None:
         p = np.array(self.position, dtype=float)
         y = np.array(self.yaw, dtype=float)
-        if p.shape != (_POS_DERIVS, 3) or y.shape != (_YAW_DERIVS,):
+        if p.shape != (POSITION_DERIVS, 3) or y.shape != (YAW_DERIVS,):
             raise ValueError(f"expected position (5, 3) and yaw (3,), got {p.shape}, {y.shape}")
         object.__setattr__(self, "position", _readonly(p))
         object.__setattr__(self, "yaw", _readonly(y))
@@ -143,7 +74,7 @@ class VertexState:
     @classmethod
     def hover(cls, position: np.ndarray, yaw: float) -> VertexState:
         """At rest at ``position`` (m, shape (3,)) with heading ``yaw`` (rad)."""
-        p = np.zeros((_POS_DERIVS, 3))
+        p = np.zeros((POSITION_DERIVS, 3))
         p[0] = position
         return cls(p, np.array([yaw, 0.0, 0.0]))
 
@@ -191,7 +122,7 @@ class Segment:
     @cached_property
     def unit_coeffs(self) -> tuple[np.ndarray, np.ndarray]:
         """Coefficients in s = τ/T ∈ [0, 1]: position (3, 10) and yaw (6,)."""
-        scale = self.duration**_POWERS
+        scale = self.duration**POWERS
         return self.position_coeffs * scale, self.yaw_coeffs * scale[:YAW_COEFFS]
 
     @cached_property
@@ -202,13 +133,13 @@ class Segment:
         τ-derivative in increasing powers of s = τ/T, so values are ``s_powers @ D``.
         """
         c = np.concatenate([self.position_coeffs.ravel(), self.yaw_coeffs])
-        out = (_DERIVATIVE_MAP @ c).reshape(POSITION_COEFFS, -1)
-        out *= (self.duration**_POWERS)[:, None]
+        out = (DERIVATIVE_MAP @ c).reshape(POSITION_COEFFS, -1)
+        out *= (self.duration**POWERS)[:, None]
         return out
 
     def _values(self, s: np.ndarray) -> np.ndarray:
         """All derivatives at unit times s, shape (S, 18)."""
-        return (s[:, None] ** _POWERS) @ self.derivative_coeffs
+        return (s[:, None] ** POWERS) @ self.derivative_coeffs
 
     def flat_outputs(self, tau: np.ndarray) -> FlatOutputs:
         """Flat outputs at local times ``tau`` (s, shape (S,)), held at rest outside [0, T]."""
@@ -216,10 +147,10 @@ class Segment:
         v = self._values(np.clip(tau, 0.0, self.duration) / self.duration)
         outside = (tau < 0.0) | (tau > self.duration)
         if np.any(outside):
-            v[outside, 3 : 3 * _POS_DERIVS] = 0.0
-            v[outside, 3 * _POS_DERIVS + 1 :] = 0.0
-        pos = v[:, : 3 * _POS_DERIVS].reshape(-1, _POS_DERIVS, 3)
-        yaw = v[:, 3 * _POS_DERIVS :]
+            v[outside, 3 : 3 * POSITION_DERIVS] = 0.0
+            v[outside, 3 * POSITION_DERIVS + 1 :] = 0.0
+        pos = v[:, : 3 * POSITION_DERIVS].reshape(-1, POSITION_DERIVS, 3)
+        yaw = v[:, 3 * POSITION_DERIVS :]
         return FlatOutputs(
             pos[:, 0], pos[:, 1], pos[:, 2], pos[:, 3], pos[:, 4], yaw[:, 0], yaw[:, 1], yaw[:, 2]
         )
@@ -227,7 +158,8 @@ class Segment:
     def state_at(self, s: float) -> VertexState:
         """Flat state at unit time s = τ/T ∈ [0, 1]."""
         v = self._values(np.array([s]))[0]
-        return VertexState(v[: 3 * _POS_DERIVS].reshape(_POS_DERIVS, 3), v[3 * _POS_DERIVS :])
+        return VertexState(v[: 3 * POSITION_DERIVS].reshape(POSITION_DERIVS, 3),
+                           v[3 * POSITION_DERIVS :])
 
     def start_state(self) -> VertexState:
         """Flat state at τ = 0."""
@@ -244,7 +176,7 @@ def _trusted_segment(duration: float, position_b: np.ndarray, yaw_b: np.ndarray)
     The connections call this thousands of times per second; it skips the checks and
     copies of ``Segment.__init__`` (the arrays are fresh and owned by the segment).
     """
-    inv = duration ** -_POWERS
+    inv = duration ** -POWERS
     seg = object.__new__(Segment)
     object.__setattr__(seg, "duration", duration)
     object.__setattr__(seg, "position_coeffs", _readonly(position_b * inv))
@@ -259,11 +191,11 @@ def _start_boundary(start: VertexState, duration: float, n_position: int, n_yaw:
     T = float(duration)
     if not T > 0.0:
         raise ValueError(f"duration must be positive, got {duration}")
-    scale = T**_POWERS
+    scale = T**POWERS
     d = np.empty((n_position, 3))
-    np.multiply(start.position, scale[:_POS_DERIVS, None], out=d[:_POS_DERIVS])
+    np.multiply(start.position, scale[:POSITION_DERIVS, None], out=d[:POSITION_DERIVS])
     yd = np.empty(n_yaw)
-    np.multiply(start.yaw, scale[:_YAW_DERIVS], out=yd[:_YAW_DERIVS])
+    np.multiply(start.yaw, scale[:YAW_DERIVS], out=yd[:YAW_DERIVS])
     return T, scale, d, yd
 
 
@@ -291,10 +223,10 @@ def connect_free_end(start: VertexState, end_position: np.ndarray, end_yaw: floa
     -------
     Segment
     """
-    T, _, d, yd = _start_boundary(start, duration, _POS_DERIVS + 1, _YAW_DERIVS + 1)
-    d[_POS_DERIVS] = end_position
-    yd[_YAW_DERIVS] = end_yaw
-    return _trusted_segment(T, (_POS_FREE @ d).T, _YAW_FREE @ yd)
+    T, _, d, yd = _start_boundary(start, duration, POSITION_DERIVS + 1, YAW_DERIVS + 1)
+    d[POSITION_DERIVS] = end_position
+    yd[YAW_DERIVS] = end_yaw
+    return _trusted_segment(T, (POSITION_FREE_END @ d).T, YAW_FREE_END @ yd)
 
 
 def connect_fixed(start: VertexState, end: VertexState, duration: float) -> Segment:
@@ -315,9 +247,9 @@ def connect_fixed(start: VertexState, end: VertexState, duration: float) -> Segm
     Segment
     """
     T, scale, d, yd = _start_boundary(start, duration, POSITION_COEFFS, YAW_COEFFS)
-    np.multiply(end.position, scale[:_POS_DERIVS, None], out=d[_POS_DERIVS:])
-    np.multiply(end.yaw, scale[:_YAW_DERIVS], out=yd[_YAW_DERIVS:])
-    return _trusted_segment(T, (_POS_HERMITE @ d).T, _YAW_HERMITE @ yd)
+    np.multiply(end.position, scale[:POSITION_DERIVS, None], out=d[POSITION_DERIVS:])
+    np.multiply(end.yaw, scale[:YAW_DERIVS], out=yd[YAW_DERIVS:])
+    return _trusted_segment(T, (POSITION_HERMITE @ d).T, YAW_HERMITE @ yd)
 
 
 def stop_segment(start: VertexState, duration: float,
@@ -353,13 +285,13 @@ def snap_cost(segment: Segment) -> float:
     With s = τ/T: ∫₀^T (p⁗)² dτ = T^(-7) ∫₀¹ (d⁴p/ds⁴)² ds = T^(-7) bᵀ Q b.
     """
     b, _ = segment.unit_coeffs
-    return float(np.einsum("ai,ij,aj->", b, _POS_COST, b)) / segment.duration**7
+    return float(np.einsum("ai,ij,aj->", b, POSITION_COST, b)) / segment.duration**7
 
 
 def yaw_rate_cost(segment: Segment) -> float:
     """∫₀^T ψ̇² dτ over the segment, rad²/s (exact, from the Q matrix)."""
     _, b = segment.unit_coeffs
-    return float(b @ _YAW_COST @ b) / segment.duration
+    return float(b @ YAW_COST @ b) / segment.duration
 
 
 def duration_range(distance: float, speed_max: float, budget_left: float,

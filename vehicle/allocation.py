@@ -11,7 +11,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.config_types import VehicleConfig
 
 __all__ = ["allocation_matrix", "allocation_pinv", "rotor_speeds_squared"]
 

@@ -2,8 +2,9 @@
 
 Validation runs in two phases. `validate_document` checks the parsed TOML key by key
 (unknown keys, missing keys, types, signs) and returns plain, normalised values;
-`check_vehicle` then checks what only the assembled `VehicleConfig` can tell (inertia
-consistency, a c_M that is really a ratio, rotor allocation rank, lift, limit order).
+`mavsysid.vehicle.config_checks.check_vehicle` then checks what only the assembled
+`VehicleConfig` can tell (inertia consistency, a c_M that is really a ratio, rotor
+allocation rank, lift, limit order).
 
 Every problem raises `ConfigError` with one line ``"<file>: <key>: <expected>, got
 <found>"``, keys spelled ``mass``, ``[parameters].c_M``, ``[[rotors]][3].direction``,
@@ -19,18 +20,13 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import Any, NoReturn
 
-import numpy as np
-from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.config_messages import describe_value, raise_config_error
+from mavsysid.vehicle.config_types import PARAMETER_UNITS
 from mavsysid.vehicle.model_effects import EFFECTS
 
-from mavsysid.errors import ConfigError
-
-if TYPE_CHECKING:
-    from mavsysid.vehicle.config import VehicleConfig
-
-__all__ = ["MIN_ROTORS", "check_vehicle", "validate_document"]
+__all__ = ["EFFECT_PARAMETER_SIGNS", "MIN_ROTORS", "validate_document"]
 
 #: Fewer rotors than this cannot control thrust, roll, pitch and yaw independently.
 MIN_ROTORS = 4
@@ -38,10 +34,10 @@ MIN_ROTORS = 4
 # (key, unit, sign) per optional/required key of each table; sign is "positive" or
 # "nonnegative". Units go into messages so a user sees what scale is expected.
 _PARAMETERS: dict[str, tuple[str, str]] = {
-    "c_T": ("N/(rad/s)²", "positive"),
-    "c_D": ("s/m", "nonnegative"),
-    "c_M": ("N·m/(rad/s)²", "positive"),
-    "J": ("kg·m²", "positive"),
+    "c_T": (PARAMETER_UNITS["c_T"], "positive"),
+    "c_D": (PARAMETER_UNITS["c_D"], "nonnegative"),
+    "c_M": (PARAMETER_UNITS["c_M"], "positive"),
+    "J": (PARAMETER_UNITS["j_x"], "positive"),
 }
 _LIMITS: dict[str, tuple[str, str]] = {
     "rotor_speed_max": ("rad/s", "positive"),
@@ -92,51 +88,14 @@ _TOP_LEVEL: dict[str, str] = {
     "noise": "[noise]",
     "effects": "[effects]",
 }
-# Parameters of effects that have a sign by their meaning (the rest may be negative).
-_EFFECT_SIGNS: dict[tuple[str, str], str] = {
+#: Parameters of effects that have a sign by their meaning, ``(effect, parameter) →
+#: "positive" | "nonnegative"``; the rest may be negative. Read by the effect fits too.
+EFFECT_PARAMETER_SIGNS: dict[tuple[str, str], str] = {
     ("motor_lag", "tau"): "nonnegative",
     ("ground_effect", "rotor_radius"): "positive",
     ("body_drag", "k"): "nonnegative",
     ("rotor_drag_linear", "k"): "nonnegative",
 }
-
-# The RotorS Firefly inertia (the reference vehicle of docs/architecture.md) has j_z 21 % above
-# j_x + j_y, which no rigid body can have. Tolerating that much keeps the reference
-# loadable while still catching decimal-point slips and swapped units (factors ≥ 10).
-_INERTIA_TRIANGLE_SLACK = 0.25
-# c_M/c_T is the rotor's torque-to-thrust lever, a few cm on any real propeller;
-# RotorS's ratio (≈ 0.016 m for the Firefly) passed as c_M gives a value ≥ 1000 m.
-_MAX_MOMENT_ARM = 0.1
-# Relative singular-value threshold below which an allocation direction is missing.
-_RANK_RTOL = 1e-9
-_MAX_SHOWN = 60
-
-
-def _fail(file: str, key: str, expected: str, found: str) -> NoReturn:
-    """Raise the one-line ConfigError of the module docstring."""
-    message = f"{file}: {key}: {expected}, got {found}"
-    # One line is part of the CLI contract (exit 2, one-line message).
-    raise ConfigError(" ".join(message.split()))
-
-
-def _describe(value: Any) -> str:
-    """A short, one-line description of a TOML value for error messages."""
-    if isinstance(value, bool):
-        return f"a boolean ({str(value).lower()})"
-    if isinstance(value, str):
-        shown = value if len(value) <= _MAX_SHOWN else value[:_MAX_SHOWN] + "…"
-        return f"a string {shown!r}"
-    if isinstance(value, Mapping):
-        return "a table"
-    if isinstance(value, list):
-        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-            text = "[" + ", ".join(repr(v) for v in value) + "]"
-            if len(text) <= _MAX_SHOWN:
-                return text
-        return f"an array of {len(value)} item{'s' if len(value) != 1 else ''}"
-    if isinstance(value, int | float):
-        return repr(value)
-    return f"a {type(value).__name__} ({value})"
 
 
 def _suggestion(key: str, section: str | None, index: int | None = None) -> str:
@@ -182,22 +141,22 @@ def _check_known(
         else:
             spelled = _spell(section, key, index)
         known = ", ".join(_spell(section, k) if section is None else k for k in allowed)
-        _fail(file, spelled, f"one of the known keys ({known})",
-              f"an unknown key{_suggestion(key, section, index)}")
+        raise_config_error(file, spelled, f"one of the known keys ({known})",
+                           f"an unknown key{_suggestion(key, section, index)}")
 
 
 def _number(file: str, key: str, value: Any, unit: str, sign: str | None) -> float:
     """Validate one finite number with an optional sign constraint; ints are accepted."""
     # bool is an int subclass in Python, but `mass = true` is never meant as 1 kg.
     if isinstance(value, bool) or not isinstance(value, int | float):
-        _fail(file, key, f"a number ({unit})", _describe(value))
+        raise_config_error(file, key, f"a number ({unit})", describe_value(value))
     number = float(value)
     if not math.isfinite(number):
-        _fail(file, key, f"a finite number ({unit})", _describe(value))
+        raise_config_error(file, key, f"a finite number ({unit})", describe_value(value))
     if sign == "positive" and number <= 0.0:
-        _fail(file, key, f"a positive number ({unit})", _describe(value))
+        raise_config_error(file, key, f"a positive number ({unit})", describe_value(value))
     if sign == "nonnegative" and number < 0.0:
-        _fail(file, key, f"a number ≥ 0 ({unit})", _describe(value))
+        raise_config_error(file, key, f"a number ≥ 0 ({unit})", describe_value(value))
     return number
 
 
@@ -206,18 +165,19 @@ def _vector3(file: str, key: str, value: Any, unit: str, sign: str | None) -> tu
     what = {"positive": "positive ", "nonnegative": "non-negative "}.get(sign or "", "")
     expected = f"an array of 3 {what}finite numbers ({unit})"
     if not isinstance(value, list) or len(value) != 3:
-        _fail(file, key, expected, _describe(value))
+        raise_config_error(file, key, expected, describe_value(value))
     numbers = []
     for item in value:
         if isinstance(item, bool) or not isinstance(item, int | float):
-            _fail(file, key, expected, f"{_describe(value)} containing {_describe(item)}")
+            raise_config_error(file, key, expected,
+                               f"{describe_value(value)} containing {describe_value(item)}")
         numbers.append(float(item))
     bad = [
         not math.isfinite(v) or (sign == "positive" and v <= 0) or (sign == "nonnegative" and v < 0)
         for v in numbers
     ]
     if any(bad):
-        _fail(file, key, expected, _describe(value))
+        raise_config_error(file, key, expected, describe_value(value))
     return tuple(numbers)
 
 
@@ -228,11 +188,11 @@ def _table(file: str, doc: Mapping[str, Any], section: str) -> dict[str, Any]:
     raw = doc.get(section)
     if raw is None:
         if required:
-            _fail(file, f"[{section}]", f"a table with {', '.join(required)}",
-                  "nothing (the table is missing)")
+            raise_config_error(file, f"[{section}]", f"a table with {', '.join(required)}",
+                               "nothing (the table is missing)")
         return {}
     if not isinstance(raw, Mapping):
-        _fail(file, f"[{section}]", "a table", _describe(raw))
+        raise_config_error(file, f"[{section}]", "a table", describe_value(raw))
     _check_known(file, raw, section)
     values: dict[str, Any] = {}
     for key, (unit, sign) in spec.items():
@@ -240,7 +200,8 @@ def _table(file: str, doc: Mapping[str, Any], section: str) -> dict[str, Any]:
         if key not in raw:
             if key in required:
                 kind = "an array of 3 numbers" if key in _VECTOR_KEYS else "a number"
-                _fail(file, spelled, f"{kind} ({unit})", "nothing (the key is missing)")
+                raise_config_error(file, spelled, f"{kind} ({unit})",
+                                   "nothing (the key is missing)")
             continue
         check = _vector3 if key in _VECTOR_KEYS else _number
         values[key] = check(file, spelled, raw[key], unit, sign)
@@ -252,30 +213,33 @@ def _rotors(file: str, doc: Mapping[str, Any]) -> list[tuple[tuple[float, ...], 
     raw = doc.get("rotors")
     expected = f"an array of at least {MIN_ROTORS} [[rotors]] tables"
     if raw is None:
-        _fail(file, "[[rotors]]", expected, "nothing (the key is missing)")
+        raise_config_error(file, "[[rotors]]", expected, "nothing (the key is missing)")
     if not isinstance(raw, list) or not all(isinstance(r, Mapping) for r in raw):
-        found = _describe(raw)
+        found = describe_value(raw)
         # A bare number here is most likely a rotor count, not a rotor list.
         if isinstance(raw, int | float) and not isinstance(raw, bool):
             found = f"the number {found}"
-        _fail(file, "[[rotors]]", expected, found)
+        raise_config_error(file, "[[rotors]]", expected, found)
     if len(raw) < MIN_ROTORS:
-        _fail(file, "[[rotors]]", expected, f"{len(raw)} rotor{'s' if len(raw) != 1 else ''}")
+        raise_config_error(file, "[[rotors]]", expected,
+                           f"{len(raw)} rotor{'s' if len(raw) != 1 else ''}")
     rotors = []
     for index, rotor in enumerate(raw, start=1):
         _check_known(file, rotor, "rotors", index)
         for key in _ROTOR_KEYS:
             if key not in rotor:
                 what = "an array of 3 numbers (m, body FLU)" if key == "position" else "+1 or -1"
-                _fail(file, _spell("rotors", key, index), what, "nothing (the key is missing)")
+                raise_config_error(file, _spell("rotors", key, index), what,
+                                   "nothing (the key is missing)")
         position = _vector3(
             file, _spell("rotors", "position", index), rotor["position"], "m, body FLU", None
         )
         direction = rotor["direction"]
         # ±1.0 is harmless, but 0, 2 or true are not a spin direction.
         if isinstance(direction, bool) or direction not in (1, -1):
-            _fail(file, _spell("rotors", "direction", index),
-                  "+1 (counter-clockwise from above) or -1 (clockwise)", _describe(direction))
+            raise_config_error(
+                file, _spell("rotors", "direction", index),
+                "+1 (counter-clockwise from above) or -1 (clockwise)", describe_value(direction))
         rotors.append((position, int(direction)))
     return rotors
 
@@ -287,8 +251,8 @@ def _unknown_name(file: str, spelled: str, name: str, known: list[str], what: st
     close = ([folded[name.lower()]] if name.lower() in folded
              else difflib.get_close_matches(name, known, n=1, cutoff=0.6))
     hint = f" (did you mean {spell(close[0])}?)" if close else ""
-    _fail(file, spelled, f"one of the known {what}s ({', '.join(known)})",
-          f"an unknown {what}{hint}")
+    raise_config_error(file, spelled, f"one of the known {what}s ({', '.join(known)})",
+                       f"an unknown {what}{hint}")
 
 
 def _effects(file: str, doc: Mapping[str, Any]) -> list[tuple[str, dict[str, float]]]:
@@ -297,15 +261,16 @@ def _effects(file: str, doc: Mapping[str, Any]) -> list[tuple[str, dict[str, flo
     if raw is None:
         return []
     if not isinstance(raw, Mapping):
-        _fail(file, "[effects]", "a table of [effects.NAME] tables", _describe(raw))
+        raise_config_error(file, "[effects]", "a table of [effects.NAME] tables",
+                           describe_value(raw))
     out = []
     for name, table in raw.items():
         if name not in EFFECTS:
             _unknown_name(file, f"[effects.{name}]", name, list(EFFECTS), "effect",
                           lambda n: f"[effects.{n}]")
         if not isinstance(table, Mapping):
-            _fail(file, f"[effects.{name}]", "a table of the effect's parameters",
-                  _describe(table))
+            raise_config_error(file, f"[effects.{name}]", "a table of the effect's parameters",
+                               describe_value(table))
         parameters = {p.name: p for p in EFFECTS[name].parameters}
         values = {}
         for key, value in table.items():
@@ -314,7 +279,7 @@ def _effects(file: str, doc: Mapping[str, Any]) -> list[tuple[str, dict[str, flo
                 _unknown_name(file, spelled, key, list(parameters), "key",
                               lambda k, n=name: f"[effects.{n}].{k}")
             values[key] = _number(file, spelled, value, parameters[key].unit,
-                                  _EFFECT_SIGNS.get((name, key)))
+                                  EFFECT_PARAMETER_SIGNS.get((name, key)))
         out.append((name, values))
     return out
 
@@ -348,106 +313,11 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     _check_known(file, doc, None)
     for key in ("name", "description"):
         if key in doc and not (isinstance(doc[key], str) and doc[key].strip()):
-            _fail(file, key, "a non-empty string", _describe(doc[key]))
+            raise_config_error(file, key, "a non-empty string", describe_value(doc[key]))
     if "mass" not in doc:
-        _fail(file, "mass", "a number (kg)", "nothing (the key is missing)")
+        raise_config_error(file, "mass", "a number (kg)", "nothing (the key is missing)")
     mass = _number(file, "mass", doc["mass"], "kg", "positive")
     rotors = _rotors(file, doc)
     tables = {section: _table(file, doc, section) for section in _TABLES}
     return {"name": doc.get("name"), "mass": mass, "rotors": rotors, **tables,
             "effects": _effects(file, doc)}
-
-
-def _rank_ok(rows: np.ndarray) -> bool:
-    """Whether the rows are linearly independent, each row scaled to unit max first."""
-    scale = np.max(np.abs(rows), axis=1, keepdims=True)
-    if np.any(scale == 0.0):
-        return False
-    # Rows differ by orders of magnitude (c_T ≈ 1e-5 vs c_M ≈ 1e-7): normalise so
-    # the rank test measures geometry, not units.
-    s = np.linalg.svd(rows / scale, compute_uv=False)
-    return bool(s[-1] > _RANK_RTOL * s[0])
-
-
-def _check_allocation(file: str, config: VehicleConfig) -> None:
-    """Check the 4×k allocation [c_T; c_T y; -c_T x; -ε c_M] has rank 4, naming the gap."""
-    from mavsysid.vehicle.allocation import (
-        allocation_matrix,  # imports mavsysid.vehicle.config: not at the top
-    )
-
-    thrust, roll, pitch, yaw = allocation_matrix(config)
-    eps = config.rotor_directions
-    directions = "(" + ", ".join(f"{int(e):+d}" for e in eps) + ")"
-    if not _rank_ok(np.vstack([thrust, yaw])):
-        _fail(file, "[[rotors]].direction",
-              "rotors spinning both ways (+1 and -1) so that yaw torque can be produced "
-              "independently of thrust", f"all directions {int(eps[0]):+d}")
-    if not _rank_ok(np.vstack([thrust, roll, pitch])):
-        _fail(file, "[[rotors]].position",
-              "rotor positions spanning the x-y plane so that roll and pitch torque can be "
-              "produced", "all rotors on one line in the x-y plane")
-    if not _rank_ok(np.vstack([thrust, roll, pitch, yaw])):
-        _fail(file, "[[rotors]].direction",
-              "directions that let yaw torque be produced independently of thrust, roll and "
-              "pitch torque", f"directions {directions}, which follow the rotor layout")
-
-
-def check_vehicle(file: str, config: VehicleConfig) -> None:
-    """Check the properties of an assembled configuration that no single key shows.
-
-    Parameters
-    ----------
-    file : str
-        How the file is named in error messages.
-    config : VehicleConfig
-        The configuration built from a document that passed `validate_document`.
-
-    Raises
-    ------
-    ConfigError
-        Inconsistent inertia, a c_M that is RotorS's ratio c_M/c_T, rotors that cannot
-        produce independent thrust, roll, pitch and yaw torque, rotors that cannot lift
-        the vehicle, limits in the wrong order, or a motor curve out of range (pwm_min ≥
-        pwm_max, thrust_expo > 1).
-    """
-    params = config.parameters
-    j = params.J
-    for c in range(3):
-        a, b = (c + 1) % 3, (c + 2) % 3
-        if j[c] > (1.0 + _INERTIA_TRIANGLE_SLACK) * (j[a] + j[b]):
-            names = ("j_x", "j_y", "j_z")
-            _fail(file, "[parameters].J",
-                  f"principal moments satisfying {names[a]} + {names[b]} ≥ {names[c]} "
-                  "(rigid-body triangle inequality)",
-                  f"{_describe(list(j))} ({names[a]} + {names[b]} = {j[a] + j[b]:.6g} < "
-                  f"{names[c]} = {j[c]:.6g})")
-    arm = params.c_M / params.c_T
-    if arm >= _MAX_MOMENT_ARM:
-        _fail(file, "[parameters].c_M",
-              "the absolute moment coefficient in N·m/(rad/s)² (c_M/c_T is a few cm at most)",
-              f"{params.c_M!r}, which looks like the ratio c_M/c_T; the absolute coefficient "
-              f"is ratio × c_T = {params.c_M!r} × {params.c_T!r} = {params.c_M * params.c_T:.6g}")
-    _check_allocation(file, config)
-    limits = config.limits
-    k = config.rotor_count
-    lift = k * params.c_T * limits.rotor_speed_max**2
-    weight = config.mass * GRAVITY
-    if lift < weight:
-        _fail(file, "[limits].rotor_speed_max",
-              f"a speed at which the {k} rotors lift the vehicle ({k} × c_T × "
-              f"rotor_speed_max² ≥ m g = {weight:.6g} N)",
-              f"{limits.rotor_speed_max!r} rad/s giving {lift:.6g} N")
-    if limits.rotor_speed_min >= limits.rotor_speed_max:
-        _fail(file, "[limits].rotor_speed_min",
-              f"a speed in [0, rotor_speed_max = {limits.rotor_speed_max!r}) rad/s",
-              repr(limits.rotor_speed_min))
-    motor = config.motor
-    if motor.pwm_min >= motor.pwm_max:
-        _fail(file, "[motor].pwm_min", f"a PWM below pwm_max = {motor.pwm_max!r} µs",
-              repr(motor.pwm_min))
-    if motor.thrust_expo > 1.0:
-        _fail(file, "[motor].thrust_expo", "a number between 0 and 1", repr(motor.thrust_expo))
-    if limits.thrust_min_ratio >= limits.thrust_max_ratio:
-        _fail(file, "[limits].thrust_min_ratio",
-              f"a ratio below thrust_max_ratio = {limits.thrust_max_ratio!r}",
-              repr(limits.thrust_min_ratio))

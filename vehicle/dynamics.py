@@ -16,15 +16,18 @@ F_i = c_T n_i² e_z - c_T n_i² diag(c_D, c_D, 0)(v_B + ω × r_i)  (paper Eq. d
 M_i = -ε_i c_M n_i² e_z. F_ext, M_ext are extra body-frame force and torque: zero in the
 model, the hook through which the simulator's truth side adds unmodelled effects.
 
-The kernel is compiled with numba because the simulator calls it at ≥ 1 kHz; the
-numpy-facing `state_derivative` wraps it for arrays of states.
+The rotor wrench and Euler's equation are those of `mavsysid.vehicle.mav_model` (one
+statement of each law). The kernel is compiled with numba because the simulator calls
+it at ≥ 1 kHz; the numpy-facing `state_derivative` wraps it for arrays of states.
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
-from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.config_types import VehicleConfig
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.mav_model import add_rotor_wrench, euler_kernel
 
 __all__ = [
     "ATT",
@@ -66,50 +69,22 @@ def rotation_kernel(q):
 @numba.njit(cache=True, fastmath=False)
 def derivative_kernel(x, n, theta, mass, r, eps, force_ext, torque_ext, out):
     """ẋ of one state into ``out`` (13,). Arrays: x (13,), n (k,), θ (6,), r (k, 3), ε (k,)."""
-    c_T, c_D, c_M = theta[0], theta[1], theta[2]
-    jx, jy, jz = theta[3], theta[4], theta[5]
     vx, vy, vz = x[3], x[4], x[5]
-    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
     wx, wy, wz = x[10], x[11], x[12]
-    inv = 1.0 / np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    qw, qx, qy, qz = qw * inv, qx * inv, qy * inv, qz * inv
-    r00 = 1.0 - 2.0 * (qy * qy + qz * qz)
-    r01 = 2.0 * (qx * qy - qw * qz)
-    r02 = 2.0 * (qx * qz + qw * qy)
-    r10 = 2.0 * (qx * qy + qw * qz)
-    r11 = 1.0 - 2.0 * (qx * qx + qz * qz)
-    r12 = 2.0 * (qy * qz - qw * qx)
-    r20 = 2.0 * (qx * qz - qw * qy)
-    r21 = 2.0 * (qy * qz + qw * qx)
-    r22 = 1.0 - 2.0 * (qx * qx + qy * qy)
-
-    fx, fy, fz = force_ext[0], force_ext[1], force_ext[2]
-    mx, my, mz = torque_ext[0], torque_ext[1], torque_ext[2]
-    for i in range(n.shape[0]):
-        n2 = n[i] * n[i]
-        thrust = c_T * n2
-        rx, ry, rz = r[i, 0], r[i, 1], r[i, 2]
-        # Paper Eq. drag: hub velocity v_B + ω × r_i, only its xy part is opposed.
-        hx = vx + wy * rz - wz * ry
-        hy = vy + wz * rx - wx * rz
-        fix = -thrust * c_D * hx
-        fiy = -thrust * c_D * hy
-        fiz = thrust
-        fx += fix
-        fy += fiy
-        fz += fiz
-        mx += ry * fiz - rz * fiy
-        my += rz * fix - rx * fiz
-        mz += rx * fiy - ry * fix - eps[i] * c_M * n2
+    R = rotation_kernel(x[6:10])
+    # F_B = F_ext + Σ F_i and M_B = M_ext + Σ (M_i + r_i × F_i) (paper Eq. drag).
+    force = force_ext.copy()
+    torque = torque_ext.copy()
+    add_rotor_wrench(n, theta, r, eps, x[3:6], x[10:13], force, torque)
 
     # ṗ = R v_B
-    out[0] = r00 * vx + r01 * vy + r02 * vz
-    out[1] = r10 * vx + r11 * vy + r12 * vz
-    out[2] = r20 * vx + r21 * vy + r22 * vz
+    out[0] = R[0, 0] * vx + R[0, 1] * vy + R[0, 2] * vz
+    out[1] = R[1, 0] * vx + R[1, 1] * vy + R[1, 2] * vz
+    out[2] = R[2, 0] * vx + R[2, 1] * vy + R[2, 2] * vz
     # Paper Eq. newton: v̇_B = F_B/m - ω × v_B + Rᵀ g, g = [0, 0, -GRAVITY].
-    out[3] = fx / mass - (wy * vz - wz * vy) - GRAVITY * r20
-    out[4] = fy / mass - (wz * vx - wx * vz) - GRAVITY * r21
-    out[5] = fz / mass - (wx * vy - wy * vx) - GRAVITY * r22
+    out[3] = force[0] / mass - (wy * vz - wz * vy) - GRAVITY * R[2, 0]
+    out[4] = force[1] / mass - (wz * vx - wx * vz) - GRAVITY * R[2, 1]
+    out[5] = force[2] / mass - (wx * vy - wy * vx) - GRAVITY * R[2, 2]
     # q̇ = ½ q ⊗ [0, ω] on the unnormalised q, so the integrator sees the true field.
     qw, qx, qy, qz = x[6], x[7], x[8], x[9]
     out[6] = 0.5 * (-qx * wx - qy * wy - qz * wz)
@@ -117,9 +92,7 @@ def derivative_kernel(x, n, theta, mass, r, eps, force_ext, torque_ext, out):
     out[8] = 0.5 * (qw * wy + qz * wx - qx * wz)
     out[9] = 0.5 * (qw * wz + qx * wy - qy * wx)
     # Paper Eq. euler: ω̇ = J⁻¹ (M_B - ω × J ω), J = diag(j_x, j_y, j_z).
-    out[10] = (mx - (wy * jz * wz - wz * jy * wy)) / jx
-    out[11] = (my - (wz * jx * wx - wx * jz * wz)) / jy
-    out[12] = (mz - (wx * jy * wy - wy * jx * wx)) / jz
+    euler_kernel(torque, x[10:13], theta[3:6], out[10:13])
 
 
 @numba.njit(cache=True)

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from mavsysid.vehicle.allocation import allocation_pinv
-from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.config_types import VehicleConfig
+from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
 from mavsysid.vehicle.trajectory import FlatOutputs
 

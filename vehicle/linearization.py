@@ -11,6 +11,9 @@ a covariance stays well conditioned whether c_T is 1e-5 or 2e-8.
 Process noise w, shape (6,): unmodelled body force (N) and moment (N·m), white with
 densities from the vehicle's ``[noise]``. Measurement: motion-capture position and
 attitude, ``q_meas = q ⊗ Exp(φ)``; the residual is [p_meas - p̂, Log(q̂⁻¹ ⊗ q_meas)].
+
+The Jacobian kernel itself is in `mavsysid.vehicle.error_jacobian`; it is re-exported
+here with the transition kernel, so that the EKF and the planner import both from here.
 """
 
 from __future__ import annotations
@@ -19,9 +22,9 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from mavsysid.vehicle.config import VehicleConfig
-from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.dynamics import ATT, POS, RATE, VEL, rotation_kernel
+from mavsysid.vehicle.config_types import VehicleConfig
+from mavsysid.vehicle.dynamics import ATT, POS, RATE, VEL
+from mavsysid.vehicle.error_jacobian import jacobian_kernel
 from mavsysid.vehicle.rotation import quat_conjugate, quat_exp, quat_log, quat_multiply
 
 __all__ = [
@@ -239,119 +242,6 @@ class ErrorStateModel:
         P = np.asarray(P, dtype=float)
         s = self.theta_scale
         return P[..., E_THETA, E_THETA] * s[:, None] * s[None, :]
-
-
-@numba.njit(cache=True)
-def _skew_into(v, out):
-    out[0, 0] = 0.0
-    out[0, 1] = -v[2]
-    out[0, 2] = v[1]
-    out[1, 0] = v[2]
-    out[1, 1] = 0.0
-    out[1, 2] = -v[0]
-    out[2, 0] = -v[1]
-    out[2, 1] = v[0]
-    out[2, 2] = 0.0
-
-
-@numba.njit(cache=True)
-def jacobian_kernel(x, n, theta, mass, r, eps, scale, A, G):
-    """A (18, 18) and G (18, 6) of one state into ``A`` and ``G``; see `ErrorStateModel`."""
-    c_T, c_D, c_M = theta[0], theta[1], theta[2]
-    J = theta[3:6]
-    R = rotation_kernel(x[6:10])
-    v = x[3:6]
-    w = x[10:13]
-    A[:] = 0.0
-    G[:] = 0.0
-    sum_T = 0.0
-    sum_eps_n2 = 0.0
-    Tr = np.zeros(3)
-    M = np.zeros(3)
-    dF_dcT = np.zeros(3)
-    dF_dcD = np.zeros(3)
-    dM_dcT = np.zeros(3)
-    dM_dcD = np.zeros(3)
-    dM_dw = np.zeros((3, 3))
-    rx = np.empty((3, 3))
-    for i in range(n.shape[0]):
-        n2 = n[i] * n[i]
-        T = c_T * n2
-        ri = r[i]
-        hub = v + np.cross(w, ri)  # v_B + ω × r_i (paper Eq. drag)
-        a = np.array([-c_D * n2 * hub[0], -c_D * n2 * hub[1], n2])  # ∂F_i/∂c_T
-        b = np.array([-T * hub[0], -T * hub[1], 0.0])  # ∂F_i/∂c_D
-        M += np.cross(ri, c_T * a)
-        dM_dcT += np.cross(ri, a)
-        dM_dcD += np.cross(ri, b)
-        dF_dcT += a
-        dF_dcD += b
-        sum_T += T
-        sum_eps_n2 += eps[i] * n2
-        Tr += T * ri
-        _skew_into(ri, rx)
-        # Σ T_i [r_i]× D [r_i]×, with D = diag(1, 1, 0) zeroing the third column of [r_i]×.
-        for p in range(3):
-            for q in range(3):
-                dM_dw[p, q] += T * (rx[p, 0] * rx[0, q] + rx[p, 1] * rx[1, q])
-    M[2] -= c_M * sum_eps_n2
-    Jw = J * w
-    w_dot = (M - np.cross(w, Jw)) / J
-
-    sk = np.empty((3, 3))
-    # ṗ = R v_B with R = R̂ (I + [δφ]×)
-    _skew_into(v, sk)
-    A[0:3, 3:6] = R
-    A[0:3, 6:9] = -(R @ sk)
-    # Paper Eq. newton
-    _skew_into(w, sk)
-    for p in range(3):
-        for q in range(3):
-            A[3 + p, 3 + q] = -sk[p, q]
-    A[3, 3] -= c_D * sum_T / mass
-    A[4, 4] -= c_D * sum_T / mass
-    g_body = -GRAVITY * R[2, :]  # Rᵀ g
-    _skew_into(g_body, sk)
-    A[3:6, 6:9] = sk
-    _skew_into(Tr, rx)
-    _skew_into(v, sk)
-    for q in range(3):  # ∂F/∂ω = c_D D [Σ T_i r_i]×, plus [v]× from -ω × v
-        A[3, 9 + q] = c_D * rx[0, q] / mass + sk[0, q]
-        A[4, 9 + q] = c_D * rx[1, q] / mass + sk[1, q]
-        A[5, 9 + q] = sk[2, q]
-    A[3:6, 12] = dF_dcT / mass
-    A[3:6, 13] = dF_dcD / mass
-    # Attitude error kinematics: δφ̇ = -ω × δφ + δω
-    _skew_into(w, sk)
-    for p in range(3):
-        for q in range(3):
-            A[6 + p, 6 + q] = -sk[p, q]
-        A[6 + p, 9 + p] = 1.0
-    # Paper Eq. euler
-    for p in range(3):
-        for q in range(2):  # ∂M/∂v = -c_D [Σ T_i r_i]× D
-            A[9 + p, 3 + q] = -c_D * rx[p, q] / J[p]
-    # ∂(ω × J ω)/∂ω = [ω]× J - [J ω]×
-    wx = np.empty((3, 3))
-    _skew_into(w, wx)
-    _skew_into(Jw, sk)
-    for p in range(3):
-        for q in range(3):
-            A[9 + p, 9 + q] = (c_D * dM_dw[p, q] - wx[p, q] * J[q] + sk[p, q]) / J[p]
-    A[9:12, 12] = dM_dcT / J
-    A[9:12, 13] = dM_dcD / J
-    A[11, 14] = -sum_eps_n2 / J[2]
-    for a_ in range(3):
-        e_a = np.zeros(3)
-        e_a[a_] = 1.0
-        col = -np.cross(w, e_a) * w[a_] / J
-        col[a_] -= w_dot[a_] / J[a_]
-        A[9:12, 15 + a_] = col
-    for q in range(6):
-        A[:, 12 + q] *= scale[q]
-    for p in range(3):
-        G[3 + p, p] = 1.0 / mass
-        G[9 + p, 3 + p] = 1.0 / J[p]
 
 
 @numba.njit(cache=True)

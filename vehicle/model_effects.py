@@ -14,18 +14,24 @@ values. An effect enters the model through up to three channels:
   (`ModelEffect.acting_rotor_speeds`).
 
 The simulator's hidden truth (`mavsysid.flight.offline.effects`), a vehicle config's
-``[effects.NAME]``
-tables, the EKF and the discrepancy workflow all use these definitions, so the effect
-that is hidden is exactly the effect that is fitted.
+``[effects.NAME]`` tables, the EKF and the discrepancy workflow all use these
+definitions, so the effect that is hidden is exactly the effect that is fitted. The base
+class and the effect inputs live in `mavsysid.vehicle.effect_base`; they are re-exported
+here so that this module is the one entry point to the effects.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import ClassVar
-
 import numpy as np
-from mavsysid.vehicle.rotation import quat_to_matrix
+from mavsysid.vehicle.effect_base import (
+    EffectInputs,
+    EffectParameter,
+    ModelEffect,
+    hub_forces_wrench,
+    rotor_force_wrench,
+    total_wrench,
+)
+from mavsysid.vehicle.rotation import quat_normalize, quat_to_matrix
 
 from mavsysid.errors import InputError
 
@@ -47,182 +53,6 @@ __all__ = [
     "parse_effect",
     "total_wrench",
 ]
-
-
-@dataclass(frozen=True)
-class EffectParameter:
-    """One parameter of an effect.
-
-    Attributes
-    ----------
-    name : str
-        Identifier used in configs, the CLI and JSON.
-    unit : str
-    description : str
-    scale : float
-        A typical magnitude (same unit): the step of searches and the unit of scaled fits.
-    """
-
-    name: str
-    unit: str
-    description: str
-    scale: float
-
-
-@dataclass(frozen=True)
-class EffectInputs:
-    """Samples at which effects are evaluated (N of them); every array is float.
-
-    Attributes
-    ----------
-    t : ndarray, shape (N,)
-        Time since the start of the flight, s.
-    position : ndarray, shape (N, 3)
-        Body-frame origin, world ENU, m.
-    quaternion : ndarray, shape (N, 4)
-        Attitude [w, x, y, z], body → world.
-    velocity : ndarray, shape (N, 3)
-        Velocity over ground in the body frame v_B, m/s.
-    rates : ndarray, shape (N, 3)
-        Body rates ω, rad/s.
-    rotor_speeds : ndarray, shape (N, k)
-        Speeds acting on the body, rad/s.
-    theta : ndarray, shape (6,)
-        θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI.
-    rotor_positions : ndarray, shape (k, 3)
-        Rotor hubs in the body frame, m.
-    """
-
-    t: np.ndarray
-    position: np.ndarray
-    quaternion: np.ndarray
-    velocity: np.ndarray
-    rates: np.ndarray
-    rotor_speeds: np.ndarray
-    theta: np.ndarray
-    rotor_positions: np.ndarray
-
-    def rotation(self) -> np.ndarray:
-        """R(q) body → world, shape (N, 3, 3)."""
-        return quat_to_matrix(self.quaternion)
-
-    def hub_velocities(self) -> np.ndarray:
-        """v_B + ω × r_i of every rotor hub, shape (N, k, 3), m/s."""
-        return self.velocity[:, None, :] + _cross(self.rates[:, None, :],
-                                                    self.rotor_positions[None, :, :])
-
-    def rotor_thrusts(self) -> np.ndarray:
-        """c_T n_i², shape (N, k), N."""
-        return self.theta[0] * self.rotor_speeds**2
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over the last axis (size 3), broadcasting; shape of the broadcast.
-
-    np.cross's axis handling costs tens of µs a call, which dominates the simulator's
-    per-tick evaluation of one sample; this is the same formula without it.
-    """
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a1 * b2 - a2 * b1
-    out[..., 1] = a2 * b0 - a0 * b2
-    out[..., 2] = a0 * b1 - a1 * b0
-    return out
-
-
-def _zero_wrench(inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
-    n = len(inputs.t)
-    return np.zeros((n, 3)), np.zeros((n, 3))
-
-
-def _rotor_wrench(inputs: EffectInputs, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sum of per-rotor body forces (N, k, 3) acting at the hubs: force and torque (N, 3)."""
-    torque = _cross(inputs.rotor_positions[None, :, :], forces).sum(axis=1)
-    return forces.sum(axis=1), torque
-
-
-def _paper_rotor_forces(inputs: EffectInputs) -> np.ndarray:
-    """The paper's per-rotor force: thrust c_T n² e_z and its rotor drag (paper Eq. drag)."""
-    thrust = inputs.rotor_thrusts()
-    hub = inputs.hub_velocities()
-    forces = np.empty(hub.shape)
-    forces[..., 0] = -thrust * inputs.theta[1] * hub[..., 0]
-    forces[..., 1] = -thrust * inputs.theta[1] * hub[..., 1]
-    forces[..., 2] = thrust
-    return forces
-
-
-class ModelEffect:
-    """Base class: an effect with its parameter values; every channel defaults to none."""
-
-    name: ClassVar[str] = "effect"
-    title: ClassVar[str] = ""
-    description: ClassVar[str] = ""
-    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
-    #: Channels through which the effect enters: a subset of {"wrench", "pose",
-    #: "rotor_speeds"}.
-    channels: ClassVar[frozenset[str]] = frozenset()
-
-    def __init__(self, **values: float) -> None:
-        known = {p.name for p in self.parameters}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise InputError(f"effect {self.name}: unknown parameter {unknown[0]!r}; "
-                             f"expected one of {', '.join(sorted(known))}")
-        for key, value in values.items():
-            if not np.isfinite(value):
-                raise InputError(f"effect {self.name}: parameter {key} = {value}: "
-                                 "expected a finite number")
-        self.values = np.array([float(values.get(p.name, 0.0)) for p in self.parameters])
-
-    @classmethod
-    def parameter_names(cls) -> tuple[str, ...]:
-        return tuple(p.name for p in cls.parameters)
-
-    @classmethod
-    def parameter_scales(cls) -> np.ndarray:
-        return np.array([p.scale for p in cls.parameters])
-
-    def as_dict(self) -> dict[str, float]:
-        """Parameter values by name (SI)."""
-        return {p.name: float(v) for p, v in zip(self.parameters, self.values, strict=True)}
-
-    def with_values(self, values: np.ndarray) -> ModelEffect:
-        """The same effect with other parameter values, shape (P,)."""
-        return type(self)(**dict(zip(self.parameter_names(), map(float, values), strict=True)))
-
-    def __repr__(self) -> str:
-        inner = ", ".join(f"{k}={v:g}" for k, v in self.as_dict().items())
-        return f"{type(self).__name__}({inner})"
-
-    def __eq__(self, other: object) -> bool:
-        return type(self) is type(other) and np.array_equal(self.values, other.values)  # type: ignore[attr-defined]
-
-    def __hash__(self) -> int:
-        return hash((self.name, tuple(self.values)))
-
-    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
-        """Extra body force (N) and torque (N·m), each of shape (N, 3)."""
-        return _zero_wrench(inputs)
-
-    def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Truth → measurement: the pose reported at times t given the true pose at t.
-
-        Shapes (N,), (N, 3), (N, 4). A delay needs the pose history, so it is applied
-        by interpolating over the whole arrays (the simulator keeps a history).
-        """
-        return position, quaternion
-
-    def corrected_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Measurement → model: times, positions and attitudes of the model's body frame."""
-        return t, position, quaternion
-
-    def acting_rotor_speeds(self, t: np.ndarray, logged: np.ndarray) -> np.ndarray:
-        """Speeds acting on the body given the logged ones, shape (N, k), rad/s."""
-        return logged
 
 
 class BodyDrag(ModelEffect):
@@ -256,7 +86,7 @@ class RotorDragLinear(ModelEffect):
         hub = inputs.hub_velocities()
         forces = -self.values[0] * inputs.rotor_speeds[..., None] * hub
         forces[..., 2] = 0.0
-        return _rotor_wrench(inputs, forces)
+        return hub_forces_wrench(inputs, forces)
 
 
 class MotorLag(ModelEffect):
@@ -282,6 +112,8 @@ class MotorLag(ModelEffect):
         if np.ptp(dt) <= 1e-9 * dt[0]:
             # Uniform steps: the same recursion, y_i = a y_(i-1) + b x_i + (1 - a - b) x_(i-1),
             # as one IIR filter (the loop below costs ~25 ms per call on a 30 s log).
+            # Imported here: scipy.signal adds ~0.5 s to every command's start-up, and only
+            # the discrepancy workflow reaches this branch.
             from scipy.signal import lfilter
 
             x = np.asarray(logged, dtype=float)
@@ -307,8 +139,6 @@ class PoseDelay(ModelEffect):
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
-        from mavsysid.vehicle.rotation import quat_normalize
-
         d = self.values[0]
         ts = np.clip(t - d, t[0], t[-1])
         p = np.column_stack([np.interp(ts, t, position[:, i]) for i in range(3)])
@@ -360,16 +190,10 @@ class CogOffset(ModelEffect):
     channels = frozenset({"wrench", "pose"})
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
-        c = self.values
-        shifted = EffectInputs(inputs.t, inputs.position, inputs.quaternion, inputs.velocity,
-                               inputs.rates, inputs.rotor_speeds, inputs.theta,
-                               inputs.rotor_positions - c)
-        base = _paper_rotor_forces(inputs)
-        moved = _paper_rotor_forces(shifted)
-        force = (moved - base).sum(axis=1)
-        torque = (_cross(shifted.rotor_positions[None], moved)
-                  - _cross(inputs.rotor_positions[None], base)).sum(axis=1)
-        return force, torque
+        moved_force, moved_torque = rotor_force_wrench(
+            inputs, rotor_positions=inputs.rotor_positions - self.values)
+        force, torque = rotor_force_wrench(inputs)
+        return moved_force - force, moved_torque - torque
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -397,11 +221,10 @@ class Wind(ModelEffect):
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         w_body = np.einsum("nji,j->ni", inputs.rotation(), np.append(self.values, 0.0))
-        k = inputs.rotor_thrusts() * inputs.theta[1]
-        forces = np.zeros(k.shape + (3,))
-        forces[..., 0] = k * w_body[:, None, 0]
-        forces[..., 1] = k * w_body[:, None, 1]
-        return _rotor_wrench(inputs, forces)
+        # The paper's rotor drag at the airspeed v_B − Rᵀ w, less the model's at v_B.
+        air_force, air_torque = rotor_force_wrench(inputs, velocity=inputs.velocity - w_body)
+        force, torque = rotor_force_wrench(inputs)
+        return air_force - force, air_torque - torque
 
 
 class ThrustDrift(ModelEffect):
@@ -415,8 +238,9 @@ class ThrustDrift(ModelEffect):
     channels = frozenset({"wrench"})
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
-        forces = _paper_rotor_forces(inputs) * (self.values[0] * inputs.t)[:, None, None]
-        return _rotor_wrench(inputs, forces)
+        force, torque = rotor_force_wrench(inputs)
+        scale = (self.values[0] * inputs.t)[:, None]
+        return force * scale, torque * scale
 
 
 class GroundEffect(ModelEffect):
@@ -444,7 +268,7 @@ class GroundEffect(ModelEffect):
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         forces = np.zeros(inputs.rotor_speeds.shape + (3,))
         forces[..., 2] = self.gain(inputs) * inputs.rotor_thrusts()
-        return _rotor_wrench(inputs, forces)
+        return hub_forces_wrench(inputs, forces)
 
 
 #: The catalogue, by stable name (docs/architecture.md).
@@ -474,15 +298,3 @@ def parse_effect(text: str) -> ModelEffect:
         except ValueError:
             raise InputError(f"effect {text!r}: {item!r} is not KEY=NUMBER") from None
     return effect_from_values(name.strip(), values)
-
-
-def total_wrench(effects: tuple[ModelEffect, ...] | list[ModelEffect], inputs: EffectInputs
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Sum of the wrenches of ``effects`` at ``inputs``: force and torque (N, 3) each."""
-    force, torque = _zero_wrench(inputs)
-    for effect in effects:
-        if "wrench" in effect.channels:
-            f, m = effect.wrench(inputs)
-            force += f
-            torque += m
-    return force, torque

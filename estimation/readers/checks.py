@@ -14,16 +14,16 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.mav_model import collective_thrust
 
 from mavsysid.errors import LogFormatError
 
 __all__ = [
     "HOVER_FACTOR",
     "MAX_GAP",
-    "MIN_DURATION",
     "QUATERNION_ERROR",
     "QUATERNION_WARNING",
     "check_sampling",
@@ -34,8 +34,6 @@ __all__ = [
 
 #: Longest gap between samples the estimator may bridge, s.
 MAX_GAP = 0.2
-#: Shortest flight worth estimating from, s.
-MIN_DURATION = 2.0
 #: Hover thrust Σ c_T n² off from m g by more than this factor means a unit error.
 HOVER_FACTOR = 5.0
 #: Quaternion norms off by more than this are reported when normalised.
@@ -166,7 +164,7 @@ def _check_hover(data: FlightData, vehicle: VehicleConfig) -> None:
         raise LogFormatError(f"{data.source}: the rotor speeds are zero throughout; the "
                              "rotors never spun in this log")
     # Samples with the rotors stopped (on the ground, disarmed) say nothing about units.
-    thrust = vehicle.parameters.c_T * np.sum(n[spinning] ** 2, axis=1)
+    thrust = collective_thrust(vehicle.parameters.c_T, n[spinning])
     ratio = float(np.median(thrust)) / (vehicle.mass * GRAVITY)
     if 1.0 / HOVER_FACTOR <= ratio <= HOVER_FACTOR:
         return

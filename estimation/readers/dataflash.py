@@ -29,6 +29,7 @@ from mavsysid.estimation.readers.guard import import_parser, parsing
 from mavsysid.estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
 from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import (
     euler_ned_to_quaternion,
     ned_to_enu,
@@ -39,7 +40,6 @@ from mavsysid.errors import LogFormatError
 
 __all__ = ["read_dataflash"]
 
-RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 _EARTH_RADIUS = 6378137.0  # m, WGS-84 equatorial: a local flat-earth map is enough here
 _EKFS = (("XKF1", "XKQ"), ("NKF1", "NKQ"))
 _TYPES = ["VISP", "XKF1", "XKQ", "NKF1", "NKQ", "POS", "ATT", "ESC", "RCOU"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -32,6 +33,7 @@ from mavsysid.estimation.readers.guard import import_parser, parsing
 from mavsysid.estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
 from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import (
     euler_ned_to_quaternion,
     ned_to_enu,
@@ -42,13 +44,10 @@ from mavsysid.errors import LogFormatError
 
 __all__ = ["read_tlog"]
 
-RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 _ESC = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_8": 4, "ESC_TELEMETRY_9_TO_12": 8}
 _CLOCKED = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE", "SYSTEM_TIME",
             "GLOBAL_POSITION_INT")
 _TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", *_CLOCKED, *_ESC]
-_MAV_AUTOPILOT_INVALID = 8
-_MAV_TYPE_GCS = 6
 _POSE_HINT = "no ATT_POS_MOCAP, nor LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE"
 
 # (receipt time s, (system, component), message) per message type.
@@ -74,10 +73,14 @@ def _collect(path: Path) -> _Messages:
     return found
 
 
-def _from_autopilot(found: _Messages) -> _Messages:
-    """The messages sent by the autopilot (all of them if no autopilot HEARTBEAT)."""
+def _from_autopilot(found: _Messages, mavlink: ModuleType) -> _Messages:
+    """The messages sent by the autopilot (all of them if no autopilot HEARTBEAT).
+
+    ``mavlink`` is pymavlink's dialect module, for the MAVLink enums: a ground station's
+    HEARTBEAT says type GCS or autopilot INVALID.
+    """
     beats = [src for _, src, m in found.get("HEARTBEAT", [])
-             if m.autopilot != _MAV_AUTOPILOT_INVALID and m.type != _MAV_TYPE_GCS]
+             if m.autopilot != mavlink.MAV_AUTOPILOT_INVALID and m.type != mavlink.MAV_TYPE_GCS]
     if not beats:
         return found
     return {name: [row for row in rows if row[1] == beats[0]] for name, rows in found.items()}
@@ -191,7 +194,7 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
         An unreadable file, or neither ESC rpm nor motor outputs.
     """
     found = _collect(path)
-    own = _from_autopilot(found)
+    own = _from_autopilot(found, import_parser("pymavlink.mavutil", path).mavlink)
     notes: list[str] = []
     offset = _clock_offset(own)
     if offset is None:

@@ -30,13 +30,13 @@ from mavsysid.estimation.readers.motor_curve import (
 )
 from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
 
 from mavsysid.errors import LogFormatError
 
 __all__ = ["read_ulog"]
 
-RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 _ODOMETRY = ("vehicle_mocap_odometry", "vehicle_visual_odometry")
 _TOPICS = [*_ODOMETRY, "vehicle_local_position", "vehicle_attitude", "esc_status",
            "actuator_motors", "actuator_outputs"]

@@ -29,25 +29,17 @@ from typing import Any, Protocol
 
 from mavsysid.flight.autopilot_modes import Autopilot, mode_name
 from mavsysid.flight.ground.tlog_writer import LinkClock, TlogWriter
-from mavsysid.flight.mavlink_setup import load_mavutil, parse_connect
+from mavsysid.flight.mavlink_setup import GCS_COMPONENT, GCS_SYSTEM, load_mavutil, parse_connect
 
 from mavsysid.errors import JobFailedError
 
 __all__ = [
-    "GCS_COMPONENT",
-    "GCS_SYSTEM",
     "HeartbeatLost",
     "MavlinkLink",
     "Ticker",
     "VehicleState",
 ]
 
-GCS_SYSTEM = 255
-#: MAV_COMP_ID_MISSIONPLANNER: the usual component id of a ground station.
-GCS_COMPONENT = 190
-_MAV_TYPE_GCS = 6
-_MAV_AUTOPILOT_INVALID = 8
-_MAV_STATE_ACTIVE = 4
 _ARMED_FLAG = 128  # MAV_MODE_FLAG_SAFETY_ARMED
 _LONGEST_WAIT = 0.05  # wall s per select(): bounds how late an interrupt is noticed
 
@@ -184,7 +176,8 @@ class MavlinkLink:
         """Send a GCS HEARTBEAT every ``period`` streamer seconds from a daemon thread."""
         if self._beat_thread is not None:
             return
-        msg_args = (_MAV_TYPE_GCS, _MAV_AUTOPILOT_INVALID, 0, 0, _MAV_STATE_ACTIVE)
+        M = self.mavlink
+        msg_args = (M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE)
 
         def beat() -> None:
             # Due times on a fixed grid, so that a late wake-up (a busy main thread holds
@@ -328,7 +321,8 @@ class MavlinkLink:
             listener(msg, t)
 
     def _is_vehicle_heartbeat(self, msg: Any) -> bool:
-        if msg.autopilot == _MAV_AUTOPILOT_INVALID or msg.type == _MAV_TYPE_GCS:
+        M = self.mavlink
+        if msg.autopilot == M.MAV_AUTOPILOT_INVALID or msg.type == M.MAV_TYPE_GCS:
             return False
         v = self.vehicle
         # Lock onto the first autopilot seen; later ones (a second vehicle, a camera) are

@@ -34,11 +34,11 @@ import numpy as np
 from mavsysid.flight.ground.setpoints import Setpoint
 from mavsysid.formats.poselog_writer import PoseLogWriter
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
 
 __all__ = [
     "EXTRA_COLUMNS",
-    "RPM_TO_RAD_S",
     "STAMPING",
     "ClockOffset",
     "PoseSample",
@@ -46,7 +46,6 @@ __all__ = [
     "TelemetryRecorder",
 ]
 
-RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 EXTRA_COLUMNS = ("vx", "vy", "vz", "x_ref", "y_ref", "z_ref", "yaw_ref", "ref_active",
                  "t_traj")
 _ESC_BASE = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_8": 4, "ESC_TELEMETRY_9_TO_12": 8}

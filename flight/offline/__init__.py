@@ -1,6 +1,13 @@
-"""The offline simulator: truth dynamics, the geometric controller, truth-side effects and the
-built-in excitation trajectory. No MAVLink; `mavsysid.flight.simvehicle` runs the same physics
-behind a MAVLink endpoint.
+"""The offline simulator: a trajectory flown as fast as the computer allows, no MAVLink.
+
+- `simulator`: `Simulator` flies a trajectory and, given a flight directory, writes
+  ``pose.csv``, ``truth.csv`` and ``meta.json`` into it;
+- `truth_step`, `sensor_noise`: the truth's RK4 step (motor lag, effects) and the
+  motion-capture and rotor-speed noise, shared with `mavsysid.flight.simvehicle`, which
+  flies the same physics behind a MAVLink endpoint;
+- `controller`: the geometric controller on the config's nominal θ;
+- `effects`: truth-side effects (what the world does that the model may not know);
+- `excitation`: the built-in excitation trajectory.
 """
 
 

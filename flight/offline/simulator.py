@@ -2,10 +2,11 @@
 
 The truth integrates the model's own dynamics kernel (`mavsysid.vehicle.dynamics`) with RK4,
 with first-order motor lag on the rotor speeds (the config's `[motor].time_constant`)
-and any `TruthEffect` objects. The controller runs at its own rate with perfect state
-feedback, holding its commands between ticks. At the log rate the simulator records
-what a motion-capture system and ESC telemetry would report: pose with noise, and the
-actual (lagged) rotor speeds, into ``pose.csv``; and the true state into ``truth.csv``.
+and any `TruthEffect` objects (`mavsysid.flight.offline.truth_step`). The controller runs
+at its own rate with perfect state feedback, holding its commands between ticks. At the
+log rate the simulator records what a motion-capture system and ESC telemetry would
+report: pose with noise (`mavsysid.flight.offline.sensor_noise`), and the actual (lagged)
+rotor speeds, into ``pose.csv``; and the true state into ``truth.csv``.
 
 Model effects (`mavsysid.vehicle.model_effects`) act on the truth in two ways: the vehicle
 config's ``[effects.NAME]`` tables are known physics, always simulated (meta.json
@@ -29,7 +30,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numba
 import numpy as np
 from mavsysid.flight.offline.controller import GeometricController, reference_samples
 from mavsysid.flight.offline.effects import (
@@ -39,11 +39,12 @@ from mavsysid.flight.offline.effects import (
     effect_metadata,
     motor_time_constant,
 )
+from mavsysid.flight.offline.sensor_noise import SensorNoise
+from mavsysid.flight.offline.truth_step import advance_truth, summed_effect_wrench
 from mavsysid.formats.flight_log import FlightRecorder
 from mavsysid.vehicle.config import VehicleConfig
-from mavsysid.vehicle.dynamics import ATT, POS, STATE_DIM, derivative_kernel
+from mavsysid.vehicle.dynamics import ATT, POS, STATE_DIM
 from mavsysid.vehicle.flatness import flat_to_state
-from mavsysid.vehicle.rotation import quat_exp
 from mavsysid.vehicle.trajectory import Trajectory
 
 from mavsysid.errors import InputError
@@ -134,40 +135,37 @@ class SimulationResult:
         return float(self.times[-1] - self.times[0]) / max(self.wall_time, 1e-12)
 
 
-@numba.njit(cache=True)
-def _advance(y, n_cmd, dt, steps, tau, theta, mass, r, eps, force, torque):
-    """Advance the truth state y = [x (13), n (k)] by ``steps`` RK4 steps in place."""
-    nx = 13
-    dim = y.shape[0]
-    k1 = np.empty(dim)
-    k2 = np.empty(dim)
-    k3 = np.empty(dim)
-    k4 = np.empty(dim)
-    tmp = np.empty(dim)
-    if tau <= 0.0:
-        y[nx:] = n_cmd
-    for _ in range(steps):
-        for stage in range(4):
-            if stage == 0:
-                tmp[:] = y
-                kk = k1
-            elif stage == 1:
-                tmp[:] = y + 0.5 * dt * k1
-                kk = k2
-            elif stage == 2:
-                tmp[:] = y + 0.5 * dt * k2
-                kk = k3
-            else:
-                tmp[:] = y + dt * k3
-                kk = k4
-            derivative_kernel(tmp[:nx], tmp[nx:], theta, mass, r, eps, force, torque, kk[:nx])
-            if tau > 0.0:
-                kk[nx:] = (n_cmd - tmp[nx:]) / tau
-            else:
-                kk[nx:] = 0.0
-        y += dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        q = y[6:10]
-        y[6:10] = q / np.sqrt(np.sum(q * q))
+_ZERO = np.zeros(3)
+
+
+@dataclass
+class _Truth:
+    """The truth during one run: state, held commands and what one control tick needs."""
+
+    y: np.ndarray
+    n_cmd: np.ndarray
+    dt: float
+    tau: float
+    args: tuple
+    tick_effects: list[TruthEffect]
+    step_effects: list[TruthEffect]
+
+    def advance(self, t: float, steps: int) -> None:
+        """One control tick from time ``t``: ``steps`` physics steps under the effects.
+
+        Wrenches of per-tick effects are evaluated once and held; per-step ones at each
+        physics step. Without per-step effects the steps run in one compiled call.
+        """
+        held = _ZERO, _ZERO
+        if self.tick_effects:
+            held = summed_effect_wrench(self.tick_effects, t, self.y)
+        if not self.step_effects:
+            advance_truth(self.y, self.n_cmd, self.dt, steps, self.tau, *self.args, *held)
+            return
+        for j in range(steps):
+            force, torque = summed_effect_wrench(self.step_effects, t + j * self.dt, self.y)
+            advance_truth(self.y, self.n_cmd, self.dt, 1, self.tau, *self.args,
+                          force + held[0], torque + held[1])
 
 
 @dataclass
@@ -231,38 +229,17 @@ class Simulator:
         s = self.settings
         per_control, per_log = s.steps()
         cfg = self.config
-        k = cfg.rotor_count
-        dt = 1.0 / s.physics_rate
         n_control = round(trajectory.duration * s.control_rate)
         # References are computed in blocks so that long flights need little memory.
         block = max(per_log, round(_REFERENCE_BLOCK_S * s.control_rate) // per_log * per_log)
-        start = flat_to_state(trajectory.flat_outputs(np.array([0.0])), cfg, self.true_theta)
-
-        y = np.concatenate([start.states()[0], start.rotor_speeds[0]])
-        y[3:6] = 0.0
-        n_cmd = start.rotor_speeds[0].copy()
-        effects = self.truth_effects
-        tau = self._motor_time_constant()
-        args = (self.true_theta, float(cfg.mass), np.ascontiguousarray(cfg.rotor_positions),
-                np.ascontiguousarray(cfg.rotor_directions))
-        tick_effects = [e for e in effects if applies_wrench(e) and e.wrench_per_tick]
-        step_effects = [e for e in effects if applies_wrench(e) and not e.wrench_per_tick]
-        for effect in effects:
-            effect.bind(self.true_theta, cfg.rotor_positions)
-            effect.reset(dt)
-        zero = np.zeros(3)
-        noise = _SensorNoise(cfg, s.seed, enabled=s.sensor_noise)
-        n_log = n_control // per_log + 1
-        log = _LogBuffers(n_log, k)
+        truth = self._start(trajectory)
+        noise = SensorNoise(cfg, s.seed, enabled=s.sensor_noise)
+        log = _LogBuffers(n_control // per_log + 1, cfg.rotor_count)
         recorder = None
         if directory is not None:
-            recorder = FlightRecorder(directory, cfg, k)
+            recorder = FlightRecorder(directory, cfg, cfg.rotor_count)
             recorder.start(self._metadata(trajectory, description))
-
-        # Load (or compile) the kernels before the clock starts, so wall_time is simulation.
-        self.controller.command(y[:STATE_DIM].copy(), reference_samples(
-            trajectory, np.zeros(1), cfg)[0], n_cmd.copy())
-        _advance(y.copy(), n_cmd, dt, 0, tau, *args, zero, zero)
+        self._warm_up(trajectory, truth)
         saturated = 0
         wall0 = time.perf_counter()
         try:
@@ -274,23 +251,15 @@ class Simulator:
                 ref = reference[i % block]
                 if i % per_log == 0:
                     row = i // per_log
-                    log.store(row, t, y, n_cmd, ref[0:3])
+                    log.store(row, t, truth.y, truth.n_cmd, ref[0:3])
                     if recorder is not None:
-                        self._record(recorder, noise, t, y, n_cmd, ref)
+                        self._record(recorder, noise, t, truth.y, truth.n_cmd, ref)
                     if progress is not None and row % int(s.log_rate) == 0:
                         progress(t, trajectory.duration)
                 if i == n_control:
                     break
-                saturated += self.controller.command(y[:STATE_DIM], ref, n_cmd)
-                held = zero, zero
-                if tick_effects:
-                    held = _effect_wrench(tick_effects, t, y)
-                if not step_effects:
-                    _advance(y, n_cmd, dt, per_control, tau, *args, *held)
-                    continue
-                for j in range(per_control):
-                    force, torque = _effect_wrench(step_effects, t + j * dt, y)
-                    _advance(y, n_cmd, dt, 1, tau, *args, force + held[0], torque + held[1])
+                saturated += self.controller.command(truth.y[:STATE_DIM], ref, truth.n_cmd)
+                truth.advance(t, per_control)
         except BaseException:
             if recorder is not None:
                 recorder.finish(status="aborted")
@@ -308,13 +277,40 @@ class Simulator:
             })
         return result
 
+    def _start(self, trajectory: Trajectory) -> _Truth:
+        """The truth at rest at the trajectory's start; the effects bound and reset."""
+        cfg = self.config
+        dt = 1.0 / self.settings.physics_rate
+        start = flat_to_state(trajectory.flat_outputs(np.array([0.0])), cfg, self.true_theta)
+        y = np.concatenate([start.states()[0], start.rotor_speeds[0]])
+        y[3:6] = 0.0
+        effects = self.truth_effects
+        truth = _Truth(
+            y=y, n_cmd=start.rotor_speeds[0].copy(), dt=dt, tau=self._motor_time_constant(),
+            args=(self.true_theta, float(cfg.mass), np.ascontiguousarray(cfg.rotor_positions),
+                  np.ascontiguousarray(cfg.rotor_directions)),
+            tick_effects=[e for e in effects if applies_wrench(e) and e.wrench_per_tick],
+            step_effects=[e for e in effects if applies_wrench(e) and not e.wrench_per_tick],
+        )
+        for effect in effects:
+            effect.bind(self.true_theta, cfg.rotor_positions)
+            effect.reset(dt)
+        return truth
+
+    def _warm_up(self, trajectory: Trajectory, truth: _Truth) -> None:
+        """Load (or compile) the kernels before the clock starts, so wall_time is simulation."""
+        self.controller.command(truth.y[:STATE_DIM].copy(), reference_samples(
+            trajectory, np.zeros(1), self.config)[0], truth.n_cmd.copy())
+        advance_truth(truth.y.copy(), truth.n_cmd, truth.dt, 0, truth.tau, *truth.args,
+                      _ZERO, _ZERO)
+
     def _motor_time_constant(self) -> float:
         """The truth's motor lag, s: an effect's (a motor_lag) or the config's."""
         default = self.config.motor.time_constant if self.settings.motor_lag else 0.0
         return motor_time_constant(self.truth_effects, default)
 
     def _record(
-        self, recorder: FlightRecorder, noise: _SensorNoise, t: float, y: np.ndarray,
+        self, recorder: FlightRecorder, noise: SensorNoise, t: float, y: np.ndarray,
         n_cmd: np.ndarray, reference: np.ndarray,
     ) -> None:
         """Write what the sensors would report, and the truth, at one log time."""
@@ -350,20 +346,6 @@ class Simulator:
         }
 
 
-def _effect_wrench(
-    effects: list[TruthEffect], t: float, y: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Summed extra body force (N) and torque (N·m) of ``effects`` at truth y = [x, n]."""
-    force = np.zeros(3)
-    torque = np.zeros(3)
-    for effect in effects:
-        w = effect.wrench(t, y[:STATE_DIM], y[STATE_DIM:])
-        if w is not None:
-            force += w[0]
-            torque += w[1]
-    return force, torque
-
-
 class _LogBuffers:
     """In-memory copy of the truth at the log rate, returned to library callers."""
 
@@ -380,48 +362,3 @@ class _LogBuffers:
         self.n[row] = y[STATE_DIM:]
         self.n_cmd[row] = n_cmd
         self.ref[row] = ref
-
-
-class _SensorNoise:
-    """Motion-capture and rotor-speed noise, drawn in vectorised blocks from one seed.
-
-    Position gets N(0, σ_p² I), attitude q ⊗ Exp(φ) with φ ~ N(0, σ_φ² I) (body frame),
-    rotor speeds N(0, σ_n² I).
-    """
-
-    _BLOCK = 1000
-
-    def __init__(self, config: VehicleConfig, seed: int, enabled: bool) -> None:
-        self._rng = np.random.default_rng(seed)
-        self._noise = config.noise
-        self._k = config.rotor_count
-        self._enabled = enabled
-        self._next = self._BLOCK
-
-    def _draw(self) -> None:
-        nz, b = self._noise, self._BLOCK
-        self._dp = self._rng.normal(0.0, nz.position_sigma, (b, 3))
-        self._dq = quat_exp(self._rng.normal(0.0, nz.attitude_sigma, (b, 3))).tolist()
-        self._dn = self._rng.normal(0.0, nz.rotor_speed_sigma, (b, self._k))
-        self._next = 0
-
-    def apply(
-        self, position: np.ndarray, quaternion: np.ndarray, rotor_speeds: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Noisy copies of a true pose and rotor speeds."""
-        if not self._enabled:
-            return position, quaternion, rotor_speeds
-        if self._next == self._BLOCK:
-            self._draw()
-        i = self._next
-        self._next += 1
-        # One Hamilton product on plain floats: numpy's per-call overhead would dominate.
-        aw, ax, ay, az = quaternion.tolist()
-        bw, bx, by, bz = self._dq[i]
-        q = np.array([
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ])
-        return position + self._dp[i], q, rotor_speeds + self._dn[i]

@@ -1,22 +1,21 @@
 """Physics of the simulated vehicle: truth state, ground, motors, sensors and truth log.
 
-One control tick (2 ms) runs the reference shaper (`mavsysid.flight.simvehicle.reference`), the
-geometric controller on the config's nominal θ, and two 1 kHz RK4 steps of the truth
-dynamics with motor lag (`mavsysid.flight.offline.simulator._advance`) on the true θ. The ground is
-the
-plane at the start height: a landed vehicle rests on it (its state frozen, the rotors
-idling when armed), a flying one that touches it is stopped there. The published pose
-carries motion-capture-like noise (`mavsysid.flight.offline.simulator._SensorNoise`), drawn once
-per tick.
+One control tick (2 ms) runs the reference shaper (`mavsysid.flight.simvehicle.reference`),
+the geometric controller on the config's nominal θ, and two 1 kHz RK4 steps of the truth
+dynamics with motor lag (`mavsysid.flight.offline.truth_step.advance_truth`) on the true
+θ. The ground is the plane at the start height: a landed vehicle rests on it (its state
+frozen, the rotors idling when armed), a flying one that touches it is stopped there. The
+published pose carries motion-capture-like noise
+(`mavsysid.flight.offline.sensor_noise.SensorNoise`), drawn once per tick.
 The truth log samples the true state at 200 Hz of sim time, between the two physics
 steps of a tick when needed (control runs at 500 Hz, so 5 ms falls mid-tick).
 
-Model effects (`mavsysid.flight.offline.effects`): the config's ``[effects]`` and any hidden ones
-act on
-the truth as in the offline simulator — their wrench evaluated once per flying tick at
-the session's sim time, a motor_lag's tau replacing the motor time constant — and on
-what is published and logged (pose channel, commanded rotor speeds). The ground plane
-of a ground effect is z = 0, which is the ground only for a start height of 0.
+Model effects (`mavsysid.flight.offline.effects`): the config's ``[effects]`` and any
+hidden ones act on the truth as in the offline simulator — their wrench evaluated once
+per flying tick at the session's sim time, a motor_lag's tau replacing the motor time
+constant — and on what is published and logged (pose channel, commanded rotor speeds).
+The ground plane of a ground effect is z = 0, which is the ground only for a start height
+of 0.
 """
 
 from __future__ import annotations
@@ -35,7 +34,8 @@ from mavsysid.flight.offline.effects import (
     config_truth_effects,
     motor_time_constant,
 )
-from mavsysid.flight.offline.simulator import _advance, _effect_wrench, _SensorNoise
+from mavsysid.flight.offline.sensor_noise import SensorNoise
+from mavsysid.flight.offline.truth_step import advance_truth, summed_effect_wrench
 from mavsysid.flight.simvehicle.reference import (
     LIMITS_DIM,
     SHAPER_DIM,
@@ -46,6 +46,7 @@ from mavsysid.flight.simvehicle.reference import (
 from mavsysid.formats.flight_log import FlightRecorder
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.dynamics import STATE_DIM
+from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 
 __all__ = [
     "CONTROL_DT_US",
@@ -103,7 +104,7 @@ class TruthLog:
                  seed: int, noise: bool) -> None:
         self.recorder = FlightRecorder(directory, config, config.rotor_count)
         self.recorder.start({**meta, "simulated": True})
-        self._noise = _SensorNoise(config, seed + 1, enabled=noise)
+        self._noise = SensorNoise(config, seed + 1, enabled=noise)
         self.closed = False
 
     def record(self, t: float, y: np.ndarray, n_cmd: np.ndarray, ref: np.ndarray,
@@ -152,9 +153,8 @@ class SimVehicle:
         Add motion-capture and rotor-speed noise to what is published.
     truth_log : TruthLog, optional
     effects : sequence of TruthEffect
-        Hidden truth-side effects (`mavsysid.flight.offline.effects.hidden_effect`); the config's
-        own
-        ``effects`` are simulated too, before these.
+        Hidden truth-side effects (`mavsysid.flight.offline.effects.hidden_effect`); the
+        config's own ``effects`` are simulated too, before these.
     """
 
     def __init__(self, config: VehicleConfig, true_theta: np.ndarray, start=(0.0, 0.0, 0.0),
@@ -194,7 +194,7 @@ class SimVehicle:
                       np.ascontiguousarray(config.rotor_positions),
                       np.ascontiguousarray(config.rotor_directions))
         self._zero = np.zeros(3)
-        self._noise = _SensorNoise(config, seed, enabled=sensor_noise)
+        self._noise = SensorNoise(config, seed, enabled=sensor_noise)
         self._measured: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._measured_tick = -1
         self.idle_speed = self._idle_speed(config)
@@ -206,7 +206,8 @@ class SimVehicle:
     def _idle_speed(config: VehicleConfig) -> float:
         """Rotor speed when armed on the ground (like MOT_SPIN_ARM): 20 % of the maximum,
         or less, so that idling lifts under a third of the weight."""
-        limit = math.sqrt(config.hover_thrust / 3.0 / (config.rotor_count * config.parameters.c_T))
+        limit = float(rotor_speed_for_thrust(config.parameters.c_T,
+                                             config.hover_thrust / 3.0 / config.rotor_count))
         lim = config.limits
         return max(lim.rotor_speed_min, min(0.2 * lim.rotor_speed_max, limit))
 
@@ -215,7 +216,7 @@ class SimVehicle:
         y, ref, n = self.y.copy(), self.ref.copy(), self.n_cmd.copy()
         shape_step(self.target.copy(), self.shaper.copy(), self.limits, 0.002, ref)
         self.controller.command(y[:STATE_DIM], ref, n)
-        _advance(y, n, 0.001, 1, self._tau, *self._args, self._zero, self._zero)
+        advance_truth(y, n, 0.001, 1, self._tau, *self._args, self._zero, self._zero)
 
     # --- state -------------------------------------------------------------------------
     @property
@@ -316,7 +317,7 @@ class SimVehicle:
             else:
                 self.n_cmd[:] = 0.0
         if self._tick_effects and not self.landed:
-            self._wrench = _effect_wrench(self._tick_effects, t_us * 1e-6, self.y)
+            self._wrench = summed_effect_wrench(self._tick_effects, t_us * 1e-6, self.y)
         record = self.truth_log is not None
         sub = -1
         if record:
@@ -340,7 +341,7 @@ class SimVehicle:
     def _physics(self, steps: int) -> None:
         if steps <= 0:
             return
-        _advance(self.y, self.n_cmd, _PHYSICS_DT_US * 1e-6, steps, self._tau, *self._args,
+        advance_truth(self.y, self.n_cmd, _PHYSICS_DT_US * 1e-6, steps, self._tau, *self._args,
                  *self._wrench)
         if self.y[2] <= self.ground_z:
             # Ground contact: no sinking in; a downward world velocity is stopped.

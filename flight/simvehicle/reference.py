@@ -124,25 +124,16 @@ def _body_rates(acc, jerk, yaw, yaw_rate, out):
 
 
 @numba.njit(cache=True)
-def shape_step(target, state, limits, dt, ref):
-    """Reference row at the current time into ``ref`` (16,); then advance by ``dt``.
+def _shaped_acceleration(target, state, limits, acc):
+    """The shaper's acceleration (m/s², ENU) towards ``target`` into ``acc`` (3,).
 
-    Both the shaper ``state`` and the ``target`` are advanced in place (the target
-    extrapolated with its own derivatives), so that the next call is one tick later.
+    The target's own acceleration plus the correction of a velocity loop whose reference
+    is the target's velocity and a braking profile of the position error, limited by
+    ``limits`` (gains, speeds and accelerations; see the module docstring).
     """
     kp, kv = limits[0], limits[1]
     v_xy, v_up, v_down = limits[2], limits[3], limits[4]
-    a_xy, a_z, k_yaw, yaw_rate_max = limits[5], limits[6], limits[7], limits[8]
-    use_xy = target[14] > 0.5
-    use_z = target[15] > 0.5
-    # A velocity-only axis carries its position target along with the vehicle's, so
-    # that switching to a position target later starts from where the vehicle is.
-    if not use_xy:
-        target[0] = state[0]
-        target[1] = state[1]
-    if not use_z:
-        target[2] = state[2]
-
+    a_xy, a_z = limits[5], limits[6]
     # Position error → velocity correction along a braking profile (square root far
     # away), planned with part of the acceleration so that the velocity loop can keep up;
     # the profile's own rate of change is fed forward, so the reference brakes on time.
@@ -174,10 +165,30 @@ def shape_step(target, state, limits, dt, ref):
         ax *= a_xy / an
         ay *= a_xy / an
     az = min(max(az, -a_z), a_z)
-    acc = np.empty(3)
     acc[0] = target[6] + ax
     acc[1] = target[7] + ay
     acc[2] = target[8] + az
+
+
+@numba.njit(cache=True)
+def shape_step(target, state, limits, dt, ref):
+    """Reference row at the current time into ``ref`` (16,); then advance by ``dt``.
+
+    Both the shaper ``state`` and the ``target`` are advanced in place (the target
+    extrapolated with its own derivatives), so that the next call is one tick later.
+    """
+    k_yaw, yaw_rate_max = limits[7], limits[8]
+    use_xy = target[14] > 0.5
+    use_z = target[15] > 0.5
+    # A velocity-only axis carries its position target along with the vehicle's, so
+    # that switching to a position target later starts from where the vehicle is.
+    if not use_xy:
+        target[0] = state[0]
+        target[1] = state[1]
+    if not use_z:
+        target[2] = state[2]
+    acc = np.empty(3)
+    _shaped_acceleration(target, state, limits, acc)
 
     yaw_err = _wrap(target[12] - state[6])
     yaw_rate = target[13] + min(max(k_yaw * yaw_err, -yaw_rate_max), yaw_rate_max)

@@ -1,66 +1,30 @@
 """``mavsysid estimate``: θ with uncertainties from a flight log.
 
-A thin layer over `run_estimate` (which tests call directly): read the log, run the
-filter and the refinement, print the table, write the JSON, the updated vehicle config
-and the Rerun recording on request. The vehicle config's model effects
-(``[effects.NAME]``) are part of the model; their parameters are fitted with θ (or held
-with ``--fixed-effects``), reported, and written back by ``--update-vehicle``.
+A thin layer over `mavsysid.estimation.estimate_job.run_estimate` (which tests call
+directly: read the log, run the filter and the refinement): print the table, write the
+JSON, the updated vehicle config and the Rerun recording on request. The vehicle
+config's model effects (``[effects.NAME]``) are part of the model; their parameters are
+fitted with θ (or held with ``--fixed-effects``), reported, and written back by
+``--update-vehicle``.
 """
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
 from pathlib import Path
 
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.readers import load_flight
+from mavsysid.cli.options import add_log_arguments
+from mavsysid.estimation.estimate_job import run_estimate
+from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.report import format_table, updated_vehicle, write_estimate_json
-from mavsysid.estimation.results import EstimationResult
-from mavsysid.vehicle.config import VehicleConfig, load_vehicle, save_vehicle
+from mavsysid.vehicle.config import save_vehicle
 
-__all__ = ["EstimateRun", "add_arguments", "main", "run_estimate"]
-
-
-@dataclass(frozen=True)
-class EstimateRun:
-    """A finished estimation: the vehicle, the flight as read, and the result."""
-
-    config: VehicleConfig
-    flight: FlightData
-    result: EstimationResult
-
-
-def run_estimate(
-    log: str | Path, vehicle: str | Path = "firefly", pose: str | Path | None = None,
-    time_offset: float | None = None, settings: EstimatorSettings | None = None,
-) -> EstimateRun:
-    """Read a flight log and estimate θ.
-
-    Parameters
-    ----------
-    log : str or Path
-        ``pose.csv``, ``.tlog``, ``.ulg`` or ``.bin``.
-    vehicle : str or Path
-        Shipped vehicle name or TOML path: known mass and geometry, and the prior.
-    pose : str or Path, optional
-        External motion-capture pose CSV to merge with the log's rotor speeds.
-    time_offset : float, optional
-        Clock offset of ``pose`` relative to the log, s (found by cross-correlation
-        when not given).
-    settings : EstimatorSettings, optional
-    """
-    config = load_vehicle(vehicle)
-    flight = load_flight(log, config, pose=pose, time_offset=time_offset)
-    return EstimateRun(config, flight, estimate_parameters(flight, config, settings))
+__all__ = ["add_arguments", "main"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid estimate``."""
-    parser.add_argument("log", type=Path, help="flight log: pose.csv, .tlog, .ulg or .bin")
-    parser.add_argument("--vehicle", default="firefly",
-                        help="shipped vehicle name or TOML path (default: firefly)")
+    add_log_arguments(parser)
     parser.add_argument("-o", "--output", type=Path, metavar="JSON",
                         help="write the estimate as JSON")
     parser.add_argument("--update-vehicle", type=Path, metavar="TOML",

@@ -12,11 +12,21 @@ import sys
 from collections.abc import Sequence
 
 from mavsysid import __version__
-from mavsysid.errors import MavsysidError
+from mavsysid.errors import InputError, JobFailedError, MavsysidError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["EXIT_CODES", "EXIT_INTERRUPTED", "build_parser", "exit_code", "main"]
 
 EXIT_INTERRUPTED = 130
+
+#: Exit code of each error type; an error takes the code of the first type in its method
+#: resolution order found here (`ConfigError` and `LogFormatError` are `InputError`s).
+#: 1 is for a `MavsysidError` of no more specific kind (argparse exits with 2 on bad usage
+#: by itself).
+EXIT_CODES: dict[type[MavsysidError], int] = {
+    MavsysidError: 1,
+    InputError: 2,
+    JobFailedError: 3,
+}
 
 #: Built commands: (name, module with add_arguments/main, --help line, description).
 #: Modules are imported only for the command being run: the estimation and diagnosis
@@ -116,12 +126,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args.run(args)
     except MavsysidError as error:
         print(f"mavsysid {args.command}: error: {error}", file=sys.stderr)
-        return error.exit_code
+        return exit_code(error)
     except (KeyboardInterrupt, SystemError) as error:
         if not _caused_by_interrupt(error):
             raise
         print(f"mavsysid {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def exit_code(error: MavsysidError) -> int:
+    """The console script's exit code for ``error`` (see `EXIT_CODES`)."""
+    return next(EXIT_CODES[kind] for kind in type(error).__mro__ if kind in EXIT_CODES)
 
 
 def _caused_by_interrupt(error: BaseException) -> bool:

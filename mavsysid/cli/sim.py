@@ -15,11 +15,11 @@ import signal
 import sys
 from pathlib import Path
 
-from mavsysid.cli.plan import parse_numbers
-from mavsysid.cli.simulate import parse_hidden_effects
+from mavsysid.cli.options import allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.mavlink_setup import signing_key_from_file
+from mavsysid.flight.offline.offline_flight import parse_hidden_effects
 from mavsysid.flight.simvehicle.endpoint import SimEndpoint, SimSettings
 from mavsysid.vehicle.config import load_vehicle
 
@@ -31,7 +31,7 @@ _FAULT_RE = re.compile(r"^(deny-arm|mode:([A-Z_]+)@(\d+(?:\.\d*)?)|silent@(\d+(?
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid sim``."""
-    parser._negative_number_matcher = re.compile(r"-\.?\d")  # type: ignore[attr-defined]
+    allow_negative_values(parser)  # "--start -1,2,0"
     parser.add_argument("--connect", default="udpout:127.0.0.1:14550", metavar="URL",
                         help="udpout:HOST:PORT (send to a ground station), tcpin:HOST:PORT "
                         "or udpin:HOST:PORT (listen) (default: udpout:127.0.0.1:14550)")

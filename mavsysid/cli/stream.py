@@ -1,7 +1,8 @@
 """``mavsysid stream``: fly a trajectory file over MAVLink and record the flight.
 
-A thin layer over `run_stream` (which tests call directly): parse the options, open the
-session (plan checks, flight directory, connection), fly, and print where the flight
+A thin layer over `mavsysid.flight.ground.stream_job.run_stream` (which tests call
+directly): parse the options, open the session (plan checks, flight directory,
+connection), fly, and print where the flight
 was recorded with its tracking and rate figures. Exit codes: 0 flown, 2 bad input, 3
 refused or aborted (one line saying why), 130 interrupted after braking and landing.
 """
@@ -9,51 +10,16 @@ refused or aborted (one line saying why), 130 interrupted after braking and land
 from __future__ import annotations
 
 import argparse
-import re
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-from mavsysid.cli.plan import parse_numbers
+from mavsysid.cli.options import allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
-from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings, open_session
-from mavsysid.flight.ground.streamer import fly
+from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
+from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
 
-__all__ = ["StreamOutcome", "add_arguments", "format_summary", "main", "run_stream"]
-
-
-@dataclass(frozen=True)
-class StreamOutcome:
-    """A finished flight: its directory and the final metadata."""
-
-    directory: Path
-    meta: dict[str, Any]
-
-
-def run_stream(trajectory: str | Path, settings: StreamSettings,
-               vehicle: str | Path | None = None, say: Callable[[str], None] | None = None,
-               progress: bool = True, at_end: Callable[[StreamSession], None] | None = None,
-               ) -> StreamOutcome:
-    """Fly ``trajectory`` with ``settings`` (see `flight.ground.streamer.fly`, also for ``at_end``).
-
-    Raises
-    ------
-    InputError
-        Bad trajectory, vehicle, box or connection string.
-    JobFailedError
-        Refused or aborted; the flight directory keeps what was recorded.
-    KeyboardInterrupt
-        After the safe action.
-    """
-    say = say or (lambda _text: None)
-    with open_session(trajectory, settings, vehicle) as session:
-        session.commands.say = say
-        say(f"recording into {session.directory}")
-        fly(session, say, progress, at_end)
-    return StreamOutcome(session.directory, session.meta)
+__all__ = ["add_arguments", "format_summary", "main"]
 
 
 def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
@@ -87,7 +53,7 @@ def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid stream``."""
-    parser._negative_number_matcher = re.compile(r"-\.?\d")  # type: ignore[attr-defined]
+    allow_negative_values(parser)  # "--box -2,-2,0.5,2,2,2.5"
     parser.add_argument("trajectory", type=Path, help="trajectory file (JSON) to fly")
     parser.add_argument("--connect", default="udp:127.0.0.1:14550", metavar="LINK",
                         help="udp:HOST:PORT (listen), udpout:HOST:PORT, tcp:HOST:PORT, "

@@ -16,6 +16,14 @@ from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.poselog import read_pose_log
 
 from mavsysid.cli import main
+from mavsysid.cli.main import exit_code
+from mavsysid.errors import (
+    ConfigError,
+    InputError,
+    JobFailedError,
+    LogFormatError,
+    MavsysidError,
+)
 
 HERE = Path(__file__).parent
 BAD_VEHICLES = HERE.parent / "data" / "bad_vehicles"
@@ -109,6 +117,7 @@ def test_console_script_reports_version_and_errors_without_traceback(tmp_path):
     assert done.stderr.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_interrupt_exits_130_and_keeps_the_log(tmp_path):
     """Ctrl-C mid-flight exits 130, leaving a readable pose log and meta status 'aborted'."""
     flight = tmp_path / "long"
@@ -165,6 +174,27 @@ def test_interrupt_inside_numba_kernel_exits_130(cause, expected, monkeypatch, c
         return
     assert main(["evaluate", "--n", "1"]) == expected
     assert capsys.readouterr().err == "mavsysid evaluate: interrupted\n"
+
+
+class _LinkGone(JobFailedError):
+    """A subclass elsewhere in the code (like the ground station's HeartbeatLost)."""
+
+
+@pytest.mark.parametrize(("error", "expected"), [
+    (MavsysidError("x"), 1), (InputError("x"), 2), (ConfigError("x"), 2),
+    (LogFormatError("x"), 2), (JobFailedError("x"), 3), (_LinkGone("x"), 3),
+])
+def test_error_types_map_to_exit_codes(error, expected, monkeypatch, capsys):
+    """The CLI's table gives each error type its exit code and prints one line."""
+    import mavsysid.cli.evaluate
+
+    def run(args):
+        raise error
+
+    assert exit_code(error) == expected
+    monkeypatch.setattr(mavsysid.cli.evaluate, "main", run)
+    assert main(["evaluate", "--n", "1"]) == expected
+    assert capsys.readouterr().err == "mavsysid evaluate: error: x\n"
 
 
 @pytest.mark.parametrize("command", ["sim", "stream"])

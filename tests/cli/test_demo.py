@@ -6,12 +6,14 @@ import json
 
 import numpy as np
 import pytest
+from mavsysid.experiments.demo import DemoSettings, run_demo
+from mavsysid.experiments.demo_flight import hidden_scale
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from rerun.chunk import RrdReader
 
 from mavsysid.cli import main
-from mavsysid.cli.demo import DemoSettings, format_summary, hidden_scale, run_demo
+from mavsysid.cli.demo import format_summary
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +34,7 @@ def test_hidden_truth_is_seeded_physical_and_differs_from_the_nominal():
     assert np.all(j.max(axis=1) <= 1.25 * (j.sum(axis=1) - j.max(axis=1)))
 
 
+@pytest.mark.slow
 def test_demo_flies_the_plan_over_mavlink_and_estimates_within_its_sigma(demo_run):
     """The streamed flight is recorded; the estimate is within 4σ of the simulator's truth."""
     (round_,) = demo_run.rounds
@@ -45,6 +48,7 @@ def test_demo_flies_the_plan_over_mavlink_and_estimates_within_its_sigma(demo_ru
     assert np.all(moved[np.abs(scale - 1.0) > 0.05] > 0.02), "the estimate left the prior"
 
 
+@pytest.mark.slow
 def test_demo_writes_the_estimate_and_the_truth(demo_run):
     """estimate.json holds the final θ with σ, the truth and each round's D-opt."""
     doc = json.loads((demo_run.directory / "estimate.json").read_text())
@@ -55,6 +59,7 @@ def test_demo_writes_the_estimate_and_the_truth(demo_run):
     assert r["reached_dopt"] > 0.0 and r["predicted_dopt"] > 0.0
 
 
+@pytest.mark.slow
 def test_demo_writes_one_recording_of_every_stage(demo_run):
     """demo.rrd holds the plan, the estimate and the per-round D-opt."""
     entities = {chunk.entity_path for chunk in RrdReader(demo_run.files["recording"]).stream()}
@@ -64,6 +69,7 @@ def test_demo_writes_one_recording_of_every_stage(demo_run):
     assert "/rounds/dopt/reached" in entities
 
 
+@pytest.mark.slow
 def test_demo_diagnoses_a_faithful_model_as_such(demo_run):
     """Without a hidden effect the diagnosis finds no significant discrepancy, and says so."""
     assert demo_run.diagnosis is not None and not demo_run.diagnosis.effects

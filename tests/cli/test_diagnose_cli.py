@@ -34,6 +34,7 @@ def _normalise(text: str, log: Path, tmp: Path) -> str:
     return re.sub(r" +", " ", text)
 
 
+@pytest.mark.slow
 def test_report_text_json_config_and_recording(lag_log, tmp_path, capsys):
     out, toml, rrd = tmp_path / "d.json", tmp_path / "aug.toml", tmp_path / "d.rrd"
     code = main(["diagnose", str(lag_log), "--vehicle", "firefly", "-o", str(out),
@@ -61,6 +62,7 @@ def test_report_text_json_config_and_recording(lag_log, tmp_path, capsys):
     assert np.sqrt(np.mean(after**2)) < np.sqrt(np.mean(before**2))
 
 
+@pytest.mark.slow
 def test_estimate_json_gives_the_theta(lag_log, tmp_path, capsys):
     """θ is read from estimate.json; with the lag as a known effect nothing is left."""
     config = load_vehicle("firefly")
@@ -75,6 +77,7 @@ def test_estimate_json_gives_the_theta(lag_log, tmp_path, capsys):
     assert json.loads(out.read_text())["effects"] == []
 
 
+@pytest.mark.slow
 def test_reestimate_moves_theta_towards_the_truth(lag_log, capsys):
     """--reestimate: the EKF on the augmented model; θ closer to the simulated truth."""
     assert main(["diagnose", str(lag_log), "--reestimate"]) == 0

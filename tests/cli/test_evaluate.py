@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mavsysid.experiments.evaluate_job import make_specs, run_evaluation
 from mavsysid.experiments.evaluation import load_records, median_convergence_time, summarise
 from mavsysid.experiments.evaluation_intervals import (
     headline_intervals,
@@ -23,7 +24,6 @@ from mavsysid.experiments.experiment import draw_prior, run_experiment
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.cli import main
-from mavsysid.cli.evaluate import make_specs, run_evaluation
 
 #: Small, sample-budgeted experiments: the records depend only on the seeds.
 FAST = {"budget": 15.0, "samples": 150, "refine_steps": 30}
@@ -46,6 +46,7 @@ def test_prior_draw_is_within_50_percent_and_seeded():
     assert np.ptp(draws[:, 0] / truth[0]) > 0.5, "the draws spread over the range"
 
 
+@pytest.mark.slow
 def test_record_holds_both_planners_with_consistent_figures(two_experiments):
     """Each record has a DOPT and a RAND flight with D-opt, σ, errors and a history."""
     records = load_records(two_experiments)
@@ -63,6 +64,7 @@ def test_record_holds_both_planners_with_consistent_figures(two_experiments):
             assert np.allclose(hist[0], record["prior"], rtol=0.05), "history starts at prior"
 
 
+@pytest.mark.slow
 def test_csv_has_a_row_per_flight_matching_the_records(two_experiments):
     """runs.csv has one row per flight whose numbers equal the stored records."""
     with (two_experiments / "runs.csv").open() as f:
@@ -79,6 +81,7 @@ def test_csv_has_a_row_per_flight_matching_the_records(two_experiments):
         assert 0.0 < float(row["tracking_rms"]) == flight["tracking_rms"]
 
 
+@pytest.mark.slow
 def test_table_and_plots_are_written(two_experiments):
     """table.md has the paper's rows (CONV TIME per parameter, DOPT); PNGs are real PNGs."""
     table = (two_experiments / "table.md").read_text()
@@ -88,6 +91,7 @@ def test_table_and_plots_are_written(two_experiments):
         assert (two_experiments / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_table_notes_give_the_headline_intervals_and_saturating_flights(two_experiments):
     """Under the table: the D-opt ratio of the table's medians with its bootstrap interval,
     and the saturating flights counted from the records."""
@@ -110,6 +114,7 @@ def test_table_notes_give_the_headline_intervals_and_saturating_flights(two_expe
             f"{off_path['dopt'][0]} of 2, random {off_path['random'][0]} of 2." in table)
 
 
+@pytest.mark.slow
 def test_command_prints_the_table_and_its_notes(two_experiments, capsys):
     """A rerun over finished records prints the table and the very notes of table.md."""
     code = main(["evaluate", "--n", "2", "--budget", "15", "--samples", "150",
@@ -137,6 +142,7 @@ def test_median_convergence_time(ratios, expected):
     assert np.allclose(got, expected, equal_nan=True)
 
 
+@pytest.mark.slow
 def test_flight_controller_is_tuned_to_the_truth_unless_asked_for_the_prior():
     """The same plans; tuned to the truth (the default) the flights track within 1 cm, tuned
     to the ±50 % guess they leave the plan (thrust and inertia mis-modelled)."""
@@ -151,6 +157,7 @@ def test_flight_controller_is_tuned_to_the_truth_unless_asked_for_the_prior():
         assert b["tracking_rms"] > 3.0 * a["tracking_rms"]
 
 
+@pytest.mark.slow
 def test_summary_of_records_uses_the_last_iteration(tmp_path):
     """With iterations, σ shrinks from one iteration to the next and the summary uses the last."""
     record = run_experiment(make_specs(1, iterations=2, **FAST)[0])
@@ -162,6 +169,7 @@ def test_summary_of_records_uses_the_last_iteration(tmp_path):
     assert summary.median_dopt["dopt"] == record["flights"][1]["reached_dopt"]
 
 
+@pytest.mark.slow
 def test_rerun_reuses_finished_experiments(two_experiments, tmp_path):
     """A second run with more experiments computes only the new ones; old records stay."""
     out = tmp_path / "ev"
@@ -176,6 +184,7 @@ def test_rerun_reuses_finished_experiments(two_experiments, tmp_path):
     assert len(load_records(out)) == 3
 
 
+@pytest.mark.slow
 def test_other_settings_in_the_folder_are_refused(two_experiments, capsys):
     """Resuming with other settings is refused with one line, exit 2."""
     code = main(["evaluate", "--n", "2", "--samples", "99", "--budget", "15",
@@ -200,6 +209,7 @@ def test_bad_input_exits_2_with_one_line(argv, fragment, tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and fragment in err
 
 
+@pytest.mark.slow
 def test_interrupted_evaluation_resumes_with_only_unfinished(tmp_path):
     """Ctrl-C after the first experiment keeps it; the rerun computes only the others."""
     out = tmp_path / "ev"
@@ -224,6 +234,7 @@ def test_interrupted_evaluation_resumes_with_only_unfinished(tmp_path):
     assert {n: (out / "runs" / n).stat().st_mtime_ns for n in finished} == kept
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_same_csv_as_local(tmp_path):
     """4 experiments on a 2-worker LocalCluster (loopback) give the local executor's CSV."""
     distributed = pytest.importorskip("distributed")

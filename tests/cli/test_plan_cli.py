@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.formats.trajectory_file import read_trajectory
+from mavsysid.planner.plan_job import run_plan
 from mavsysid.planner.results import (
     PlannerGraph,
     PlannerSettings,
@@ -23,7 +24,6 @@ from mavsysid.planner.results import (
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle, save_vehicle
 
 from mavsysid.cli import main
-from mavsysid.cli.plan import run_plan
 from mavsysid.errors import InputError, JobFailedError
 
 HEADER = "t,x,y,z,vx,vy,vz,ax,ay,az,yaw,yaw_rate"

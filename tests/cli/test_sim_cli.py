@@ -51,6 +51,7 @@ def _command(link, command: int, *params: float, timeout: float = 2.0):
     return None if ack is None else ack.result
 
 
+@pytest.mark.slow
 def test_real_time_pacing_holds_500_hz_without_drift():
     """At speedup 1 the sim's clock follows the wall clock: over 2 s of sim time the
     telemetry's time_boot_ms advances at 1.000 ± 1 % of wall time, 100 Hz telemetry arrives
@@ -92,6 +93,7 @@ def test_real_time_pacing_holds_500_hz_without_drift():
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.slow
 def test_signal_closes_the_truth_log_and_reports_rejected_signatures(tmp_path, signum):
     """SIGTERM/SIGINT: exit 0 with a one-line summary counting rejected signatures; the
     truth log holds truth.csv (true state and rotor speeds at 200 Hz), pose.csv (the noisy

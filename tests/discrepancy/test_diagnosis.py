@@ -137,6 +137,7 @@ def test_linear_candidate_columns_reproduce_the_effect(config, flights):
 
 
 @pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.slow
 def test_hidden_effect_is_named_fitted_and_closes_the_gap(config, flights, name):
     """Named first, 95 % CI holds the truth, held-out gap shrinks ≥ 50 %, θ moves closer."""
     flight = flights((name,), 0)
@@ -153,6 +154,7 @@ def test_hidden_effect_is_named_fitted_and_closes_the_gap(config, flights, name)
 
 
 @pytest.mark.parametrize("pair", PAIRS, ids=["+".join(p) for p in PAIRS])
+@pytest.mark.slow
 def test_two_hidden_effects_are_both_named(config, flights, pair):
     """Two effects hidden at once are both named."""
     flight = flights(pair, 0)
@@ -180,6 +182,7 @@ def test_known_effect_is_not_a_candidate_and_explains_the_flight(config, flights
     assert [e.name for e in d.augmented_effects] == ["motor_lag"]
 
 
+@pytest.mark.slow
 def test_nis_before_and_after_for_a_pose_channel_effect(config, flights):
     """The EKF's NIS is too large with a hidden pose delay and consistent once it is named."""
     flight = flights(("pose_delay",), 0)
@@ -221,6 +224,7 @@ def test_non_uniform_sampling_is_refused(config, flights):
         diagnose_flight(bad, config, with_nis=False)
 
 
+@pytest.mark.slow
 def test_results_are_reproducible(config, flights):
     """The same flight gives the same diagnosis."""
     flight = flights(("body_drag",), 0)

@@ -6,7 +6,11 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
+from mavsysid.estimation.estimator import (
+    EstimatorSettings,
+    flight_initial_state_sigma,
+    prior_from_config,
+)
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
 from scipy.stats import chi2
@@ -15,7 +19,7 @@ from scipy.stats import chi2
 def _filter(config, flight):
     prior = prior_from_config(config, EstimatorSettings())
     sigma = (config.noise.position_sigma, config.noise.attitude_sigma)
-    return ParameterEKF(config, prior, sigma), _initial_state_sigma(flight, sigma)
+    return ParameterEKF(config, prior, sigma), flight_initial_state_sigma(flight, sigma)
 
 
 def test_is_a_filterpy_extended_kalman_filter(simulate_flight):
@@ -61,6 +65,7 @@ def test_parameter_covariance_is_well_conditioned_at_any_scale(simulate_flight, 
     assert np.all(np.isfinite(ekf.theta_covariance))
 
 
+@pytest.mark.slow
 def test_filter_is_consistent_when_the_truth_has_its_process_noise(
     simulate_flight, prior_config, with_noise
 ):

@@ -14,6 +14,7 @@ CORE = [0, 2, 3, 4, 5]  # c_T, c_M, j_x, j_y, j_z
 
 @pytest.mark.parametrize(("name", "seeds"), [("firefly", (0, 1, 2)), ("quad_x", (0,)),
                                              ("micro_quad", (0,))])
+@pytest.mark.slow
 def test_excitation_flight_is_identified_accurately(simulate_flight, prior_config, name, seeds):
     """Priors ±50 % off: final error < 5 % (median), < 10 % worst on the core, within 3σ."""
     truth_cfg = load_vehicle(name)
@@ -30,6 +31,7 @@ def test_excitation_flight_is_identified_accurately(simulate_flight, prior_confi
     assert np.mean(z < 3.0) >= 0.95, z
 
 
+@pytest.mark.slow
 def test_refinement_beats_the_filter_on_short_flights(simulate_flight, prior_config):
     """On 10 s flights the refined median error is ≤ 0.7× the filter's for every parameter."""
     truth_cfg = load_vehicle("firefly")

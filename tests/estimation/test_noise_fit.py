@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-from mavsysid.estimation.estimator import EstimatorSettings, _initial_state_sigma, prior_from_config
+from mavsysid.estimation.estimator import (
+    EstimatorSettings,
+    flight_initial_state_sigma,
+    prior_from_config,
+)
 from mavsysid.estimation.noise_fit import fit_noise_scale
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
@@ -18,7 +22,8 @@ def test_fit_recovers_the_injected_noise_level(simulate_flight, prior_config, wi
     prior_cfg = prior_config(cfg, 3)
     prior = prior_from_config(prior_cfg, EstimatorSettings())
     sigma = (cfg.noise.position_sigma, cfg.noise.attitude_sigma)
-    fit = fit_noise_scale(flight, prior_cfg, prior, sigma, _initial_state_sigma(flight, sigma))
+    state_sigma = flight_initial_state_sigma(flight, sigma)
+    fit = fit_noise_scale(flight, prior_cfg, prior, sigma, state_sigma)
     assert 4 / 1.6 < fit.scale < 4 * 1.6
     assert not fit.at_bound
 
@@ -29,5 +34,5 @@ def test_noise_free_truth_drives_the_scale_down(simulate_flight):
     flight = simulate_flight(cfg, 2, duration=10.0)
     prior = prior_from_config(cfg, EstimatorSettings())
     sigma = (cfg.noise.position_sigma, cfg.noise.attitude_sigma)
-    fit = fit_noise_scale(flight, cfg, prior, sigma, _initial_state_sigma(flight, sigma))
+    fit = fit_noise_scale(flight, cfg, prior, sigma, flight_initial_state_sigma(flight, sigma))
     assert fit.scale < 0.1

@@ -7,7 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from mavsysid.planner.belief import apply_transfer, identity_transfer
+from mavsysid.planner.best_flight import best_path
 from mavsysid.planner.feasibility import check_segment
+from mavsysid.planner.graph_search import GraphSearch
 from mavsysid.planner.refine import (
     FlightPricing,
     PathRefiner,
@@ -16,7 +18,7 @@ from mavsysid.planner.refine import (
     split_path,
 )
 from mavsysid.planner.results import PlannerSettings
-from mavsysid.planner.rrbt import GraphSearch, plan
+from mavsysid.planner.rrbt import plan
 from mavsysid.planner.segments import VertexState, connect_fixed, to_piecewise
 from mavsysid.vehicle.config import load_vehicle
 
@@ -108,12 +110,17 @@ def test_refiner_respects_the_budget():
     assert refiner.path.dopt == pytest.approx(-refiner.path.duration)
 
 
-@pytest.mark.parametrize("change", [{"refine_share": 1.0}, {"refine_share": -0.1},
-                                    {"refine_steps": -1}, {"refine_split": 0}])
-def test_bad_refinement_settings_are_refused(change):
-    """A refinement share outside [0, 1) or negative steps is an input error, not a crash."""
+@pytest.mark.parametrize(("change", "fragment"), [
+    ({"refine_share": 1.0}, "^refinement: share 1 "),
+    ({"refine_share": -0.1}, "^refinement: share -0.1 "),
+    ({"refine_steps": -1}, "^--refine-steps -1: "),
+    ({"refine_split": 0}, "^refinement: .* split 0 "),
+])
+def test_bad_refinement_settings_are_refused(change, fragment):
+    """A refinement share outside [0, 1), negative steps or a split < 1 is an input error,
+    not a crash."""
     settings = replace(PlannerSettings(max_samples=5, planning_time=np.inf), **change)
-    with pytest.raises(InputError, match="refinement"):
+    with pytest.raises(InputError, match=fragment):
         plan(load_vehicle("firefly"), settings)
 
 
@@ -125,7 +132,7 @@ def searched():
                                refine_steps=300)
     search = GraphSearch(cfg, settings, "dopt", None)
     search.run()
-    return search, search.best_path()
+    return search, best_path(search)
 
 
 def test_best_path_is_the_searched_flight_with_continuous_yaw(searched):

@@ -19,6 +19,7 @@ from mavsysid.vehicle.config import (
     vehicle_to_toml,
 )
 
+from mavsysid.cli.main import exit_code
 from mavsysid.errors import ConfigError, InputError
 
 BAD_VEHICLES = Path(__file__).resolve().parents[1] / "data" / "bad_vehicles"
@@ -293,7 +294,7 @@ def test_config_error_is_an_input_error(tmp_path: Path) -> None:
     """ConfigError is an InputError, so the CLI maps it to exit code 2."""
     with pytest.raises(InputError) as info:
         load_vehicle(_write(tmp_path, _edit("mass = 1.0\n", "")))
-    assert info.value.exit_code == 2
+    assert exit_code(info.value) == 2
 
 
 @pytest.mark.parametrize(

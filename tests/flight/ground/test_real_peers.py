@@ -27,6 +27,8 @@ from mavsysid.vehicle.config import load_vehicle
 
 from tests.support.stream_flights import SimProcess
 
+pytestmark = pytest.mark.peers
+
 TAKEOFF_ALTITUDE = 2.0  # m
 #: The offboard target, NED from home (m), and how close the vehicle must get to it.
 TARGET_NED = (1.0, 0.5, -2.0)

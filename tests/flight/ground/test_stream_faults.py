@@ -27,7 +27,7 @@ from tests.support.stream_flights import (
     wait_for,
 )
 
-pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
+pytestmark = [pytest.mark.slow, pytest.mark.filterwarnings("ignore::UserWarning")]
 
 SPEEDUP = "8"
 

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from mavsysid.flight.ground.setpoints import Setpoint
 from mavsysid.flight.ground.telemetry_recorder import (
-    RPM_TO_RAD_S,
     ClockOffset,
     SetpointHistory,
     TelemetryRecorder,
 )
 from mavsysid.flight.mavlink_setup import load_mavutil
 from mavsysid.formats.poselog import read_pose_log
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import euler_ned_to_quaternion, quaternion_ned_to_enu
 from mavsysid.vehicle.rotation import quat_to_matrix
 

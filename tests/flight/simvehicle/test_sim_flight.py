@@ -234,6 +234,7 @@ def test_px4_takeoff_climbs_then_holds():
         assert gcs.position().z == pytest.approx(-2.5, abs=0.1)
 
 
+@pytest.mark.slow
 def test_streamed_trajectory_is_tracked_closely():
     """Full feed-forward setpoints (position, velocity, acceleration, yaw, yaw rate) of the
     excitation figure at 50 Hz are tracked with a position RMS below 2 cm."""

@@ -1,0 +1,52 @@
+"""Option parsing shared by several commands: the flight log and vehicle, comma-separated
+numbers, negative values."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from pathlib import Path
+
+from mavsysid.errors import InputError
+from mavsysid.planner.results import PlannerSettings
+
+__all__ = ["DEFAULT_BOX", "add_log_arguments", "allow_negative_values", "parse_numbers"]
+
+#: The planner's default flight box as the ``--box`` text of the commands.
+DEFAULT_BOX = ",".join(f"{v:g}" for v in PlannerSettings.box)
+
+
+def add_log_arguments(parser: argparse.ArgumentParser) -> None:
+    """The flight log and the vehicle of the commands that read a log (estimate, diagnose)."""
+    parser.add_argument("log", type=Path, help="flight log: pose.csv, .tlog, .ulg or .bin")
+    parser.add_argument("--vehicle", default="firefly",
+                        help="shipped vehicle name or TOML path (default: firefly)")
+
+
+def allow_negative_values(parser: argparse.ArgumentParser) -> None:
+    """Let values such as ``--box -2,-2,0.5,2,2,2.5`` through as option values.
+
+    Python < 3.13 takes any argument that starts with "-" and is not a plain number for an
+    option (3.13 uses this very pattern).
+    """
+    parser._negative_number_matcher = re.compile(r"-\.?\d")  # type: ignore[attr-defined]
+
+
+def parse_numbers(text: str, count: int, option: str, names: str) -> tuple[float, ...]:
+    """``count`` finite comma-separated numbers from an option value.
+
+    Raises
+    ------
+    InputError
+        One line naming the option and the expected ``names`` (e.g. "x,y,z,yaw").
+    """
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise InputError(f"{option} {text!r}: expected {count} comma-separated finite "
+                         f"numbers {names}")
+    return values

@@ -1,0 +1,128 @@
+"""The one validator of a planning request, used by ``mavsysid plan`` and by the planner.
+
+`check_request` refuses, before any planning time is spent, a request that cannot make
+sense: a malformed budget, sample count, planning time, seed or refinement setting; a box
+too small for the vehicle or a start too close to its walls; limits within which the
+vehicle cannot hover; a rotor headroom without the hover speed. Each refusal is one line
+naming the option (``--budget``, ``--box``, …) or the configuration key at fault.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from mavsysid.planner.feasibility import check_rotor_headroom
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.vehicle.config import GRAVITY, VehicleConfig
+from mavsysid.vehicle.mav_model import rotor_thrust
+
+from mavsysid.errors import ConfigError, InputError
+
+__all__ = ["MIN_BOX_SIDE", "check_request", "rotor_clearance"]
+
+#: Shortest side of a flight box, m, whatever the vehicle.
+MIN_BOX_SIDE = 0.5
+
+
+def rotor_clearance(config: VehicleConfig) -> float:
+    """Distance from the centre of gravity to the farthest rotor hub in the x-y plane, m."""
+    return float(np.max(np.linalg.norm(config.rotor_positions[:, :2], axis=1)))
+
+
+def _check_box(settings: PlannerSettings, config: VehicleConfig) -> None:
+    """Refuse a malformed or too small box, or a start whose rotors would leave it."""
+    box = np.asarray(settings.box, dtype=float)
+    shown = ",".join(f"{v:g}" for v in box)
+    if box.shape != (6,) or not np.all(np.isfinite(box)):
+        raise InputError(f"--box {shown}: expected 6 finite numbers "
+                         "x_min,y_min,z_min,x_max,y_max,z_max")
+    side = box[3:] - box[:3]
+    clearance = rotor_clearance(config)
+    need = max(MIN_BOX_SIDE, 2.0 * clearance)
+    for axis, length in zip("xyz", side, strict=True):
+        if length <= 0.0:
+            raise InputError(f"--box {shown}: {axis}_min must be below {axis}_max")
+        if length < need:
+            raise InputError(f"--box {shown}: the {axis} side is {length:g} m; the "
+                             f"{config.name} needs at least {need:.2g} m")
+    start = settings.start_pose
+    if start.shape != (4,) or not np.all(np.isfinite(start)):
+        raise InputError("--start: expected 4 finite numbers x,y,z,yaw")
+    # The start hover must leave the rotors inside the box, not only the centre of gravity.
+    margin = float(np.min(np.concatenate([start[:3] - box[:3], box[3:] - start[:3]])))
+    if margin < clearance:
+        raise InputError(
+            f"--start {','.join(f'{v:g}' for v in start)}: the {config.name} must start at "
+            f"least {clearance:.2g} m inside --box {shown}, got {margin:.2g} m")
+
+
+def _check_hover(config: VehicleConfig) -> None:
+    """Refuse limits within which the vehicle cannot hover (one line naming the key).
+
+    Both thrust comparisons are strict: a vehicle whose least thrust equals its weight
+    cannot descend from hover, one whose greatest thrust equals it has no margin to climb
+    or to correct a disturbance.
+    """
+    limits = config.limits
+    if limits.thrust_min_ratio >= 1.0:
+        raise ConfigError(
+            f"{config.source}: [limits].thrust_min_ratio: below 1 so that the vehicle can "
+            f"hover (T_min < m g), got {limits.thrust_min_ratio!r}")
+    if limits.thrust_max_ratio <= 1.0:
+        raise ConfigError(
+            f"{config.source}: [limits].thrust_max_ratio: above 1 so that the vehicle can "
+            f"climb out of hover (T_max > m g), got {limits.thrust_max_ratio!r}")
+    idle_thrust = config.rotor_count * rotor_thrust(config.parameters.c_T, limits.rotor_speed_min)
+    if idle_thrust >= config.mass * GRAVITY:
+        raise ConfigError(
+            f"{config.source}: [limits].rotor_speed_min: a speed at which the rotors lift "
+            f"less than m g = {config.mass * GRAVITY:.4g} N, got {limits.rotor_speed_min!r} "
+            f"rad/s giving {idle_thrust:.4g} N")
+
+
+def _check_numbers(settings: PlannerSettings) -> None:
+    """Refuse a budget, sample count, planning time, seed or refinement out of range."""
+    if not (math.isfinite(settings.budget) and settings.budget > 0.0):
+        raise InputError(f"--budget {settings.budget:g}: expected a flight time > 0 s")
+    if settings.max_samples is not None and settings.max_samples < 1:
+        raise InputError(f"--samples {settings.max_samples}: expected at least 1 sample")
+    if not settings.planning_time > 0.0:
+        raise InputError(f"--time {settings.planning_time:g}: expected a planning time > 0 s "
+                         "(or --samples N to stop after N samples)")
+    if math.isinf(settings.planning_time) and settings.max_samples is None:
+        raise InputError("--time: an unlimited planning time needs --samples N")
+    if settings.seed < 0:
+        raise InputError(f"--seed {settings.seed}: expected an integer ≥ 0")
+    if settings.refine_steps < 0:
+        raise InputError(f"--refine-steps {settings.refine_steps}: expected an integer ≥ 0")
+    if not 0.0 <= settings.refine_share < 1.0 or settings.refine_split < 1:
+        raise InputError(f"refinement: share {settings.refine_share:g} must lie in [0, 1) "
+                         f"and split {settings.refine_split} must be ≥ 1")
+    if not (settings.measurement_rate > 0.0 and settings.prior_relative_sigma > 0.0):
+        raise InputError("planner settings: measurement rate and prior σ must be positive")
+
+
+def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
+    """Refuse a planning request that cannot make sense, before planning starts.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        The vehicle to plan for (rotor positions, mass, θ and `Limits`).
+    settings : PlannerSettings
+        The request.
+
+    Raises
+    ------
+    InputError
+        A budget or planning time ≤ 0, no limit on planning at all, a sample count ≤ 0,
+        a negative seed or refinement step count, a refinement share outside [0, 1) or
+        split < 1, a malformed or too small box, a start closer to a wall than the
+        rotors reach, or a rotor headroom outside [0, 0.5) or without the hover speed;
+        or (`ConfigError`) limits the vehicle cannot hover within. One line each.
+    """
+    _check_numbers(settings)
+    _check_box(settings, config)
+    _check_hover(config)
+    check_rotor_headroom(config, settings.rotor_headroom, "--rotor-headroom")

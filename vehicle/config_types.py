@@ -1,0 +1,254 @@
+"""The vehicle configuration's data types: what a vehicle TOML file holds, as frozen dataclasses.
+
+Loading and validation are in `mavsysid.vehicle.config` (the public entry point, which
+re-exports these types), `mavsysid.vehicle.config_schema` and
+`mavsysid.vehicle.config_checks`; writing is in `mavsysid.vehicle.config_toml`.
+
+A configuration holds what is known about a vehicle before a flight: its mass and
+rotor geometry (taken as known), the nominal (prior) physical parameters
+θ = [c_T, c_D, c_M, j_x, j_y, j_z], its limits, its motors, its noise, and the model
+effects beyond the paper's model that are known to act on it (``[effects.NAME]`` tables,
+`mavsysid.vehicle.model_effects`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.effect_base import ModelEffect
+
+__all__ = [
+    "ANGULAR_NOISE_DENSITY",
+    "LINEAR_NOISE_DENSITY",
+    "PARAMETER_NAMES",
+    "PARAMETER_UNITS",
+    "Limits",
+    "MotorConfig",
+    "NoiseConfig",
+    "Parameters",
+    "RotorConfig",
+    "VehicleConfig",
+    "default_noise_densities",
+]
+
+
+#: Order of the parameter vector θ everywhere in mavsysid.
+PARAMETER_NAMES: tuple[str, ...] = ("c_T", "c_D", "c_M", "j_x", "j_y", "j_z")
+
+#: Unit of each parameter of θ, by name (messages, tables and the estimate JSON).
+PARAMETER_UNITS: dict[str, str] = {
+    "c_T": "N/(rad/s)²",
+    "c_D": "s/m",
+    "c_M": "N·m/(rad/s)²",
+    "j_x": "kg·m²",
+    "j_y": "kg·m²",
+    "j_z": "kg·m²",
+}
+
+#: Default unmodelled linear acceleration noise density, m/s²·√s.
+LINEAR_NOISE_DENSITY = 0.02
+#: Default unmodelled angular acceleration noise density, rad/s²·√s.
+ANGULAR_NOISE_DENSITY = 0.02
+
+
+@dataclass(frozen=True)
+class RotorConfig:
+    """One rotor.
+
+    Attributes
+    ----------
+    position : tuple of 3 float
+        Rotor hub position relative to the centre of gravity, m, body FLU frame.
+    direction : int
+        +1 spins counter-clockwise seen from above (reaction torque -c_M n² about
+        z_B), -1 clockwise. The paper's ε_i.
+    """
+
+    position: tuple[float, float, float]
+    direction: int
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """The identified parameters θ, in SI units.
+
+    Attributes
+    ----------
+    c_T : float
+        Thrust coefficient, N/(rad/s)²: rotor thrust c_T n².
+    c_D : float
+        Rotor drag coefficient, s/m: rotor drag -c_T n² diag(c_D, c_D, 0)(v_B + ω × r_i).
+    c_M : float
+        Moment coefficient, N·m/(rad/s)² (absolute, not RotorS's ratio c_M/c_T).
+    J : tuple of 3 float
+        Principal moments of inertia [j_x, j_y, j_z], kg·m².
+    """
+
+    c_T: float
+    c_D: float
+    c_M: float
+    J: tuple[float, float, float]
+
+    def as_array(self) -> np.ndarray:
+        """θ as a float array of shape (6,), in the order of `PARAMETER_NAMES`."""
+        return np.array([self.c_T, self.c_D, self.c_M, *self.J], dtype=float)
+
+    @classmethod
+    def from_array(cls, theta: np.ndarray) -> Parameters:
+        """Build from θ of shape (6,) in the order of `PARAMETER_NAMES`."""
+        t = [float(v) for v in np.asarray(theta, dtype=float).reshape(6)]
+        return cls(c_T=t[0], c_D=t[1], c_M=t[2], J=(t[3], t[4], t[5]))
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Actuator and planner limits (optional `[limits]` keys have these defaults)."""
+
+    rotor_speed_max: float
+    rotor_speed_min: float = 0.0
+    thrust_min_ratio: float = 0.5
+    thrust_max_ratio: float = 1.8
+    body_rate_max: float = 3.0
+    yaw_acceleration_max: float = 2.0 * math.pi
+    speed_max: float = 3.0
+    segment_time_max: float = 3.0
+
+
+@dataclass(frozen=True)
+class MotorConfig:
+    """Motor lag (simulator truth side) and the motor curve (logs without rotor speeds).
+
+    Attributes
+    ----------
+    time_constant : float
+        First-order lag between commanded and actual rotor speed, s.
+    pwm_min, pwm_max : float
+        Motor output PWM for zero and full throttle u, µs.
+    thrust_expo : float
+        ArduPilot's MOT_THST_EXPO e in [0, 1]: thrust ∝ (1 − e) u + e u², so a rotor
+        speed is rotor_speed_max · sqrt((1 − e) u + e u²).
+    """
+
+    time_constant: float = 0.02
+    pwm_min: float = 1000.0
+    pwm_max: float = 2000.0
+    thrust_expo: float = 0.65
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Sensor noise (σ) and process-noise densities.
+
+    Attributes
+    ----------
+    position_sigma : float
+        Motion-capture position noise σ, m.
+    attitude_sigma : float
+        Motion-capture attitude noise σ, rad (per axis of the body-frame error).
+    rotor_speed_sigma : float
+        Noise σ on logged rotor speeds, rad/s.
+    force_density : float
+        White-noise density of the unmodelled body force, N·√s (continuous time).
+    moment_density : float
+        White-noise density of the unmodelled body moment, N·m·√s.
+    """
+
+    position_sigma: float = 0.0005
+    attitude_sigma: float = math.radians(0.1)
+    rotor_speed_sigma: float = 0.0
+    force_density: float = 0.0
+    moment_density: float = 0.0
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """A complete vehicle description.
+
+    Attributes
+    ----------
+    name : str
+        Short name (the shipped name, or the file stem).
+    mass : float
+        Mass, kg (weighed, not estimated).
+    rotors : tuple of RotorConfig
+        The rotors, in the order of the rotor-speed columns n1..nk of a log.
+    parameters : Parameters
+        Nominal (prior) values of θ.
+    limits, motor, noise
+        See the respective classes.
+    effects : tuple of ModelEffect
+        Known model effects (``[effects.NAME]``), part of the model everywhere: the
+        simulators' physics and the estimator's model. Empty by default.
+    source : str
+        Where the configuration came from (a path, or ``builtin:NAME``).
+    """
+
+    name: str
+    mass: float
+    rotors: tuple[RotorConfig, ...]
+    parameters: Parameters
+    limits: Limits
+    motor: MotorConfig = field(default_factory=MotorConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    source: str = ""
+    effects: tuple[ModelEffect, ...] = ()
+
+    @property
+    def rotor_count(self) -> int:
+        """Number of rotors k."""
+        return len(self.rotors)
+
+    @property
+    def rotor_positions(self) -> np.ndarray:
+        """Rotor positions, shape (k, 3), m, body FLU."""
+        return np.array([r.position for r in self.rotors], dtype=float)
+
+    @property
+    def rotor_directions(self) -> np.ndarray:
+        """Rotor spin directions ε_i, shape (k,), float ±1."""
+        return np.array([r.direction for r in self.rotors], dtype=float)
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Nominal θ, shape (6,)."""
+        return self.parameters.as_array()
+
+    @property
+    def hover_thrust(self) -> float:
+        """Collective thrust in hover m g, N."""
+        return self.mass * GRAVITY
+
+    def with_parameters(self, parameters: Parameters | np.ndarray) -> VehicleConfig:
+        """A copy with other nominal parameters (a `Parameters` or θ of shape (6,))."""
+        if not isinstance(parameters, Parameters):
+            parameters = Parameters.from_array(parameters)
+        return replace(self, parameters=parameters)
+
+
+def default_noise_densities(
+    mass: float, inertia: tuple[float, float, float]
+) -> tuple[float, float]:
+    """Process-noise densities used when `[noise]` does not give them.
+
+    Stated as unmodelled accelerations so that one default suits a 30 g quad and a 3 kg
+    hexacopter alike: 0.02 m/s²·√s of linear and 0.02 rad/s²·√s of angular acceleration
+    noise. Estimation can fit the level to a flight (`mavsysid.estimation.noise_fit`).
+
+    Parameters
+    ----------
+    mass : float
+        Vehicle mass, kg.
+    inertia : tuple of 3 float
+        Principal moments of inertia, kg·m².
+
+    Returns
+    -------
+    force_density : float
+        ``0.02 m``, N·√s.
+    moment_density : float
+        ``0.02 mean(J)``, N·m·√s.
+    """
+    return LINEAR_NOISE_DENSITY * mass, ANGULAR_NOISE_DENSITY * float(np.mean(inertia))
