@@ -1,7 +1,9 @@
 """One diagnosis job: read a flight log (and an estimate) and diagnose the model on it.
 
 `run_diagnose` is the work of ``mavsysid diagnose`` (and what tests call directly); the
-command itself only parses its options, calls it and prints.
+command itself only parses its options, calls it and prints. A θ it would replay or report
+that is physically impossible or far outside the prior (`mavsysid.estimation.plausibility`)
+is refused in one line, before anything is written.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from mavsysid.discrepancy.diagnosis import (
     reestimate,
 )
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.plausibility import check_plausible
 from mavsysid.estimation.readers import load_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
@@ -62,6 +65,7 @@ def read_estimate(path: str | Path) -> tuple[np.ndarray, tuple[ModelEffect, ...]
 def run_diagnose(
     log: str | Path, vehicle: str | Path = "firefly", estimate: str | Path | None = None,
     settings: DiagnosisSettings | None = None, with_nis: bool = True,
+    start: float | None = None, end: float | None = None,
 ) -> DiagnoseRun:
     """Read a flight log (and an estimate) and diagnose the model on it.
 
@@ -76,19 +80,32 @@ def run_diagnose(
     settings : DiagnosisSettings, optional
     with_nis : bool
         Also run the parameter EKF for its NIS.
+    start, end : float, optional
+        The window of the log to use, s on its clock (default: `load_flight`'s).
 
     Returns
     -------
     DiagnoseRun
+
+    Raises
+    ------
+    JobFailedError
+        The estimate's θ, or θ refitted on the flight, is physically impossible or far
+        outside the config's prior (one line naming the file and the parameter).
     """
     config = load_vehicle(vehicle)
-    flight = load_flight(log, config)
     theta, known = None, tuple(config.effects)
     if estimate is not None:
         theta, estimated = read_estimate(estimate)
         known = estimated or known
-    return DiagnoseRun(config, flight, diagnose_flight(flight, config, theta, settings, known,
-                                                       with_nis=with_nis))
+        # The config's own θ is the prior, checked (and warned about) when loaded.
+        check_plausible(str(estimate), theta, None, config.theta, what="identified θ")
+    flight = load_flight(log, config, start=start, end=end)
+    diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
+    for what, refit in (("θ refitted without effects", diagnosis.theta_before),
+                        ("θ refitted with the named effects", diagnosis.theta_after)):
+        check_plausible(flight.source, refit, None, config.theta, what=what)
+    return DiagnoseRun(config, flight, diagnosis)
 
 
 def reestimate_comparison(run: DiagnoseRun) -> tuple[Any, Any]:

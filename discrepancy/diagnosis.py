@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from mavsysid.discrepancy.candidates import candidate_library
 from mavsysid.discrepancy.regression import fit_theta
+from mavsysid.discrepancy.resample import resample_flight
 from mavsysid.discrepancy.residual_stats import (
     AxisStats,
     Where,
@@ -41,7 +42,7 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
-from mavsysid.errors import InputError
+from mavsysid.errors import InputError, JobFailedError
 
 __all__ = [
     "MASS_NOTE",
@@ -163,18 +164,42 @@ class Diagnosis:
         return bool(self.effects)
 
 
-def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect]
-         ) -> np.ndarray:
-    """The parameter EKF's NIS per sample with ``effects`` in the model at their values.
+def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
+         grid: np.ndarray) -> np.ndarray:
+    """The parameter EKF's NIS with ``effects`` in the model at their values, on ``grid``.
 
     The estimator's effect channels (`mavsysid.estimation.estimator.estimate_with_effects`, held
-    values, filter only) carry every catalogue effect, wrenches included.
+    values, filter only) carry every catalogue effect, wrenches included. The filter runs
+    on the logged samples (it needs no uniform rate); each grid sample of a resampled
+    flight takes the NIS of the logged sample nearest to it.
     """
     from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
 
     result = estimate_with_effects(flight, config, tuple(effects),
                                    EstimatorSettings(refine=False), fit_effects=False)
-    return result.history.nis
+    nis = np.asarray(result.history.nis, float)
+    if grid is flight.t:
+        return nis
+    t = flight.t
+    i = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
+    nearest = np.where(grid - t[i - 1] <= t[i] - grid, i - 1, i)
+    return nis[nearest]
+
+
+def _nis_pair(flight: FlightData, config: VehicleConfig, known: tuple[ModelEffect, ...],
+              fitted: tuple[ModelEffect, ...], grid: np.ndarray
+              ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
+    """NIS without and with the named effects on ``grid`` (`_nis`), and notes.
+
+    The NIS is a check beside the diagnosis, not its basis: when the EKF cannot follow
+    the log (`JobFailedError`) the diagnosis stands without it and says why.
+    """
+    try:
+        before = _nis(flight, config, known, grid)
+        after = _nis(flight, config, (*known, *fitted), grid) if fitted else before
+    except JobFailedError as error:
+        return None, None, [f"no NIS: {error}"]
+    return before, after, []
 
 
 def _split(problem: ResidualProblem, used: np.ndarray, settings: DiagnosisSettings
@@ -253,17 +278,21 @@ def diagnose_flight(
         raise InputError(f"{flight.source}: {flight.rotor_count} rotor-speed columns, but "
                          f"vehicle {config.name} has {config.rotor_count} rotors")
     if not 0.05 <= settings.holdout <= 0.5:
-        raise InputError(f"held-out fraction {settings.holdout:g}: expected 0.05 … 0.5")
+        raise InputError(f"{flight.source}: held-out fraction {settings.holdout:g}: expected "
+                         "0.05 … 0.5")
     theta0 = config.theta.copy() if theta is None else np.asarray(theta, float).reshape(6)
     if not np.all(np.isfinite(theta0)) or theta0[0] <= 0.0 or np.any(theta0[3:] <= 0.0):
-        raise InputError("θ to diagnose must be finite with c_T > 0 and a positive inertia")
+        origin = "the estimate's" if theta is not None else f"vehicle {config.name}'s"
+        raise InputError(f"{flight.source}: {origin} θ to diagnose must be finite with "
+                         f"c_T > 0 and a positive inertia, got {np.array2string(theta0)}")
     known = tuple(known_effects)
     names = settings.candidates
     known_names = {e.name for e in known}
     library = tuple(c for c in candidate_library(names) if c.name not in known_names)
-    problem = ResidualProblem(flight, config, theta0, settings.smoother, known)
+    uniform, resampling = resample_flight(flight)
+    problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling)
     used = problem.keep()
-    t = flight.t
+    t = uniform.t
     split, train, test = _split(problem, used, settings)
     if progress:
         progress("fitting θ to the flight's accelerations")
@@ -273,19 +302,18 @@ def diagnose_flight(
     measured, model, pose = base.evaluate()
     r_before = measured - model
     r_after = base.residual(fitted, selection.theta_after)
-    nis_before = nis_after = None
-    if with_nis:
-        nis_before = _nis(flight, config, known)
-        nis_after = _nis(flight, config, (*known, *fitted)) if fitted else nis_before
-    before = AxisStats(axis_rms(r_before[test]), ljung_box(r_before[test], base.window_samples),
+    nis_before, nis_after, nis_notes = (_nis_pair(flight, config, known, fitted, t)
+                                        if with_nis else (None, None, []))
+    before = AxisStats(axis_rms(r_before[test]), ljung_box(r_before[test], base.block),
                        *nis_stats(nis_before, test))
-    after = AxisStats(axis_rms(r_after[test]), ljung_box(r_after[test], base.window_samples),
+    after = AxisStats(axis_rms(r_after[test]), ljung_box(r_after[test], base.block),
                       *nis_stats(nis_after, test))
     noise = axis_rms(r_after[train])
     flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
     gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
     where = where_large(base, pose, r_before, used, noise, train, settings.window)
-    notes = [MASS_NOTE]
+    notes = [MASS_NOTE, *([resampling.describe()] if resampling.resampled else []),
+             *nis_notes]
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
         where=where, theta_identified=theta0, theta_before=selection.theta_before,

@@ -9,6 +9,8 @@ Entities (time series on the ``time`` timeline, s from the start of the log):
   chart, static).
 - ``world/trajectory``: the smoothed path coloured by the base model's normalised
   residual (blue small → red large), static; ``world/residual_norm`` the same as a series.
+- ``rotors/n<i>`` (i = 1 … k, the config's rotor order): the logged rotor speeds, rad/s,
+  when the flight is given.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 from mavsysid.discrepancy.diagnosis import Diagnosis
 from mavsysid.discrepancy.residuals import AXIS_NAMES
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.recording import ROTOR_COLORS
 from mavsysid.formats.rerun_file import atomic_recording
 
 __all__ = ["log_diagnosis", "recording_id_for", "write_diagnosis_rrd"]
@@ -48,7 +52,8 @@ def _colours(z: np.ndarray) -> np.ndarray:
     return (np.array(_AFTER) * (1.0 - s) + np.array(_BEFORE) * s).astype(np.uint8)
 
 
-def write_diagnosis_rrd(path: str | Path, diagnosis: Diagnosis, log_name: str) -> None:
+def write_diagnosis_rrd(path: str | Path, diagnosis: Diagnosis, log_name: str,
+                        flight: FlightData | None = None) -> None:
     """Write a Rerun recording of ``diagnosis`` (entities: module docstring).
 
     Parameters
@@ -58,19 +63,23 @@ def write_diagnosis_rrd(path: str | Path, diagnosis: Diagnosis, log_name: str) -
     diagnosis : Diagnosis
     log_name : str
         Names the recording and fixes its id.
+    flight : FlightData, optional
+        The flight diagnosed: its rotor speeds are logged too.
     """
     blueprint = rrb.Blueprint(rrb.Horizontal(
         rrb.Grid(*[rrb.TimeSeriesView(origin=f"residual/{a}", name=a) for a in AXIS_NAMES],
                  grid_columns=2, name="residuals"),
         rrb.Vertical(rrb.Spatial3DView(origin="world", name="trajectory by residual"),
-                     rrb.BarChartView(origin="candidates", name="candidate ΔBIC")),
+                     rrb.BarChartView(origin="candidates", name="candidate ΔBIC"),
+                     rrb.TimeSeriesView(origin="rotors", name="rotor speeds")),
     ), collapse_panels=True)
     with atomic_recording(path, "mavsysid", recording_id_for(log_name),
                           f"diagnose {log_name}", blueprint) as rec:
-        log_diagnosis(rec, diagnosis)
+        log_diagnosis(rec, diagnosis, flight)
 
 
-def log_diagnosis(rec: rr.RecordingStream, diagnosis: Diagnosis) -> None:
+def log_diagnosis(rec: rr.RecordingStream, diagnosis: Diagnosis,
+                  flight: FlightData | None = None) -> None:
     """Log a diagnosis's entities (module docstring) into an open recording, e.g. the demo's."""
     d = diagnosis
     used = d.used
@@ -96,3 +105,8 @@ def log_diagnosis(rec: rr.RecordingStream, diagnosis: Diagnosis) -> None:
     rec.log("world/trajectory", rr.Points3D(position, colors=_colours(z), radii=0.01),
             static=True, strict=True)
     _series(rec, "world/residual_norm", t, z, "residual / noise", _BEFORE)
+    if flight is not None:
+        speeds = np.asarray(flight.rotor_speeds, float)
+        for i in range(speeds.shape[1]):
+            _series(rec, f"rotors/n{i + 1}", flight.t, speeds[:, i], f"n{i + 1} (rad/s)",
+                    ROTOR_COLORS[i % len(ROTOR_COLORS)])

@@ -38,7 +38,9 @@ class AxisStats:
     rms : ndarray, shape (6,)
         m/s² (forces) and rad/s² (angular accelerations).
     ljung_box_p : ndarray, shape (6,)
-        p-value of the Ljung–Box test (10 lags) on samples one smoother window apart.
+        p-value of the Ljung–Box test (10 lags) on samples one correlation length
+        (`ResidualProblem.block`: the smoother window, plus the interpolation's reach on
+        a resampled log) apart.
     nis_mean : float or None
         Mean NIS of the EKF over these samples (None if not computed).
     nis_outside : float or None
@@ -145,4 +147,4 @@ def where_large(problem: ResidualProblem, pose: SmoothedPose, r: np.ndarray, use
                 worst, worst_value = (name, label), value
         regimes[name] = {"edges": edges, "rms": np.array(rms_bins)}
     return Where(tuple(windows[:5]), regimes, worst,
-                 ljung_box(r[train], problem.window_samples), noise)
+                 ljung_box(r[train], problem.block), noise)

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property, lru_cache
 
 import numpy as np
+from mavsysid.discrepancy.resample import Resampling, uniform_step
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
@@ -134,17 +135,8 @@ class SmoothedPose:
         return np.einsum("nji,nj->ni", self.rotation(), a)
 
 
-def _uniform_step(t: np.ndarray) -> float:
-    dt = np.diff(t)
-    step = float(np.median(dt))
-    if not step > 0.0 or np.max(np.abs(dt - step)) > 0.05 * step:
-        raise InputError("the pose log is not sampled at a uniform rate (jitter > 5 %); "
-                         "the diagnosis smoother needs uniform samples")
-    return step
-
-
 def smooth_pose(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
-                settings: SmootherSettings) -> SmoothedPose:
+                settings: SmootherSettings, source: str = "pose log") -> SmoothedPose:
     """Savitzky–Golay smoothing and differentiation of a uniformly sampled pose log.
 
     The quaternion's components are smoothed as a signal (after making its sign
@@ -157,15 +149,18 @@ def smooth_pose(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
     position : ndarray, shape (N, 3)
     quaternion : ndarray, shape (N, 4)
     settings : SmootherSettings
+    source : str
+        The file the pose came from, named in refusals.
 
     Returns
     -------
     SmoothedPose
     """
-    dt = _uniform_step(t)
+    dt = uniform_step(t, source)
     w = settings.samples(dt)
     if len(t) < 2 * w:
-        raise InputError(f"{len(t)} pose samples: the diagnosis needs at least {2 * w}")
+        raise InputError(f"{source}: {len(t)} pose samples: the diagnosis needs at least "
+                         f"{2 * w}")
     q = np.array(quaternion, dtype=float)
     # Sign continuity: q and −q are the same attitude, but not the same signal.
     flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2
@@ -241,6 +236,9 @@ class ResidualProblem:
     settings : SmootherSettings
     known_effects : tuple of ModelEffect
         Effects already part of the model (a config's ``[effects.*]``).
+    resampling : Resampling, optional
+        How ``flight`` was put on its uniform grid (`mavsysid.discrepancy.resample`);
+        None: ``flight`` must be uniformly sampled.
     """
 
     flight: FlightData
@@ -248,6 +246,7 @@ class ResidualProblem:
     theta: np.ndarray
     settings: SmootherSettings = field(default_factory=SmootherSettings)
     known_effects: tuple[ModelEffect, ...] = ()
+    resampling: Resampling | None = None
 
     def __post_init__(self) -> None:
         _ = self.dt  # refuses a log sampled at a non-uniform rate
@@ -257,18 +256,30 @@ class ResidualProblem:
     @cached_property
     def dt(self) -> float:
         """Sample time, s."""
-        return _uniform_step(self.flight.t)
+        if self.resampling is not None:
+            return self.resampling.dt
+        return uniform_step(self.flight.t, self.flight.source)
 
     @property
     def window_samples(self) -> int:
         """Smoother window, samples."""
         return self.settings.samples(self.dt)
 
+    @property
+    def block(self) -> int:
+        """Correlation length of the residual, samples: one effective sample per block."""
+        if self.resampling is None:
+            return self.window_samples
+        return self.resampling.block(self.window_samples)
+
     def keep(self) -> np.ndarray:
-        """Boolean mask of the samples used (the ends trimmed), shape (N,)."""
+        """Boolean mask of the samples used (the ends and gaps trimmed), shape (N,)."""
         t = self.flight.t
         edge = max(self.settings.trim, self.window_samples * self.dt)
-        return (t >= t[0] + edge) & (t <= t[-1] - edge)
+        keep = (t >= t[0] + edge) & (t <= t[-1] - edge)
+        if self.resampling is not None:
+            keep &= self.resampling.usable(int(np.ceil(edge / self.dt)))
+        return keep
 
     def evaluate(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, SmoothedPose]:
@@ -305,7 +316,9 @@ class ResidualProblem:
     def _smooth(self, t: np.ndarray, p: np.ndarray, q: np.ndarray
                 ) -> tuple[SmoothedPose, SmoothedPose]:
         light = replace(self.settings, window=self.settings.input_window)
-        return smooth_pose(t, p, q, self.settings), smooth_pose(t, p, q, light)
+        source = self.flight.source
+        return (smooth_pose(t, p, q, self.settings, source),
+                smooth_pose(t, p, q, light, source))
 
     @cached_property
     def _smoothed_log(self) -> tuple[SmoothedPose, SmoothedPose]:

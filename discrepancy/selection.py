@@ -177,7 +177,7 @@ def forward_select(
     SelectionResult
     """
     settings = settings or SelectionSettings()
-    reg = Regression(rows, weights, problem.window_samples)
+    reg = Regression(rows, weights, problem.block)
     model = SelectionModel(problem, candidates)
     theta_base = problem.theta.copy()
     gains: dict[str, float] = {}

@@ -27,6 +27,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from mavsysid.estimation.ekf import rk4_step_kernel
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.input_noise import step_process_noise
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.vehicle.linearization import ErrorStateModel, jacobian_kernel, transition_kernel
 from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
@@ -82,7 +83,8 @@ def _shoot(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p
            want_jac, want_q, res, rows, cols, vals, Q_out):
     """Residuals of the shooting problem (and its Jacobian in COO form if ``want_jac``).
 
-    w (N, 6) is the known effects' extra body force and torque per sample (as in the EKF).
+    w (N, 6) is the known effects' extra body force and torque per sample (as in the EKF);
+    Qc (N, 6, 6) the process-noise density of the step from each sample to the next.
 
     Column layout: node k's error at 12k … 12k+11, the θ error (scaled) at 12K … 12K+5.
     ``Q_out`` (K-1, 12, 12) receives the process noise accumulated over each interval.
@@ -123,7 +125,7 @@ def _shoot(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p
             dt = t[i + 1] - t[i]
             if want_jac or (want_q and k < K - 1):
                 jacobian_kernel(x, n[i], theta, mass, r, eps, scale, A, G)
-                transition_kernel(A, G, Qc, dt, F, Qs)
+                transition_kernel(A, G, Qc[i], dt, F, Qs)
                 Phi = F @ Phi
                 Qacc = F @ Qacc @ F.T + Qs
             rk4_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps, x_next)
@@ -174,9 +176,8 @@ class _Problem:
         vals = np.empty(nnz)
         Q_out = np.empty((max(K - 1, 1), 12, 12))
         mass, r, eps, scale = self.model.kernel_args()
-        Qc = self.model.process_noise_density()
         _shoot(nodes, theta, self._t, self._z, self._n, self._w, self.node_idx, mass, r, eps,
-               scale, Qc, self.W, self.sigma[0], self.sigma[1], want_jac, want_q, res, rows,
+               scale, self._Qc, self.W, self.sigma[0], self.sigma[1], want_jac, want_q, res, rows,
                cols, vals, Q_out)
         # Prior on θ, in the scaled units of the error state.
         prior_sigma = np.sqrt(np.diag(self.prior.covariance))
@@ -197,6 +198,10 @@ class _Problem:
         self._n = np.ascontiguousarray(fl.rotor_speeds, dtype=float)
         self._w = (np.zeros((len(fl), 6)) if self.wrench is None
                    else np.ascontiguousarray(self.wrench, dtype=float))
+        # Each step's process noise, with the slow inputs' interpolation error.
+        _, r, eps, _ = self.model.kernel_args()
+        self._Qc = step_process_noise(self.model.process_noise_density(), self._t, self._n,
+                                      fl.inputs, self.prior.value, r, eps)
 
 
 def _solve_spd(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:

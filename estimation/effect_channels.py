@@ -91,7 +91,7 @@ def in_model_terms(flight: FlightData, effects: Sequence[ModelEffect]) -> Flight
         return flight
     return FlightData(np.asarray(t_model, float), np.asarray(p, float), np.asarray(q, float),
                       np.asarray(n, float), flight.source, flight.pose_source, flight.truth,
-                      flight.warnings)
+                      flight.warnings, flight.segment_starts, inputs=flight.inputs)
 
 
 def _wrench(model_flight: FlightData, log_start: float, effects: Sequence[ModelEffect],

@@ -26,6 +26,7 @@ import numba
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.input_noise import step_process_noise
 from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.dynamics import STATE_DIM, derivative_kernel
@@ -44,6 +45,8 @@ from mavsysid.vehicle.rotation import (
     quat_multiply,
     quat_to_matrix,
 )
+
+from mavsysid.errors import JobFailedError
 
 __all__ = ["FILTER_DIM", "FilterRun", "ParameterEKF", "rk4_step_kernel"]
 
@@ -181,7 +184,8 @@ def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
                    out_x, out_sigma, out_innov, out_nis):
     """Filter samples 1..N-1 (sample 0 initialised x, P); histories into the out arrays.
 
-    w (N, 6) is the effects' extra body force and torque at every sample (zeros: none).
+    w (N, 6) is the effects' extra body force and torque at every sample (zeros: none);
+    Qc (N, 6, 6) the process-noise density of each step (from sample k − 1 to k).
 
     Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k).
     """
@@ -201,7 +205,7 @@ def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
     out_nis[0] = np.nan
     for k in range(1, t.shape[0]):
         _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], t[k] - t[k - 1], mass, r, eps,
-                        scale, Qc, A, G, F, Q)
+                        scale, Qc[k - 1], A, G, F, Q)
         out_nis[k] = _update_kernel(x, P, z[k], R, scale, y, S, SI, K)
         log_det = 2.0 * np.sum(np.log(np.diag(np.linalg.cholesky(S))))
         log_likelihood -= 0.5 * (out_nis[k] + log_det + 6.0 * np.log(2.0 * np.pi))
@@ -305,6 +309,20 @@ class ParameterEKF(ExtendedKalmanFilter):
         """Current θ covariance, SI, shape (6, 6)."""
         return self.model.parameter_covariance_si(self.P)
 
+    def start_segment(self, flight: FlightData, i: int,
+                      state_sigma: tuple[float, float, float, float]) -> None:
+        """Restart the model state from samples ``i``, ``i + 1`` of ``flight`` (finite
+        differences), with σ ``state_sigma``; θ and its covariance are kept, the states'
+        cross-covariance with θ is dropped."""
+        dt0 = flight.t[i + 1] - flight.t[i]
+        q0, q1 = flight.quaternion[i], flight.quaternion[i + 1]
+        rates = quat_log(quat_multiply(q0 * [1, -1, -1, -1], q1)) / dt0
+        v_world = (flight.position[i + 1] - flight.position[i]) / dt0
+        v_body = quat_to_matrix(q0).T @ v_world
+        self.P[:12, :] = 0.0
+        self.P[:, :12] = 0.0
+        self.initialize(flight.position[i], q0, v_body, rates, state_sigma)
+
     def run(
         self, flight: FlightData, state_sigma: tuple[float, float, float, float],
         wrench: np.ndarray | None = None,
@@ -313,18 +331,15 @@ class ParameterEKF(ExtendedKalmanFilter):
 
         The initial velocity and body rates come from finite differences of the first two
         poses; ``state_sigma`` gives their initial σ (position, velocity, attitude, rate).
+        A flight of several segments (``flight.segment_starts``) restarts the states at
+        each segment's start and carries θ and its covariance across the gap.
         ``wrench`` (N, 6): extra body force (N) and torque (N·m) of known model effects at
         every sample (`mavsysid.estimation.effect_channels.ModelTerms`); zeros by default.
         ``flight`` must
         already be in the model's terms (effects' pose and rotor-speed channels applied).
         """
         t = np.ascontiguousarray(flight.t, dtype=float)
-        dt0 = t[1] - t[0]
-        q0, q1 = flight.quaternion[0], flight.quaternion[1]
-        rates = quat_log(quat_multiply(q0 * [1, -1, -1, -1], q1)) / dt0
-        v_world = (flight.position[1] - flight.position[0]) / dt0
-        v_body = quat_to_matrix(q0).T @ v_world
-        self.initialize(flight.position[0], q0, v_body, rates, state_sigma)
+        self.start_segment(flight, 0, state_sigma)
         z = np.ascontiguousarray(np.hstack([flight.position, flight.quaternion]))
         n = np.ascontiguousarray(flight.rotor_speeds, dtype=float)
         N = t.size
@@ -336,8 +351,23 @@ class ParameterEKF(ExtendedKalmanFilter):
         w = np.zeros((N, 6)) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
         if w.shape != (N, 6):
             raise ValueError(f"wrench of shape ({N}, 6) expected, got {w.shape}")
-        log_likelihood = _filter_kernel(t, z, n, w, self.x, self.P, mass, r, eps, scale,
-                                        self._Qc, self.R, out_x, out_sigma, out_innov, out_nis)
+        # Each step's process noise: the configured density plus the wrench error that
+        # interpolating slow rotor-speed inputs leaves (`mavsysid.estimation.input_noise`).
+        Qc = step_process_noise(self._Qc, t, n, flight.inputs, self.prior.value, r, eps)
+        try:
+            log_likelihood = 0.0
+            for i, (a, b) in enumerate(flight.segment_bounds):
+                if i:  # after a gap: the vehicle states restart, θ and its σ carry on
+                    self.start_segment(flight, a, state_sigma)
+                log_likelihood += _filter_kernel(
+                    t[a:b], z[a:b], n[a:b], w[a:b], self.x, self.P, mass, r, eps, scale,
+                    Qc[a:b], self.R, out_x[a:b], out_sigma[a:b], out_innov[a:b], out_nis[a:b])
+        except (ZeroDivisionError, np.linalg.LinAlgError) as error:
+            # A model that cannot follow the log (wrong vehicle or rotor order) drives the
+            # state to overflow; the compiled kernel then fails on a division or on S.
+            raise JobFailedError(_diverged(flight)) from error
+        if not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.P))):
+            raise JobFailedError(_diverged(flight))
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
         history = EstimationHistory(
             t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],
@@ -345,3 +375,10 @@ class ParameterEKF(ExtendedKalmanFilter):
         )
         return FilterRun(history, out_x[:, :STATE_DIM],
                          ParameterEstimate(self.theta, self.theta_covariance), log_likelihood)
+
+
+def _diverged(flight: FlightData) -> str:
+    """The one-line message of a filter run that diverged."""
+    return (f"{flight.source}: the parameter filter diverged (the model cannot follow this "
+            "log's motion with these rotor speeds); check --vehicle, its rotor order and "
+            "the log's motor outputs")

@@ -1,7 +1,9 @@
 """One estimation job: read a flight log and estimate θ (the work of ``mavsysid estimate``).
 
 `run_estimate` is what the command line and the tests call; the console layer
-(``mavsysid estimate``) only parses its options, calls it and prints.
+(``mavsysid estimate``) only parses its options, calls it and prints. An estimate that is
+physically impossible or far outside the prior is refused here
+(`mavsysid.estimation.plausibility`), before anything is written.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from pathlib import Path
 
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.plausibility import check_plausible
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import EstimationResult
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
@@ -30,6 +33,7 @@ class EstimateRun:
 def run_estimate(
     log: str | Path, vehicle: str | Path = "firefly", pose: str | Path | None = None,
     time_offset: float | None = None, settings: EstimatorSettings | None = None,
+    start: float | None = None, end: float | None = None,
 ) -> EstimateRun:
     """Read a flight log and estimate θ.
 
@@ -45,11 +49,24 @@ def run_estimate(
         Clock offset of ``pose`` relative to the log, s (found by cross-correlation
         when not given).
     settings : EstimatorSettings, optional
+    start, end : float, optional
+        The window of the log to use, s on its clock (default: `load_flight`'s).
 
     Returns
     -------
     EstimateRun
+
+    Raises
+    ------
+    JobFailedError
+        The final θ is physically impossible (c_T, c_D, c_M or J ≤ 0, J breaking the
+        triangle inequality) or far outside the prior; one line naming the log, the
+        parameter and the numbers.
     """
     config = load_vehicle(vehicle)
-    flight = load_flight(log, config, pose=pose, time_offset=time_offset)
-    return EstimateRun(config, flight, estimate_parameters(flight, config, settings))
+    flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
+    result = estimate_parameters(flight, config, settings)
+    final = result.final
+    check_plausible(flight.source, final.value, final.sigma, result.prior.value,
+                    result.prior.sigma)
+    return EstimateRun(config, flight, result)

@@ -26,6 +26,7 @@ from mavsysid.estimation.effect_fit import EffectFit, reference_terms
 from mavsysid.estimation.ekf import ParameterEKF
 from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
 from mavsysid.estimation.noise_fit import fit_noise_scale
+from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.report import convergence_time
 from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
@@ -203,6 +204,7 @@ def estimate_with_effects(
     fit = None
     used = tuple(FittedEffect(e, np.full(len(e.parameters), np.nan), False) for e in effects)
     if fit_effects and any(e.parameters for e in effects):
+        report_stage("fitting the model effects' parameters")
         fit = effect_fit.fit_effects(flight, config, effects, prior, sigma, state_sigma)
         used = fit.effects
         effects = tuple(fe.effect for fe in fit.effects)
@@ -210,6 +212,7 @@ def estimate_with_effects(
     elif effects:
         notes.append("model effects held at the given values: "
                      + "; ".join(repr(e) for e in effects))
+    report_stage(f"filtering {len(flight)} samples")
     terms, run = reference_terms(flight, effects, config, prior, sigma, state_sigma)
     log_likelihood = run.log_likelihood
 
@@ -247,6 +250,7 @@ def _refine(
         noise_cfg, scale, at_bound = fit.config, fit.noise_scale, fit.noise_at_bound
         start, terms_r = fit.run, fit.terms
     else:
+        report_stage("fitting the process noise")
         nf = fit_noise_scale(terms.flight, config, prior, sigma, state_sigma,
                              wrench=terms.wrench)
         noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
@@ -256,9 +260,19 @@ def _refine(
         f"process noise fitted to the flight: {scale:.3g} × the configured densities "
         f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"
         + ("; at the edge of the search range" if at_bound else ""))
-    batch = refine(terms_r.flight, start.states, start.estimate,
-                   ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma,
-                   wrench=terms_r.wrench)
+    report_stage("batch refinement")
+    flight, states, wrench = terms_r.flight, start.states, terms_r.wrench
+    if len(flight.segment_starts) > 1:
+        # The batch's states form one chain of shooting nodes: it must not bridge a gap.
+        i = flight.longest_segment()
+        a, b = flight.segment_bounds[i]
+        flight, states = flight.segment(i), states[a:b]
+        wrench = None if wrench is None else wrench[a:b]
+        notes.append(f"batch refinement on the longest segment only (t = {flight.t[0]:.3f} "
+                     f"to {flight.t[-1]:.3f} s, {i + 1} of "
+                     f"{len(terms_r.flight.segment_starts)}); the filter used all segments")
+    batch = refine(flight, states, start.estimate,
+                   ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma, wrench=wrench)
     notes.append(f"batch refinement: {batch.iterations} iterations, cost "
                  f"{batch.cost_initial:.4g} → {batch.cost_final:.4g}")
     return batch.estimate, start.log_likelihood

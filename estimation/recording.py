@@ -9,6 +9,8 @@ Entities (all time series on the ``time`` timeline, s from the start of the log)
   sample; ``world/measured_path`` and ``world/filtered_path`` the whole path (static).
 - ``innovations/position/{x,y,z}`` (m), ``innovations/attitude/{x,y,z}`` (rad) and
   ``innovations/nis`` with its χ²(6) 95 % bound ``innovations/nis_bound``.
+- ``rotors/n<i>`` (i = 1 … k, the config's rotor order): the logged rotor speeds, rad/s,
+  one point per pose sample (the model's inputs).
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from mavsysid.formats.rerun_file import atomic_recording
 from mavsysid.vehicle.config import PARAMETER_NAMES
 from scipy.stats import chi2
 
-__all__ = ["APPLICATION_ID", "log_estimation", "recording_id_for", "write_estimation_rrd"]
+__all__ = ["APPLICATION_ID", "ROTOR_COLORS", "log_estimation", "recording_id_for",
+           "write_estimation_rrd"]
 
 APPLICATION_ID = "mavsysid"
 
@@ -39,6 +42,11 @@ _REFINED_COLOR = (214, 39, 40)
 _AXIS_COLORS = ((230, 60, 60), (60, 180, 60), (60, 90, 230))
 _MEASURED_COLOR = (255, 140, 0)
 _FILTERED_COLOR = (31, 119, 180)
+#: Colours of the rotor-speed series (matplotlib's tab10, so they look as in the report's
+#: PNG), RGB; rotor i takes entry i mod 8.
+ROTOR_COLORS: tuple[tuple[int, int, int], ...] = (
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40),
+    (148, 103, 189), (140, 86, 75), (227, 119, 194), (127, 127, 127))
 
 
 def recording_id_for(log_name: str) -> str:
@@ -107,6 +115,14 @@ def _log_innovations(rec: rr.RecordingStream, result: EstimationResult) -> None:
             _REFINED_COLOR, 1.0)
 
 
+def _log_rotor_speeds(rec: rr.RecordingStream, flight: FlightData) -> None:
+    """The logged rotor speeds, one series per rotor."""
+    speeds = np.asarray(flight.rotor_speeds, dtype=float)
+    for i in range(speeds.shape[1]):
+        _series(rec, f"rotors/n{i + 1}", flight.t, speeds[:, i], f"n{i + 1} (rad/s)",
+                ROTOR_COLORS[i % len(ROTOR_COLORS)])
+
+
 def _blueprint() -> rrb.Blueprint:
     """One plot per parameter, the 3-D trajectories and the innovation plots."""
     parameter_views = [rrb.TimeSeriesView(origin=f"parameters/{name}", name=name)
@@ -120,6 +136,7 @@ def _blueprint() -> rrb.Blueprint:
                 rrb.TimeSeriesView(origin="innovations/attitude", name="attitude innovation"),
                 rrb.TimeSeriesView(origin="innovations", name="NIS",
                                    contents=["innovations/nis", "innovations/nis_bound"]),
+                rrb.TimeSeriesView(origin="rotors", name="rotor speeds"),
             ),
         ),
         collapse_panels=True,
@@ -159,3 +176,4 @@ def log_estimation(rec: rr.RecordingStream, result: EstimationResult,
     _log_parameters(rec, result)
     _log_trajectories(rec, result, flight)
     _log_innovations(rec, result)
+    _log_rotor_speeds(rec, flight)

@@ -241,13 +241,14 @@ def _number(value: float) -> float | None:
 
 def _block(
     estimate: ParameterEstimate, convergence: np.ndarray | None, truth: np.ndarray | None
-) -> dict[str, dict[str, float | None]]:
-    """One estimate as ``{name: {"value", "sigma", "relative_sigma", ...}}``."""
-    out: dict[str, dict[str, float | None]] = {}
+) -> dict[str, dict[str, float | str | None]]:
+    """One estimate as ``{name: {"value", "unit", "sigma", "relative_sigma", ...}}``."""
+    out: dict[str, dict[str, float | str | None]] = {}
     for j, name in enumerate(PARAMETER_NAMES):
         value, sigma = float(estimate.value[j]), float(estimate.sigma[j])
-        entry: dict[str, float | None] = {
+        entry: dict[str, float | str | None] = {
             "value": _number(value),
+            "unit": PARAMETER_UNITS[name],
             "sigma": _number(sigma),
             "relative_sigma": _number(_relative(sigma, value)),
             "convergence_time_s": None if convergence is None else _number(convergence[j]),
@@ -283,8 +284,9 @@ def result_to_json(
         paper's model), ``log_likelihood`` (the filter's innovation log-likelihood, see
         `EstimationResult.log_likelihood`), ``parameters`` (the final
         estimate: refined if present, else the filter's), ``filter``, ``refined`` (or
-        None) and ``prior``, each ``{name: {"value", "sigma", "relative_sigma",
-        "convergence_time_s"}}`` plus ``"true_value"`` and ``"error_relative"`` (signed,
+        None) and ``prior``, each ``{name: {"value", "unit", "sigma", "relative_sigma",
+        "convergence_time_s"}}`` (``unit`` from `PARAMETER_UNITS`, the unit of value and
+        σ) plus ``"true_value"`` and ``"error_relative"`` (signed,
         (value − true)/|true|) when the truth is known. ``convergence_time_s`` (s) is the
         filter's (see `EstimationResult.convergence_time`): given in ``parameters`` and
         ``filter``, None there for a parameter that never settled, and always None in

@@ -17,13 +17,15 @@ from typing import Any
 
 from mavsysid.errors import InputError
 
-__all__ = ["GCS_COMPONENT", "GCS_SYSTEM", "load_mavutil", "parse_connect",
+__all__ = ["DEFAULT_BAUD", "GCS_COMPONENT", "GCS_SYSTEM", "load_mavutil", "parse_connect",
            "signing_key_from_file"]
 
 #: The ground station's MAVLink identity: system 255 (the usual GCS system id) and
 #: MAV_COMP_ID_MISSIONPLANNER (190), the usual component id of a ground station.
 GCS_SYSTEM = 255
 GCS_COMPONENT = 190
+#: Baud rate of a serial device given without one (a USB link to ArduPilot or PX4).
+DEFAULT_BAUD = 115200
 
 
 def load_mavutil() -> Any:
@@ -67,7 +69,7 @@ def parse_connect(connect: str) -> tuple[str, int | None]:
 
     Accepted: ``udp:HOST:PORT`` / ``udpin:HOST:PORT`` (listen), ``udpout:HOST:PORT``,
     ``tcp:HOST:PORT`` (connect), ``tcpin:HOST:PORT`` (listen), ``serial:DEVICE[:BAUD]``
-    or a bare ``/dev/…`` / ``COMn`` device (115200 baud).
+    or a bare ``/dev/…[:BAUD]`` / ``COMn[:BAUD]`` device (115200 baud by default).
 
     Raises
     ------
@@ -83,9 +85,9 @@ def parse_connect(connect: str) -> tuple[str, int | None]:
     if kind == "serial" or connect.startswith("/dev/") or connect.upper().startswith("COM"):
         device = rest if kind == "serial" else connect
         head, _, tail = device.rpartition(":")
-        if kind == "serial" and head and tail.isdigit():
+        if head and tail.isdigit():
             return head, int(tail)
         if device:
-            return device, 115200
+            return device, DEFAULT_BAUD
     raise InputError(f"--connect {connect}: expected udp:HOST:PORT, udpout:HOST:PORT, "
                      "tcp:HOST:PORT, tcpin:HOST:PORT or a serial device[:BAUD]")

@@ -115,6 +115,7 @@ def _build(values: dict[str, Any], name: str, source: str) -> VehicleConfig:
         noise=NoiseConfig(**noise),
         source=source,
         effects=tuple(effect_from_values(n, v) for n, v in values["effects"]),
+        autopilot_frame=values["autopilot_frame"],
     )
 
 

@@ -1,12 +1,15 @@
 """Checks of an assembled vehicle configuration that no single TOML key shows.
 
 `mavsysid.vehicle.config_schema.validate_document` checks the document key by key;
-`check_vehicle` then checks the assembled `VehicleConfig`: inertia consistency, a c_M
-that is really a ratio, rotor allocation rank, lift and the order of limits. Problems
+`check_vehicle` then checks the assembled `VehicleConfig`: inertia consistency (a
+warning only: a prior is a guess), a c_M that is really a ratio, rotor allocation rank,
+lift and the order of limits. Problems
 raise the one-line `ConfigError` of `mavsysid.vehicle.config_messages`.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 from mavsysid.vehicle.allocation import allocation_matrix
@@ -15,17 +18,55 @@ from mavsysid.vehicle.config_types import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.mav_model import rotor_thrust
 
-__all__ = ["check_vehicle"]
+__all__ = [
+    "INERTIA_TRIANGLE_SLACK", "InertiaWarning", "check_vehicle", "triangle_violation",
+]
 
-# The RotorS Firefly inertia (the reference vehicle of docs/architecture.md) has j_z 21 % above
-# j_x + j_y, which no rigid body can have. Tolerating that much keeps the reference
-# loadable while still catching decimal-point slips and swapped units (factors ≥ 10).
-_INERTIA_TRIANGLE_SLACK = 0.25
+#: Relative slack of the rigid-body triangle inequality j_a + j_b ≥ j_c, for a config's
+#: inertia (beyond it: a warning) and for an estimated one (beyond it: refused). The RotorS
+#: Firefly inertia (the reference vehicle of docs/architecture.md) has j_z 21 % above
+#: j_x + j_y, which no rigid body can have; 25 % keeps that reference unflagged while still
+#: catching decimal-point slips and swapped units (factors ≥ 10).
+INERTIA_TRIANGLE_SLACK = 0.25
 # c_M/c_T is the rotor's torque-to-thrust lever, a few cm on any real propeller;
 # RotorS's ratio (≈ 0.016 m for the Firefly) passed as c_M gives a value ≥ 1000 m.
 _MAX_MOMENT_ARM = 0.1
 # Relative singular-value threshold below which an allocation direction is missing.
 _RANK_RTOL = 1e-9
+
+
+class InertiaWarning(UserWarning):
+    """A config inertia that breaks the rigid-body triangle inequality beyond the slack.
+
+    A prior is a guess (the paper's own Firefly values break the inequality), so it is
+    reported, not refused; an *estimate* that breaks it is refused
+    (`mavsysid.estimation.plausibility`).
+    """
+
+
+def triangle_violation(
+    J: np.ndarray | tuple[float, float, float], slack: float = INERTIA_TRIANGLE_SLACK,
+) -> tuple[int, int, int] | None:
+    """The first principal moment that exceeds the sum of the other two by more than ``slack``.
+
+    Parameters
+    ----------
+    J : array_like, shape (3,)
+        Principal moments j_x, j_y, j_z, kg·m².
+    slack : float
+        Relative tolerance: j_c > (1 + slack)(j_a + j_b) is a violation.
+
+    Returns
+    -------
+    tuple of 3 int or None
+        Indices (c, a, b) of the violation, None when the inequality holds.
+    """
+    j = np.asarray(J, dtype=float)
+    for c in range(3):
+        a, b = (c + 1) % 3, (c + 2) % 3
+        if j[c] > (1.0 + slack) * (j[a] + j[b]):
+            return c, a, b
+    return None
 
 
 def _rank_ok(rows: np.ndarray) -> bool:
@@ -74,23 +115,28 @@ def check_vehicle(file: str, config: VehicleConfig) -> None:
     Raises
     ------
     ConfigError
-        Inconsistent inertia, a c_M that is RotorS's ratio c_M/c_T, rotors that cannot
+        A c_M that is RotorS's ratio c_M/c_T, rotors that cannot
         produce independent thrust, roll, pitch and yaw torque, rotors that cannot lift
         the vehicle, limits in the wrong order, or a motor curve out of range (pwm_min ≥
         pwm_max, thrust_expo > 1).
+
+    Warns
+    -----
+    InertiaWarning
+        An inertia breaking the triangle inequality by more than `INERTIA_TRIANGLE_SLACK`.
     """
     params = config.parameters
     j = params.J
-    for c in range(3):
-        a, b = (c + 1) % 3, (c + 2) % 3
-        if j[c] > (1.0 + _INERTIA_TRIANGLE_SLACK) * (j[a] + j[b]):
-            names = ("j_x", "j_y", "j_z")
-            raise_config_error(
-                file, "[parameters].J",
-                f"principal moments satisfying {names[a]} + {names[b]} ≥ {names[c]} "
-                "(rigid-body triangle inequality)",
-                f"{describe_value(list(j))} ({names[a]} + {names[b]} = {j[a] + j[b]:.6g} < "
-                f"{names[c]} = {j[c]:.6g})")
+    violation = triangle_violation(j)
+    if violation is not None:
+        c, a, b = violation
+        names = ("j_x", "j_y", "j_z")
+        # One line, like the errors; stacklevel points at the caller of load_vehicle.
+        warnings.warn(
+            f"{file}: [parameters].J: {describe_value(list(j))} breaks the rigid-body "
+            f"triangle inequality ({names[a]} + {names[b]} = {j[a] + j[b]:.6g} < "
+            f"{names[c]} = {j[c]:.6g}, more than {INERTIA_TRIANGLE_SLACK:.0%} over); used as "
+            "the prior anyway, an estimate must satisfy it", InertiaWarning, stacklevel=4)
     arm = params.c_M / params.c_T
     if arm >= _MAX_MOMENT_ARM:
         raise_config_error(

@@ -13,6 +13,11 @@ Every problem raises `ConfigError` with one line ``"<file>: <key>: <expected>, g
 Known model effects are optional tables ``[effects.NAME]`` (NAME from
 `mavsysid.vehicle.model_effects.EFFECTS`) of the effect's parameters in SI units; a parameter
 left out is 0.
+
+The optional ``[autopilot]`` table names the autopilot frame whose motor outputs the
+rotors are (``frame = "ardupilot:quad_x"``, a name of
+`mavsysid.vehicle.motor_order.FRAME_NAMES`); the rotors must then match that frame's
+layout in angle and spin direction (`mavsysid.vehicle.motor_order.output_to_rotor`).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from typing import Any, NoReturn
 from mavsysid.vehicle.config_messages import describe_value, raise_config_error
 from mavsysid.vehicle.config_types import PARAMETER_UNITS
 from mavsysid.vehicle.model_effects import EFFECTS
+from mavsysid.vehicle.motor_order import FRAME_NAMES, MotorOrderError, output_to_rotor
 
 __all__ = ["EFFECT_PARAMETER_SIGNS", "MIN_ROTORS", "validate_document"]
 
@@ -87,6 +93,7 @@ _TOP_LEVEL: dict[str, str] = {
     "motor": "[motor]",
     "noise": "[noise]",
     "effects": "[effects]",
+    "autopilot": "[autopilot]",
 }
 #: Parameters of effects that have a sign by their meaning, ``(effect, parameter) →
 #: "positive" | "nonnegative"``; the rest may be negative. Read by the effect fits too.
@@ -284,6 +291,36 @@ def _effects(file: str, doc: Mapping[str, Any]) -> list[tuple[str, dict[str, flo
     return out
 
 
+def _autopilot_frame(file: str, doc: Mapping[str, Any],
+                     rotors: list[tuple[tuple[float, ...], int]]) -> str | None:
+    """Validate the optional ``[autopilot]`` table: a known frame the rotors match."""
+    raw = doc.get("autopilot")
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping):
+        raise_config_error(file, "[autopilot]", "a table with frame = \"AUTOPILOT:FRAME\"",
+                           describe_value(raw))
+    for key in raw:
+        if key != "frame":
+            raise_config_error(file, f"[autopilot].{key}", "one of the known keys (frame)",
+                               "an unknown key")
+    frame = raw.get("frame")
+    if frame is None:
+        raise_config_error(file, "[autopilot].frame", f"one of {', '.join(FRAME_NAMES)}",
+                           "nothing (the key is missing)")
+    if not isinstance(frame, str) or frame not in FRAME_NAMES:
+        close = difflib.get_close_matches(str(frame), FRAME_NAMES, n=1, cutoff=0.6)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise_config_error(file, "[autopilot].frame", f"one of {', '.join(FRAME_NAMES)}",
+                           f"{describe_value(frame)}{hint}")
+    try:
+        output_to_rotor([p for p, _ in rotors], [d for _, d in rotors], frame)
+    except MotorOrderError as exc:
+        raise_config_error(file, "[autopilot].frame", f"rotors laid out as {frame}: "
+                           f"{exc.expected}", exc.found)
+    return frame
+
+
 def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     """Check a parsed TOML document key by key and return normalised values.
 
@@ -301,7 +338,7 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
         (position tuple in m, direction int)), and ``parameters``, ``limits``, ``motor``,
         ``noise``: dicts holding only the keys present in the file, as floats (``J`` a
         tuple of 3 floats); ``effects``: list of (effect name, {parameter: float}) in
-        file order.
+        file order; ``autopilot_frame``: the ``[autopilot] frame`` name or None.
 
     Raises
     ------
@@ -320,4 +357,5 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     rotors = _rotors(file, doc)
     tables = {section: _table(file, doc, section) for section in _TABLES}
     return {"name": doc.get("name"), "mass": mass, "rotors": rotors, **tables,
-            "effects": _effects(file, doc)}
+            "effects": _effects(file, doc),
+            "autopilot_frame": _autopilot_frame(file, doc, rotors)}

@@ -62,6 +62,9 @@ def vehicle_to_toml(config: VehicleConfig) -> str:
     for rotor in config.rotors:
         lines += ["", "[[rotors]]", f"position = {_toml_value(rotor.position)}",
                   f"direction = {int(rotor.direction):+d}"]
+    if config.autopilot_frame is not None:
+        lines += ["", "# The rotors are this autopilot frame's motor outputs.", "[autopilot]",
+                  f"frame = {_toml_string(config.autopilot_frame)}"]
     # The tables are flat tables of floats (J a float triple): writing every field
     # keeps fields added to the dataclasses later saved without touching this function.
     for table, section in (("parameters", config.parameters), ("limits", config.limits),

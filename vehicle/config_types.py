@@ -174,7 +174,7 @@ class VehicleConfig:
     mass : float
         Mass, kg (weighed, not estimated).
     rotors : tuple of RotorConfig
-        The rotors, in the order of the rotor-speed columns n1..nk of a log.
+        The rotors, in the order of the rotor-speed columns n1..nk of a pose log.
     parameters : Parameters
         Nominal (prior) values of θ.
     limits, motor, noise
@@ -184,6 +184,11 @@ class VehicleConfig:
         simulators' physics and the estimator's model. Empty by default.
     source : str
         Where the configuration came from (a path, or ``builtin:NAME``).
+    autopilot_frame : str or None
+        ``[autopilot] frame``: the autopilot frame whose motor outputs the rotors are
+        (a name of `mavsysid.vehicle.motor_order.FRAME_NAMES`); the readers put a log's
+        motor outputs into the config's rotor order through it. None: log output i is
+        rotor i.
     """
 
     name: str
@@ -195,6 +200,7 @@ class VehicleConfig:
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     source: str = ""
     effects: tuple[ModelEffect, ...] = ()
+    autopilot_frame: str | None = None
 
     @property
     def rotor_count(self) -> int:

@@ -10,6 +10,7 @@ file; `streams.to_flight_data` resamples the rotor speeds to the pose times and
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -20,11 +21,17 @@ from mavsysid.estimation.readers.pose_csv import read_pose_csv
 from mavsysid.estimation.readers.streams import LogStreams, to_flight_data
 from mavsysid.estimation.readers.tlog import read_tlog
 from mavsysid.estimation.readers.ulog import read_ulog
+from mavsysid.estimation.readers.window import (
+    TimeWindow,
+    choose_window,
+    dataflash_control_spans,
+    ulog_control_spans,
+)
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError
 
-__all__ = ["READERS", "load_flight"]
+__all__ = ["READERS", "TimeWindow", "load_flight"]
 
 #: The reader of each supported file extension (lower case).
 READERS: dict[str, Callable[[Path, VehicleConfig], LogStreams]] = {
@@ -44,8 +51,31 @@ def _existing_file(path: str | Path, what: str) -> Path:
     return path
 
 
+#: Readers of the autopilot's mode spans, for formats whose reader does not give them.
+_MODE_SPANS = {".ulg": ulog_control_spans, ".bin": dataflash_control_spans}
+
+
+def _windowed(streams: LogStreams, path: Path, start: float | None, end: float | None,
+              auto_window: bool) -> tuple[LogStreams, TimeWindow | None]:
+    """The window to use (`choose_window`), with its ``info:`` note added to the streams."""
+    if not auto_window and start is None and end is None:
+        return streams, None
+
+    def spans() -> tuple[tuple[float, float], ...] | None:
+        if streams.control_spans is not None or path.suffix.lower() not in _MODE_SPANS:
+            return streams.control_spans
+        return _MODE_SPANS[path.suffix.lower()](path)
+
+    window = choose_window(path, start, end, spans)
+    if window is None:
+        return streams, None
+    note = f"info: {path}: the window {window.describe()} is used: {window.reason}"
+    return dataclasses.replace(streams, warnings=(*streams.warnings, note)), window
+
+
 def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | None = None,
-                time_offset: float | None = None) -> FlightData:
+                time_offset: float | None = None, start: float | None = None,
+                end: float | None = None, auto_window: bool = True) -> FlightData:
     """Read a flight log as pose and rotor speeds in mavsysid's conventions.
 
     Parameters
@@ -61,6 +91,13 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     time_offset : float, optional
         s, with t_log = t_pose + time_offset; found by cross-correlation if omitted.
         Only meaningful with `pose`.
+    start, end : float, optional
+        The window to use, s on the log's clock (either side may be open); given, it
+        replaces the default window.
+    auto_window : bool
+        Without `start` and `end`, use the default window
+        (`mavsysid.estimation.readers.window.choose_window`: the trajectory flown by
+        ``mavsysid stream``, else the longest GUIDED/OFFBOARD span); False: the whole log.
 
     Returns
     -------
@@ -86,6 +123,7 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     if pose is None and time_offset is not None:
         raise InputError(f"{path}: a time offset applies only with a motion-capture pose file")
     streams = reader(path, vehicle)
+    streams, window = _windowed(streams, path, start, end, auto_window)
     if pose is not None:
         streams = merge_pose(streams, _existing_file(pose, "motion-capture pose"), time_offset)
-    return to_flight_data(streams, vehicle)
+    return to_flight_data(streams, vehicle, None if window is None else window.bounds)

@@ -2,8 +2,10 @@
 
 Problems the estimator cannot work around are errors (`LogFormatError`, one line naming
 the file, exit code 2): a rotor count other than the vehicle config's, rotor speeds in
-the wrong unit (rpm, rev/s, normalised outputs), less than `MIN_DURATION` of data, a gap
-longer than `MAX_GAP`, attitudes far from unit quaternions. Problems that can be repaired
+the wrong unit (rpm, rev/s, normalised outputs), less than `MIN_DURATION` of data, attitudes
+far from unit quaternions (slow sampling is not refused). A gap longer than `MAX_GAP` (see
+`gap_limit`) splits the flight into segments (`FlightData.segment_starts`), and segments
+shorter than `MIN_DURATION` are dropped, with a note. Problems that can be repaired
 are repaired and reported with counts as warnings: rows with NaN dropped, out-of-order
 timestamps sorted, duplicate timestamps dropped, short gaps, slightly non-unit
 quaternions normalised.
@@ -27,8 +29,11 @@ __all__ = [
     "QUATERNION_ERROR",
     "QUATERNION_WARNING",
     "check_sampling",
+    "gap_limit",
+    "long_gaps",
     "normalise_quaternions",
     "repair_samples",
+    "split_segments",
     "validate_flight",
 ]
 
@@ -122,30 +127,107 @@ def normalise_quaternions(q: np.ndarray, t: np.ndarray, source: str,
     return q / norm[:, None], notes
 
 
+def gap_limit(period: float) -> float:
+    """The longest step, s, bridged in samples of median step ``period``, s.
+
+    `MAX_GAP` (one sample period for series sampled more slowly) plus half a sample period
+    of tolerance: timestamps carry clock ticks and jitter, so a gap of exactly `MAX_GAP`
+    must not count as longer.
+    """
+    return max(MAX_GAP, period) + 0.5 * period
+
+
+def long_gaps(t: np.ndarray) -> np.ndarray:
+    """The gaps too long to bridge in strictly increasing times, shape (N ≥ 2,), s.
+
+    Returns
+    -------
+    ndarray, shape (G, 2)
+        The last sample time before and the first after each gap (see `gap_limit`), s.
+    """
+    dt = np.diff(t)
+    wide = dt > gap_limit(float(np.median(dt)))
+    return np.column_stack([t[:-1][wide], t[1:][wide]])
+
+
 def check_sampling(t: np.ndarray, source: str, what: str) -> list[str]:
     """Check gaps in strictly increasing sample times, shape (N ≥ 2,), s.
 
-    Returns warnings for gaps between 2 sample periods (the median step) and `MAX_GAP`;
-    raises `LogFormatError` naming the time of a longer gap, or for sampling slower than
-    1 / `MAX_GAP`.
+    Returns warnings for gaps between 2 sample periods (the median step) and the
+    `gap_limit` (longer gaps split the flight, see `split_segments`); and a
+    note, not an error, for sampling slower than 1 / `MAX_GAP`.
     """
     dt = np.diff(t)
     period = float(np.median(dt))
-    if period > MAX_GAP:
-        raise LogFormatError(f"{source}: {what} sampled every {period:.3g} s; the estimator "
-                             f"needs samples at least every {MAX_GAP:g} s")
-    if (dt > MAX_GAP).any():
-        i = int(np.argmax(dt > MAX_GAP))
-        raise LogFormatError(
-            f"{source}: gap of {dt[i]:.3g} s in the {what} samples after t = {t[i]:.3f} s "
-            f"(at most {MAX_GAP:g} s can be bridged); use a log without dropouts")
-    long = dt > 2.0 * period
+    # Slow sampling is not refused: it is information, only less of it. Slow inputs are
+    # interpolated with a modelled error (`mavsysid.estimation.input_noise`).
+    slow = ([f"{source}: {what} sampled only every {period:.3g} s (slower than every "
+             f"{MAX_GAP:g} s): used, with the larger uncertainty that leaves between "
+             "samples"] if period > MAX_GAP else [])
+    long = (dt > 2.0 * period) & (dt <= gap_limit(period))
     if not long.any():
-        return []
+        return slow
     i = int(np.argmax(np.where(long, dt, 0.0)))
-    return [f"{source}: {_plural(int(long.sum()), 'gap')} in the {what} samples longer than "
+    return [*slow,
+            f"{source}: {_plural(int(long.sum()), 'gap')} in the {what} samples longer than "
             f"2 sample periods ({2.0 * period:.3g} s), longest {dt[i]:.3g} s after "
             f"t = {t[i]:.3f} s"]
+
+
+def split_segments(t: np.ndarray, gaps: np.ndarray, source: str
+                   ) -> tuple[np.ndarray, tuple[int, ...], list[str]]:
+    """Split sample times at gaps too long to bridge; drop segments that are too short.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Strictly increasing sample times, s.
+    gaps : ndarray, shape (G, 2)
+        Gaps (last time before, first time after), s, of this or any other input series:
+        samples strictly inside one are dropped, and a segment ends before each.
+    source : str
+        The file, for messages.
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (N,)
+        The samples kept.
+    starts : tuple of int
+        Index, into the kept samples, of each segment's first sample (``(0,)``: one).
+    notes : list of str
+        What was split and dropped, one line each.
+    """
+    keep = np.ones(t.shape[0], dtype=bool)
+    breaks = np.zeros(t.shape[0], dtype=bool)
+    for a, b in gaps:
+        keep &= ~((t > a) & (t < b))
+    tk = t[keep]
+    for a, b in gaps:
+        # A segment starts at the first sample at or after the gap's end.
+        i = int(np.searchsorted(tk, b))
+        if 0 < i < tk.shape[0] and tk[i - 1] <= a:
+            breaks[i] = True
+    starts = [0, *np.flatnonzero(breaks[:tk.shape[0]]).tolist()]
+    if len(starts) == 1 and keep.all():
+        return keep, (0,), []
+    bounds = list(zip(starts, [*starts[1:], tk.shape[0]], strict=True))
+    longest = float(np.max(gaps[:, 1] - gaps[:, 0]))
+    notes = [f"{source}: {_plural(len(gaps), 'gap')} too long to bridge (longest "
+             f"{longest:.3g} s) split the flight into {_plural(len(bounds), 'segment')}; the "
+             "filter restarts the vehicle states after each gap and carries θ across it"]
+    short = [(i, j) for i, j in bounds if tk[j - 1] - tk[i] < MIN_DURATION]
+    for i, j in short:
+        notes.append(f"{source}: dropped the segment t = {tk[i]:.3f} to {tk[j - 1]:.3f} s, "
+                     f"shorter than {MIN_DURATION:g} s")
+    index = np.flatnonzero(keep)
+    new_starts, count = [], 0
+    for i, j in bounds:
+        if (i, j) in short:
+            keep[index[i:j]] = False
+        else:
+            new_starts.append(count)
+            count += j - i
+    return keep, tuple(new_starts) or (0,), notes
 
 
 def _check_rotor_count(data: FlightData, vehicle: VehicleConfig) -> None:
@@ -163,8 +245,10 @@ def _check_hover(data: FlightData, vehicle: VehicleConfig) -> None:
     if not spinning.any():
         raise LogFormatError(f"{data.source}: the rotor speeds are zero throughout; the "
                              "rotors never spun in this log")
-    # Samples with the rotors stopped (on the ground, disarmed) say nothing about units.
+    # Samples with the rotors stopped or idling (on the ground, disarmed, spool-up) say
+    # nothing about units: only those above 1 % of the log's high thrust count.
     thrust = collective_thrust(vehicle.parameters.c_T, n[spinning])
+    thrust = thrust[thrust >= 0.01 * np.percentile(thrust, 95)]
     ratio = float(np.median(thrust)) / (vehicle.mass * GRAVITY)
     if 1.0 / HOVER_FACTOR <= ratio <= HOVER_FACTOR:
         return
@@ -187,7 +271,8 @@ def _check_hover(data: FlightData, vehicle: VehicleConfig) -> None:
     raise LogFormatError(f"{data.source}: {unit}")
 
 
-def validate_flight(data: FlightData, vehicle: VehicleConfig) -> FlightData:
+def validate_flight(data: FlightData, vehicle: VehicleConfig,
+                    gaps: np.ndarray | None = None) -> FlightData:
     """Apply every check of this module to a flight.
 
     Parameters
@@ -196,12 +281,16 @@ def validate_flight(data: FlightData, vehicle: VehicleConfig) -> FlightData:
         A flight as a reader assembled it (times need not be sorted yet).
     vehicle : VehicleConfig
         The vehicle that flew: rotor count, nominal c_T and mass.
+    gaps : ndarray, shape (G, 2), optional
+        Gaps too long to bridge in the rotor-speed series (`long_gaps`), s; the pose's
+        own are found here.
 
     Returns
     -------
     FlightData
-        Repaired (see `repair_samples`, `normalise_quaternions`), with the warnings of
-        the repairs and of short gaps appended to ``data.warnings``.
+        Repaired (see `repair_samples`, `normalise_quaternions`), split into segments at
+        long gaps (`split_segments`), with the warnings of the repairs, of short gaps and
+        of the split appended to ``data.warnings``.
 
     Raises
     ------
@@ -223,8 +312,15 @@ def validate_flight(data: FlightData, vehicle: VehicleConfig) -> FlightData:
         raise LogFormatError(f"{source}: only {duration:.3g} s of pose and rotor speeds (t = "
                              f"{t[0]:.3f} to {t[-1]:.3f} s); need at least {MIN_DURATION:g} s")
     notes += check_sampling(t, source, "pose")
+    gaps = long_gaps(t) if gaps is None else np.vstack([long_gaps(t), gaps])
+    keep, starts, more = split_segments(t, gaps, source)
+    notes += more
+    if not keep.any():
+        raise LogFormatError(f"{source}: no stretch of {MIN_DURATION:g} s of pose and rotor "
+                             f"speeds without a gap longer than {MAX_GAP:g} s")
+    t, stacked, q = t[keep], stacked[keep], q[keep]
     repaired = dataclasses.replace(data, t=t, position=stacked[:, :3], quaternion=q,
                                    rotor_speeds=stacked[:, 7:7 + k],
-                                   warnings=(*data.warnings, *notes))
+                                   warnings=(*data.warnings, *notes), segment_starts=starts)
     _check_hover(repaired, vehicle)
     return repaired

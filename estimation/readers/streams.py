@@ -14,8 +14,10 @@ from typing import Literal
 
 import numpy as np
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.input_noise import InputSamples
 from mavsysid.estimation.readers.checks import (
     check_sampling,
+    long_gaps,
     normalise_quaternions,
     repair_samples,
     validate_flight,
@@ -72,6 +74,9 @@ class LogStreams:
         The truth block of a simulated flight.
     pose_hint : str
         What pose messages the reader looked for, for the error when there is none.
+    control_spans : tuple of (float, float), or None
+        Time spans, s, in which the autopilot was in the mode an external controller flies
+        it in (GUIDED, OFFBOARD); None when the log says nothing about modes.
     """
 
     source: str
@@ -81,6 +86,7 @@ class LogStreams:
     warnings: tuple[str, ...] = ()
     truth: dict | None = None
     pose_hint: str = ""
+    control_spans: tuple[tuple[float, float], ...] | None = None
 
 
 def combine_pose(source: str, position: Series, attitude: Series,
@@ -126,7 +132,17 @@ def combine_pose(source: str, position: Series, attitude: Series,
     return Series(tp, np.column_stack([p, q]), label), notes
 
 
-def to_flight_data(streams: LogStreams, vehicle: VehicleConfig) -> FlightData:
+def _inside(t: np.ndarray, window: tuple[float, float] | None, margin: int = 0) -> slice:
+    """The samples of increasing times ``t`` inside ``window`` (plus ``margin`` each side)."""
+    if window is None:
+        return slice(None)
+    lo = int(np.searchsorted(t, window[0], side="left"))
+    hi = int(np.searchsorted(t, window[1], side="right"))
+    return slice(max(lo - margin, 0), hi + margin)
+
+
+def to_flight_data(streams: LogStreams, vehicle: VehicleConfig,
+                   window: tuple[float, float] | None = None) -> FlightData:
     """Resample the rotor speeds to the pose times and check the result.
 
     Parameters
@@ -135,6 +151,10 @@ def to_flight_data(streams: LogStreams, vehicle: VehicleConfig) -> FlightData:
         What a reader (and possibly `merge_pose`) found.
     vehicle : VehicleConfig
         The vehicle that flew.
+    window : tuple of 2 float, optional
+        Start and end, s, on the log's clock: only the pose samples inside are used, and
+        the rotor speeds inside and their one sample either side (for the interpolation);
+        everything outside, such as slow telemetry before a flight, is not checked.
 
     Returns
     -------
@@ -156,17 +176,27 @@ def to_flight_data(streams: LogStreams, vehicle: VehicleConfig) -> FlightData:
         raise LogFormatError(f"{source}: no rotor speeds or motor outputs in {source}")
     pose = streams.pose
     t, values, notes = repair_samples(pose.t, pose.values, source, pose.label)
+    inside = _inside(t, window)
+    if window is not None and t[inside].shape[0] < 2:
+        span = f"t = {t[0]:.3f} to {t[-1]:.3f} s" if t.shape[0] else "no samples"
+        raise LogFormatError(f"{source}: fewer than 2 pose samples in the window t = "
+                             f"{window[0]:.3f} to {window[1]:.3f} s (the log has {span})")
+    t, values = t[inside], values[inside]
     q, more = normalise_quaternions(values[:, 3:7], t, source, pose.label)
     values = np.column_stack([values[:, :3], q])
     notes = [*streams.warnings, *notes, *more]
     columns: list[tuple[np.ndarray, np.ndarray]] = []
+    gaps = [np.empty((0, 2))]
     lo, hi = -np.inf, np.inf
     for series in streams.rotors:
         ts, vs, more = repair_samples(series.t, series.values, source, series.label)
+        inside = _inside(ts, window, margin=1)
+        ts, vs = ts[inside], vs[inside]
         notes += more
         if ts.shape[0] < 2:
             raise LogFormatError(f"{source}: fewer than 2 usable {series.label} samples")
         notes += check_sampling(ts, source, series.label)
+        gaps.append(long_gaps(ts))
         lo, hi = max(lo, ts[0]), min(hi, ts[-1])
         columns.append((ts, vs))
     keep = (t >= lo) & (t <= hi)
@@ -175,10 +205,10 @@ def to_flight_data(streams: LogStreams, vehicle: VehicleConfig) -> FlightData:
         raise LogFormatError(f"{source}: the pose ({span}) and the rotor speeds (t = {lo:.3f} "
                              f"to {hi:.3f} s) do not overlap in time")
     t, values = t[keep], values[keep]
-    speeds = np.column_stack([np.interp(t, ts, vs[:, j])
-                              for ts, vs in columns for j in range(vs.shape[1])])
+    speeds = InputSamples(tuple(columns)).interpolate(t)
     data = FlightData(t=t, position=values[:, :3], quaternion=values[:, 3:7],
                       rotor_speeds=speeds, source=source,
                       pose_source=streams.pose_source,
-                      truth=streams.truth, warnings=tuple(notes))
-    return validate_flight(data, vehicle)
+                      truth=streams.truth, warnings=tuple(notes),
+                      inputs=InputSamples(tuple(columns)))
+    return validate_flight(data, vehicle, np.vstack(gaps))

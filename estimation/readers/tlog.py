@@ -3,8 +3,9 @@
 Pose: ATT_POS_MOCAP (motion capture forwarded to the vehicle; NED, q [w, x, y, z] FRD →
 NED) if present, else LOCAL_POSITION_NED with ATTITUDE_QUATERNION (or ATTITUDE Euler
 angles), the autopilot's own estimate. Rotor speeds: ESC_TELEMETRY_1_TO_4 / _5_TO_8 /
-_9_TO_12 ``rpm`` (ESC i is rotor i of the vehicle config), else SERVO_OUTPUT_RAW
-channels 1..k through the motor curve (a warning says so).
+_9_TO_12 ``rpm`` (ESC i is motor output i), else the SERVO_OUTPUT_RAW channels that move
+(the motors) through the motor curve (a warning says so); the outputs are put into the
+config's rotor order by `mavsysid.estimation.readers.motor_outputs`.
 
 Time base: the autopilot's clock (s since boot), because the pose messages carry it
 (``time_boot_ms``). ESC_TELEMETRY and ATT_POS_MOCAP carry no autopilot time (the mocap
@@ -19,6 +20,8 @@ used, from the first message.
 
 Only messages from the autopilot (the sender of the first HEARTBEAT from an autopilot)
 count as the vehicle's, except ATT_POS_MOCAP, which a ground station or companion sends.
+The autopilot's HEARTBEATs also give the spans flown in GUIDED/OFFBOARD mode
+(``LogStreams.control_spans``, for the default window).
 """
 
 from __future__ import annotations
@@ -31,7 +34,9 @@ from typing import Any
 import numpy as np
 from mavsysid.estimation.readers.guard import import_parser, parsing
 from mavsysid.estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
+from mavsysid.estimation.readers.motor_outputs import motor_output_count, rotors_in_config_order
 from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
+from mavsysid.estimation.readers.window import CONTROLLED_MODES, spans_of
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import (
@@ -164,13 +169,22 @@ def _servo_rotors(own: _Messages, vehicle: VehicleConfig) -> Series | None:
         return None
     pwm = np.array([[getattr(m, f"servo{i}_raw", 0) or 0 for i in range(1, 17)] for m in rows],
                    dtype=float)
-    used = pwm.any(axis=0)
-    # Leading channels that ever output: the motors (later ones may drive other servos).
-    count = min(int(np.argmin(used)) if not used.all() else 16, vehicle.rotor_count)
+    count = motor_output_count(pwm)
     if count == 0:
         return None
     t = _unwrap_us(np.array([m.time_usec for m in rows], dtype=float))
     return Series(t, rotor_speed_from_pwm(pwm[:, :count], vehicle), "SERVO_OUTPUT_RAW PWM")
+
+
+def _control_spans(own: _Messages, mavutil: ModuleType,
+                   offset: float) -> tuple[tuple[float, float], ...] | None:
+    """Spans of the autopilot's HEARTBEATs in GUIDED/OFFBOARD mode, s; None without any."""
+    beats = own.get("HEARTBEAT", [])
+    if not beats:
+        return None
+    t = np.array([r for r, _, _ in beats]) - offset
+    active = np.array([mavutil.mode_string_v10(m) in CONTROLLED_MODES for _, _, m in beats])
+    return tuple(spans_of(t, active, False, float(t[-1])))
 
 
 def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
@@ -194,7 +208,8 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
         An unreadable file, or neither ESC rpm nor motor outputs.
     """
     found = _collect(path)
-    own = _from_autopilot(found, import_parser("pymavlink.mavutil", path).mavlink)
+    mavutil = import_parser("pymavlink.mavutil", path)
+    own = _from_autopilot(found, mavutil.mavlink)
     notes: list[str] = []
     offset = _clock_offset(own)
     if offset is None:
@@ -215,5 +230,9 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
                                  "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")
+        spans = _control_spans(own, mavutil, offset)
+    rotors, ordered = rotors_in_config_order(str(path), rotors, vehicle)
+    notes += ordered
     return LogStreams(source=str(path), pose=pose, pose_source=pose_source,
-                      rotors=rotors, warnings=tuple(notes), pose_hint=_POSE_HINT)
+                      rotors=rotors, warnings=tuple(notes), pose_hint=_POSE_HINT,
+                      control_spans=spans)

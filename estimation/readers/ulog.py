@@ -8,13 +8,29 @@ z-down world frame with arbitrary heading) is taken as NED, which only turns the
 frame about the vertical, which the model does not see. Times are ``timestamp_sample``
 (the measurement time) where the topic has it, else ``timestamp``; µs since boot → s.
 
-Rotor speeds: ``esc_status`` ``esc[i].esc_rpm`` for i < ``esc_count`` (ESC i is rotor
-i + 1 of the vehicle config), else motor outputs with a warning: ``actuator_motors``
-``control[i]`` is relative *thrust* (PX4 applies THR_MDL_FAC after it, in the output
-driver), so n = rotor_speed_max · sqrt(control) — the motor curve with thrust_expo 0;
-NaN there means a stopped motor (n = 0), and a column that is NaN throughout an unused
-one. Else ``actuator_outputs`` ``output[i]`` (instance 0, taken as PWM in µs) through
-the vehicle's `[motor]` curve. Only instance 0 of each topic is read.
+Rotor speeds: ``esc_status`` ``esc[i].esc_rpm``, measured. The ESCs are those whose
+``actuator_function`` is a motor (101 = Motor1 … 112), in motor order, where the log has
+that field; else ESCs 0..``esc_count`` − 1 (ESC i is motor output i + 1, put into the
+config's rotor order by `mavsysid.estimation.readers.motor_outputs`).
+Measured rpm is used when sampled at least every `RPM_USABLE_PERIOD` s, or when no
+commanded output is logged at least twice as often; otherwise (PX4 often logs
+``esc_status`` at 4 Hz) the commanded outputs carry more information about the rotor
+speeds between the rpm samples, and a warning says which input was used and why. Every
+input is interpolated to the pose times, and what that costs is modelled as added
+uncertainty (`mavsysid.estimation.input_noise`), whatever the rate.
+
+Motor outputs: ``actuator_motors`` ``control[i]`` is relative *thrust* (PX4 applies
+THR_MDL_FAC after it, in the output driver), so n = rotor_speed_max · sqrt(control) — the
+motor curve with thrust_expo 0; NaN there means a stopped motor (n = 0), and a column
+that is NaN throughout an unused one. Else ``actuator_outputs`` ``output[i]`` (taken as
+PWM in µs) through the vehicle's `[motor]` curve.
+
+Multi-instance topics: the pose topics are read from instance 0, PX4's primary (a
+second ``vehicle_local_position`` or odometry instance is another estimator's or
+sensor's, never mixed in). Of several ``esc_status`` instances the one with the most
+ESCs reporting rpm is read; of ``actuator_motors`` the one with the most motors; of
+``actuator_outputs`` (one instance per output driver: PWM main, AUX, DShot, UAVCAN) the
+one whose outputs move most, i.e. the one driving the motors, lowest instance on ties.
 """
 
 from __future__ import annotations
@@ -28,6 +44,7 @@ from mavsysid.estimation.readers.motor_curve import (
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
 )
+from mavsysid.estimation.readers.motor_outputs import motor_output_count, rotors_in_config_order
 from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
@@ -35,7 +52,17 @@ from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["read_ulog"]
+__all__ = ["RPM_USABLE_PERIOD", "read_ulog"]
+
+#: Longest median sample period of esc_status rpm that is used in preference to motor
+#: outputs logged at least twice as often, s. A multirotor's rotor speeds change within
+#: tens of ms in a manoeuvre; at 10 Hz measured rpm still resolves the motion the
+#: estimator relies on, at 4 Hz the commands between the samples say more.
+RPM_USABLE_PERIOD = 0.1
+#: PX4 OutputFunction values of Motor1 … Motor12 (esc_report.actuator_function).
+_MOTOR_FUNCTIONS = range(101, 113)
+#: actuator_motors controls smaller than this are a stopped motor's 0 with float noise.
+_STOPPED_CONTROL = 1e-6
 
 _ODOMETRY = ("vehicle_mocap_odometry", "vehicle_visual_odometry")
 _TOPICS = [*_ODOMETRY, "vehicle_local_position", "vehicle_attitude", "esc_status",
@@ -44,17 +71,33 @@ _POSE_HINT = ("no vehicle_mocap_odometry or vehicle_visual_odometry, nor "
               "vehicle_local_position with vehicle_attitude")
 
 Topic = dict[str, np.ndarray]
+#: Each topic's instances: topic name → {multi_id: field name → array}, non-empty only.
+Instances = dict[str, dict[int, Topic]]
 
 
-def _load(path: Path) -> tuple[dict[str, Topic], list[str]]:
-    """Instance 0 of each topic used here, as field name → array; and warnings."""
+def _load(path: Path) -> tuple[Instances, list[str]]:
+    """Every non-empty instance of each topic used here; and warnings."""
     ULog = import_parser("pyulog", path).ULog
     with parsing(path, "a PX4 ULog file"):
         ulog = ULog(str(path), message_name_filter_list=_TOPICS)
-    topics = {d.name: d.data for d in ulog.data_list if d.multi_id == 0}
+    topics: Instances = {}
+    for d in ulog.data_list:
+        if d.data["timestamp"].size:
+            topics.setdefault(d.name, {})[int(d.multi_id)] = d.data
     notes = [f"{path}: pyulog found the file corrupt in places and skipped the damaged "
              "parts"] if ulog.file_corruption else []
     return topics, notes
+
+
+def _primary(topics: Instances, name: str) -> Topic | None:
+    """Instance 0 of a topic (PX4's primary), else its lowest instance; None if absent."""
+    instances = topics.get(name)
+    return instances[min(instances)] if instances else None
+
+
+def _period(t: np.ndarray) -> float:
+    """Median sample period, s (inf for fewer than 2 samples)."""
+    return float(np.median(np.diff(np.sort(t)))) if t.size > 1 else np.inf
 
 
 def _time(topic: Topic) -> np.ndarray:
@@ -70,10 +113,10 @@ def _columns(topic: Topic, names: list[str]) -> np.ndarray:
     return np.column_stack([topic[n].astype(float) for n in names])
 
 
-def _pose(path: Path, topics: dict[str, Topic]) -> tuple[Series | None, PoseSource, list[str]]:
+def _pose(path: Path, topics: Instances) -> tuple[Series | None, PoseSource, list[str]]:
     """The pose series, its origin and warnings from cleaning it."""
     for name in _ODOMETRY:
-        odometry = topics.get(name)
+        odometry = _primary(topics, name)
         if odometry is None:
             continue
         fields = ([f"position[{i}]" for i in range(3)] if "position[0]" in odometry
@@ -82,7 +125,8 @@ def _pose(path: Path, topics: dict[str, Topic]) -> tuple[Series | None, PoseSour
         q = _columns(odometry, [f"q[{i}]" for i in range(4)])
         values = np.column_stack([ned_to_enu(p), quaternion_ned_to_enu(q)])
         return Series(_time(odometry), values, name), "motion_capture", []
-    local, attitude = topics.get("vehicle_local_position"), topics.get("vehicle_attitude")
+    local = _primary(topics, "vehicle_local_position")
+    attitude = _primary(topics, "vehicle_attitude")
     if local is None or attitude is None:
         return None, "autopilot", []
     position = Series(_time(local), _columns(local, ["x", "y", "z"]), "vehicle_local_position")
@@ -92,59 +136,110 @@ def _pose(path: Path, topics: dict[str, Topic]) -> tuple[Series | None, PoseSour
     return pose, "autopilot", notes
 
 
-def _esc(topics: dict[str, Topic]) -> Series | None:
-    """esc_status rpm of ESCs 0..esc_count − 1, rad/s."""
-    esc = topics.get("esc_status")
-    count = int(esc["esc_count"].max()) if esc is not None and esc["timestamp"].size else 0
-    if not count:
-        return None
-    # Reported ESC speeds are magnitudes; the spin direction is the config's.
-    rpm = np.abs(_columns(esc, [f"esc[{i}].esc_rpm" for i in range(count)]))
-    return Series(_time(esc), rpm * RPM_TO_RAD_S, "esc_status rpm")
+def _motor_escs(esc: Topic) -> list[int]:
+    """Indices of the ESCs that drive motors, in motor order."""
+    count = int(esc["esc_count"].max())
+    functions = {i: int(esc[f"esc[{i}].actuator_function"].max()) for i in range(count)
+                 if f"esc[{i}].actuator_function" in esc}
+    motors = {f: i for i, f in functions.items() if f in _MOTOR_FUNCTIONS}
+    if motors:
+        return [motors[f] for f in sorted(motors)]
+    return list(range(count))
 
 
-def _motors(topics: dict[str, Topic], vehicle: VehicleConfig) -> Series | None:
-    """actuator_motors relative thrust → n = n_max · sqrt(control), rad/s."""
-    motors = topics.get("actuator_motors")
-    if motors is None or not motors["timestamp"].size:
-        return None
+def _esc(topics: Instances) -> Series | None:
+    """esc_status rpm of the motor ESCs of the instance with most ESCs reporting, rad/s."""
+    best, best_count = None, 0
+    for _, esc in sorted(topics.get("esc_status", {}).items()):
+        escs = _motor_escs(esc)
+        # Reported ESC speeds are magnitudes; the spin direction is the config's.
+        rpm = np.abs(_columns(esc, [f"esc[{i}].esc_rpm" for i in escs])) if escs else None
+        reporting = int((rpm > 0.0).any(axis=0).sum()) if rpm is not None else 0
+        if rpm is not None and (best is None or reporting > best_count):
+            best = Series(_time(esc), rpm * RPM_TO_RAD_S, "esc_status rpm")
+            best_count = reporting
+    return best
+
+
+def _motor_control(motors: Topic) -> np.ndarray:
+    """actuator_motors controls of the motors used (leading columns not NaN throughout)."""
     names = sorted((n for n in motors if n.startswith("control[")), key=lambda n: int(n[8:-1]))
     control = _columns(motors, names)
     used = ~np.isnan(control).all(axis=0)
     count = int(np.argmin(used)) if not used.all() else len(names)
-    if not count:
+    return control[:, :count]
+
+
+def _motors(topics: Instances, vehicle: VehicleConfig) -> Series | None:
+    """actuator_motors relative thrust → n = n_max · sqrt(control), rad/s."""
+    found = [(_motor_control(m), m) for _, m in sorted(topics.get("actuator_motors", {}).items())]
+    if not found:
         return None
-    thrust = np.nan_to_num(control[:, :count], nan=0.0)  # NaN: motor stopped
+    # The instance with the most motors; the first of equals.
+    control, motors = max(found, key=lambda pair: pair[0].shape[1])
+    if not control.shape[1]:
+        return None
+    thrust = np.nan_to_num(control, nan=0.0)  # NaN: motor stopped
+    # PX4 logs a disarmed motor as 0 give or take float noise (1e-10): stopped too.
+    thrust[np.abs(thrust) < _STOPPED_CONTROL] = 0.0
     speeds = rotor_speed_from_throttle(thrust, vehicle.limits.rotor_speed_max, thrust_expo=0.0)
     return Series(_time(motors), speeds, "actuator_motors")
 
 
-def _outputs(topics: dict[str, Topic], vehicle: VehicleConfig) -> Series | None:
+def _driving_outputs(topics: Instances) -> Topic | None:
+    """The actuator_outputs instance whose outputs move most (the motors'); lowest on ties."""
+    best, spread = None, -1.0
+    for _, outputs in sorted(topics.get("actuator_outputs", {}).items()):
+        used = [f"output[{i}]" for i in range(int(outputs["noutputs"].max()))]
+        moved = float(np.ptp(_columns(outputs, used), axis=0).sum()) if used else 0.0
+        if moved > spread:
+            best, spread = outputs, moved
+    return best
+
+
+def _outputs(topics: Instances, vehicle: VehicleConfig) -> Series | None:
     """actuator_outputs PWM of outputs 1..k through the vehicle's motor curve, rad/s."""
-    outputs = topics.get("actuator_outputs")
-    if outputs is None or not outputs["timestamp"].size:
+    outputs = _driving_outputs(topics)
+    if outputs is None:
         return None
-    count = min(int(outputs["noutputs"].max()), vehicle.rotor_count)
+    slots = _columns(outputs, [f"output[{i}]" for i in range(int(outputs["noutputs"].max()))])
+    count = motor_output_count(slots)
     if not count:
         return None
-    pwm = _columns(outputs, [f"output[{i}]" for i in range(count)])
+    pwm = slots[:, :count]
     return Series(_time(outputs), rotor_speed_from_pwm(pwm, vehicle), "actuator_outputs PWM")
 
 
-def _rotors(path: Path, topics: dict[str, Topic],
-            vehicle: VehicleConfig) -> tuple[Series, list[str]]:
-    """Rotor speeds, rad/s, and a warning when they come from motor outputs."""
-    if (esc := _esc(topics)) is not None:
-        return esc, []
+def _commanded(path: Path, topics: Instances,
+               vehicle: VehicleConfig) -> tuple[Series, str] | None:
+    """The commanded rotor speeds (actuator_motors, else actuator_outputs) and their note."""
     if (motors := _motors(topics, vehicle)) is not None:
-        return motors, [f"{path}: no esc_status rpm; rotor speeds are actuator_motors thrust "
-                        f"commands through {describe_curve(vehicle, pwm=False)}: commanded, "
-                        "not measured"]
+        return motors, (f"actuator_motors thrust commands through "
+                        f"{describe_curve(vehicle, pwm=False)}: commanded, not measured")
     if (outputs := _outputs(topics, vehicle)) is not None:
-        return outputs, [f"{path}: no esc_status rpm; rotor speeds are actuator_outputs PWM "
-                         f"through the motor curve {describe_curve(vehicle, pwm=True)}: "
-                         "commanded, not measured, and only as right as the [motor] keys of "
-                         "the vehicle config"]
+        return outputs, (f"actuator_outputs PWM through the motor curve "
+                         f"{describe_curve(vehicle, pwm=True)}: commanded, not measured, and "
+                         "only as right as the [motor] keys of the vehicle config")
+    return None
+
+
+def _rotors(path: Path, topics: Instances,
+            vehicle: VehicleConfig) -> tuple[Series, list[str]]:
+    """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm."""
+    esc = _esc(topics)
+    commanded = _commanded(path, topics, vehicle)
+    if esc is not None:
+        esc_period = _period(esc.t)
+        faster = commanded is not None and 2.0 * _period(commanded[0].t) <= esc_period
+        if esc_period <= RPM_USABLE_PERIOD or not faster:
+            return esc, []
+        series, how = commanded
+        return series, [f"{path}: esc_status rpm sampled only every {esc_period:.3g} s (more "
+                        f"than {RPM_USABLE_PERIOD:g} s), {series.label} every "
+                        f"{_period(series.t):.3g} s: rotor speeds are {how}"]
+    if commanded is not None:
+        series, how = commanded
+        return series, [f"{path}: no esc_status rpm; rotor speeds are {how}"]
     raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no esc_status, "
                          "actuator_motors or actuator_outputs)")
 
@@ -174,5 +269,6 @@ def read_ulog(path: Path, vehicle: VehicleConfig) -> LogStreams:
     with parsing(path, "a PX4 ULog file with the usual topic fields"):
         pose, pose_source, more = _pose(path, topics)
         rotors, curve = _rotors(path, topics, vehicle)
-    return LogStreams(source=str(path), pose=pose, pose_source=pose_source, rotors=(rotors,),
-                      warnings=(*notes, *more, *curve), pose_hint=_POSE_HINT)
+    ordered, order_notes = rotors_in_config_order(str(path), (rotors,), vehicle)
+    return LogStreams(source=str(path), pose=pose, pose_source=pose_source, rotors=ordered,
+                      warnings=(*notes, *more, *curve, *order_notes), pose_hint=_POSE_HINT)

@@ -8,6 +8,9 @@
 - `controller`: the geometric controller on the config's nominal θ;
 - `effects`: truth-side effects (what the world does that the model may not know);
 - `excitation`: the built-in excitation trajectory.
+- `phased_flight`: take-off, a calibration part and landing as one trajectory;
+- `autopilot_log`, `ardupilot_log`, `px4_log`: a simulated flight written as ArduPilot and PX4
+  log it (message names, rates, mode changes, their motor numbering).
 """
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from mavsysid.cli.options import add_log_arguments
+from mavsysid.cli.options import add_log_arguments, add_window_arguments
 from mavsysid.discrepancy.diagnose_job import reestimate_comparison, run_diagnose
 from mavsysid.discrepancy.diagnosis import MASS_NOTE, DiagnosisSettings
 from mavsysid.discrepancy.report import (
@@ -28,6 +28,7 @@ __all__ = ["add_arguments", "main"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid diagnose``."""
     add_log_arguments(parser)
+    add_window_arguments(parser)
     parser.add_argument("--estimate", type=Path, metavar="JSON",
                         help="estimate.json of this flight: the θ to replay (default: the "
                         "vehicle config's)")
@@ -37,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write the vehicle config with the named effects added")
     parser.add_argument("--rrd", type=Path, metavar="FILE",
                         help="write a Rerun recording of the diagnosis")
+    parser.add_argument("--report", type=Path, metavar="DIR",
+                        help="write figures (PNG) and a one-page HTML report (index.html) "
+                        "into DIR")
     parser.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                         help="end of the flight kept out of all fitting (default: 0.3)")
     parser.add_argument("--reestimate", action="store_true",
@@ -52,7 +56,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"mass check: {MASS_NOTE}.")
         return 0
     run = run_diagnose(args.log, args.vehicle, args.estimate,
-                       DiagnosisSettings(holdout=args.holdout))
+                       DiagnosisSettings(holdout=args.holdout), start=args.start, end=args.end)
     if args.output is not None:
         write_diagnosis_json(args.output, run.diagnosis, run.config, str(args.log))
     if args.write_config is not None:
@@ -60,7 +64,12 @@ def main(args: argparse.Namespace) -> int:
     if args.rrd is not None:
         from mavsysid.discrepancy.recording import write_diagnosis_rrd  # rerun loads slowly
 
-        write_diagnosis_rrd(args.rrd, run.diagnosis, str(args.log))
+        write_diagnosis_rrd(args.rrd, run.diagnosis, str(args.log), run.flight)
+    if args.report is not None:
+        from mavsysid.discrepancy.report_figures import write_diagnosis_report  # matplotlib
+
+        write_diagnosis_report(args.report, run.diagnosis, run.flight, run.config,
+                               str(args.log))
     if args.verbosity >= 0:
         print(format_diagnosis(run.diagnosis, run.config, str(args.log)))
     if args.reestimate and run.diagnosis.effects:
@@ -68,7 +77,8 @@ def main(args: argparse.Namespace) -> int:
         if args.verbosity >= 0:
             print(format_reestimate(before, after))
     written = [f"{what} {path}" for what, path in (("diagnosis", args.output),
-               ("vehicle", args.write_config), ("recording", args.rrd)) if path is not None]
+               ("vehicle", args.write_config), ("recording", args.rrd),
+               ("report", args.report)) if path is not None]
     if written:
         print("wrote " + ", ".join(written))
     return 0

@@ -5,17 +5,22 @@ directly: read the log, run the filter and the refinement): print the table, wri
 JSON, the updated vehicle config and the Rerun recording on request. The vehicle
 config's model effects (``[effects.NAME]``) are part of the model; their parameters are
 fitted with θ (or held with ``--fixed-effects``), reported, and written back by
-``--update-vehicle``.
+``--update-vehicle``. ``--report DIR`` writes figures, the estimate over time and a
+one-page HTML; ``--history CSV`` the estimate over time alone. While it works, the
+stages are shown on stderr (on a terminal, or always with ``-v``; never with ``-q``).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from mavsysid.cli.options import add_log_arguments
-from mavsysid.estimation.estimate_job import run_estimate
+from mavsysid.cli.options import add_log_arguments, add_window_arguments
+from mavsysid.estimation.estimate_job import EstimateRun, run_estimate
 from mavsysid.estimation.estimator import EstimatorSettings
+from mavsysid.estimation.history_table import write_history_csv
+from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
 from mavsysid.estimation.report import format_table, updated_vehicle, write_estimate_json
 from mavsysid.vehicle.config import save_vehicle
 
@@ -25,12 +30,19 @@ __all__ = ["add_arguments", "main"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid estimate``."""
     add_log_arguments(parser)
+    add_window_arguments(parser)
     parser.add_argument("-o", "--output", type=Path, metavar="JSON",
                         help="write the estimate as JSON")
     parser.add_argument("--update-vehicle", type=Path, metavar="TOML",
                         help="write a copy of the vehicle config with the estimates")
     parser.add_argument("--rrd", type=Path, metavar="FILE",
                         help="write a Rerun recording of the estimation")
+    parser.add_argument("--report", type=Path, metavar="DIR",
+                        help="write figures (PNG), the estimate over time (history.csv) and "
+                        "a one-page HTML report (index.html) into DIR")
+    parser.add_argument("--history", type=Path, metavar="CSV",
+                        help="write the filter's estimate over time as CSV (t, each "
+                        "parameter and its σ, NIS)")
     parser.add_argument("--pose", type=Path, metavar="CSV",
                         help="external motion-capture pose log to merge with the log")
     parser.add_argument("--time-offset", type=float, metavar="S",
@@ -50,7 +62,12 @@ def main(args: argparse.Namespace) -> int:
     """Run the command; returns the exit code."""
     settings = EstimatorSettings(prior_relative_sigma=args.prior_sigma,
                                  refine=not args.no_refine, fit_effects=not args.fixed_effects)
-    run = run_estimate(args.log, args.vehicle, args.pose, args.time_offset, settings)
+    show = progress_wanted(args.verbosity, sys.stderr)
+    with stage_listener(StageLog("mavsysid estimate", sys.stderr) if show else None):
+        report_stage(f"reading {args.log}")
+        run = run_estimate(args.log, args.vehicle, args.pose, args.time_offset, settings,
+                           start=args.start, end=args.end)
+        _write_extras(args, run)
     if args.output is not None:
         write_estimate_json(args.output, run.result, run.config, args.log)
     if args.update_vehicle is not None:
@@ -62,7 +79,19 @@ def main(args: argparse.Namespace) -> int:
     if args.verbosity >= 0:
         print(format_table(run.result, run.config, str(args.log)))
     written = [f"{what} {path}" for what, path in (("estimate", args.output),
-               ("vehicle", args.update_vehicle), ("recording", args.rrd)) if path is not None]
+               ("vehicle", args.update_vehicle), ("recording", args.rrd),
+               ("history", args.history), ("report", args.report)) if path is not None]
     if written:
         print("wrote " + ", ".join(written))
     return 0
+
+
+def _write_extras(args: argparse.Namespace, run: EstimateRun) -> None:
+    """The estimate over time and the report folder, when asked for."""
+    if args.history is not None:
+        write_history_csv(args.history, run.result.history)
+    if args.report is not None:
+        report_stage(f"writing the report into {args.report}")
+        from mavsysid.estimation.report_html import write_estimate_report  # matplotlib: slow
+
+        write_estimate_report(args.report, run.result, run.flight, run.config, str(args.log))

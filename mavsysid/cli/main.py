@@ -1,22 +1,35 @@
 """The ``mavsysid`` console script: argument parsing, dispatch and exit codes.
 
 Exit codes (docs/architecture.md): 0 success, 2 bad input or usage (one line, no traceback), 3 the
-job could not be done, 130 interrupted.
+job could not be done, 130 interrupted. Anything unexpected is an internal error: one line and
+exit 1, the traceback only with ``MAVSYSID_DEBUG=1``. Warnings of mavsysid's own kinds print as
+one line too.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
-from collections.abc import Sequence
+import traceback
+import warnings
+from collections.abc import Callable, Sequence
+from typing import TextIO
 
 from mavsysid import __version__
 from mavsysid.errors import InputError, JobFailedError, MavsysidError
 
-__all__ = ["EXIT_CODES", "EXIT_INTERRUPTED", "build_parser", "exit_code", "main"]
+__all__ = [
+    "DEBUG_ENV", "EXIT_CODES", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "build_parser", "exit_code",
+    "main",
+]
 
 EXIT_INTERRUPTED = 130
+#: Exit code of an unexpected exception (a bug: reported in one line, traceback on request).
+EXIT_INTERNAL = 1
+#: Environment variable that, set to 1, prints the traceback of an internal error.
+DEBUG_ENV = "MAVSYSID_DEBUG"
 
 #: Exit code of each error type; an error takes the code of the first type in its method
 #: resolution order found here (`ConfigError` and `LogFormatError` are `InputError`s).
@@ -123,15 +136,48 @@ def main(argv: Sequence[str] | None = None) -> int:
     verbosity = getattr(args, "verbosity", 0)
     args.verbosity = -1 if getattr(args, "quiet", False) else verbosity
     try:
-        return args.run(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(args.command)
+            return args.run(args)
     except MavsysidError as error:
-        print(f"mavsysid {args.command}: error: {error}", file=sys.stderr)
+        print(f"mavsysid {args.command}: error: {_one_line(str(error))}", file=sys.stderr)
         return exit_code(error)
     except (KeyboardInterrupt, SystemError) as error:
         if not _caused_by_interrupt(error):
-            raise
+            return _internal_error(args.command, error)
         print(f"mavsysid {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Exception as error:  # the last resort: never a bare traceback
+        return _internal_error(args.command, error)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _internal_error(command: str, error: BaseException) -> int:
+    """Report an unexpected exception in one line (the traceback with MAVSYSID_DEBUG=1)."""
+    if os.environ.get(DEBUG_ENV, "") not in ("", "0"):
+        traceback.print_exception(error, file=sys.stderr)
+    print(f"mavsysid {command}: internal error: {type(error).__name__}: "
+          f"{_one_line(str(error))} (please report; {DEBUG_ENV}=1 shows the traceback)",
+          file=sys.stderr)
+    return EXIT_INTERNAL
+
+
+def _one_line_warning(command: str) -> Callable[..., None]:
+    """A `warnings.showwarning` printing mavsysid's own warnings as one line."""
+    default = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+             file: TextIO | None = None, line: str | None = None) -> None:
+        if not category.__module__.startswith("mavsysid"):
+            default(message, category, filename, lineno, file, line)
+            return
+        print(f"mavsysid {command}: warning: {_one_line(str(message))}",
+              file=sys.stderr if file is None else file)
+
+    return show
 
 
 def exit_code(error: MavsysidError) -> int:

@@ -11,7 +11,8 @@ from pathlib import Path
 from mavsysid.errors import InputError
 from mavsysid.planner.results import PlannerSettings
 
-__all__ = ["DEFAULT_BOX", "add_log_arguments", "allow_negative_values", "parse_numbers"]
+__all__ = ["DEFAULT_BOX", "add_log_arguments", "add_window_arguments", "allow_negative_values",
+           "parse_numbers"]
 
 #: The planner's default flight box as the ``--box`` text of the commands.
 DEFAULT_BOX = ",".join(f"{v:g}" for v in PlannerSettings.box)
@@ -22,6 +23,16 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", type=Path, help="flight log: pose.csv, .tlog, .ulg or .bin")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
+
+
+def add_window_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--start``/``--end``: the part of the log to use (estimate, diagnose)."""
+    parser.add_argument("--start", type=float, metavar="S",
+                        help="use the log from this time on, s on the log's clock (default: "
+                        "the trajectory flown by mavsysid stream, else the longest "
+                        "GUIDED/OFFBOARD span, else the whole log)")
+    parser.add_argument("--end", type=float, metavar="S",
+                        help="use the log up to this time, s on the log's clock")
 
 
 def allow_negative_values(parser: argparse.ArgumentParser) -> None:

@@ -24,7 +24,7 @@ from mavsysid.vehicle.model_effects import effect_from_values
 from mavsysid.vehicle.rotation import quat_exp
 from scipy.signal import savgol_filter
 
-from mavsysid.errors import InputError
+from mavsysid.errors import InputError, JobFailedError
 from tests.support.hidden import ground_trajectory, hidden_flight
 
 #: The issue's magnitudes (bench/diagnose_accuracy.py uses the same).
@@ -214,14 +214,16 @@ def test_wrong_rotor_count_and_bad_theta_are_refused(config, flights):
         diagnose_flight(flight, config, settings=DiagnosisSettings(holdout=0.9))
 
 
-def test_non_uniform_sampling_is_refused(config, flights):
-    """The smoother needs uniform samples: a jittered log is refused."""
+def test_non_uniform_sampling_is_resampled_not_refused(config, flights):
+    """A log whose clock jumps 4 ms is put on a uniform grid (issue 17), and says so; with
+    nothing hidden, nothing is named (the refusal without resampling: test_resample.py)."""
     flight = flights((), 0)
     t = flight.t.copy()
     t[100:] += 0.004
-    bad = FlightData(t, flight.position, flight.quaternion, flight.rotor_speeds, "x.csv")
-    with pytest.raises(InputError, match="uniform"):
-        diagnose_flight(bad, config, with_nis=False)
+    jumpy = FlightData(t, flight.position, flight.quaternion, flight.rotor_speeds, "x.csv")
+    d = diagnose_flight(jumpy, config, _start_theta(config, 0), with_nis=False)
+    assert any(note.startswith("pose log resampled") for note in d.notes)
+    assert d.effects == ()
 
 
 @pytest.mark.slow
@@ -248,3 +250,17 @@ def test_motor_lag_filter_matches_its_recursion():
     for i in range(1, t.size):
         ref[i] = a * ref[i - 1] + (1.0 - a) * x[i - 1] + b * (x[i] - x[i - 1])
     np.testing.assert_allclose(MotorLag(tau=tau).acting_rotor_speeds(t, x), ref, rtol=1e-12)
+
+
+def test_a_filter_that_cannot_follow_the_log_leaves_the_diagnosis_without_nis(
+        config, flights, monkeypatch):
+    """The NIS is a check beside the diagnosis: an EKF refusal becomes a note, not an exit."""
+    import mavsysid.estimation.estimator as estimator
+
+    def diverges(*args, **kwargs):
+        raise JobFailedError("x.csv: the parameter filter diverged")
+
+    monkeypatch.setattr(estimator, "estimate_with_effects", diverges)
+    d = diagnose_flight(flights((), 0), config, _start_theta(config, 0), with_nis=True)
+    assert d.gap.before.nis_mean is None and d.gap.after.nis_mean is None
+    assert "no NIS: x.csv: the parameter filter diverged" in d.notes

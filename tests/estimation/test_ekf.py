@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
@@ -92,3 +94,32 @@ def test_filter_is_consistent_when_the_truth_has_its_process_noise(
     m = len(eps)
     anees = float(np.mean(eps))
     assert chi2.ppf(0.025, 6 * m) / m < anees < chi2.ppf(0.975, 6 * m) / m, anees
+
+
+def _with_gap(flight, t0, t1):
+    """The flight without the samples t0 < t < t1, as two segments."""
+    keep = ~((flight.t > t0) & (flight.t < t1))
+    cut = flight.time_slice(-np.inf, np.inf)
+    second = int(np.searchsorted(flight.t[keep], t1))
+    return replace(cut, t=cut.t[keep], position=cut.position[keep],
+                   quaternion=cut.quaternion[keep], rotor_speeds=cut.rotor_speeds[keep],
+                   segment_starts=(0, second))
+
+
+def test_segments_restart_the_states_and_carry_theta(simulate_flight):
+    """After a gap the states restart from the measurement (not predicted across the gap),
+    while θ and its covariance carry on: the second segment ends better informed than it
+    does filtered alone."""
+    cfg = load_vehicle("firefly")
+    flight = _with_gap(simulate_flight(cfg, 3, duration=12.0), 5.0, 5.5)
+    a = flight.segment_starts[1]
+    ekf, state_sigma = _filter(cfg, flight)
+    run = ekf.run(flight, state_sigma)
+    np.testing.assert_array_equal(run.history.position[a], flight.position[a])
+    assert np.isnan(run.history.nis[a]) and np.isfinite(run.history.nis[a + 1:]).all()
+    alone_ekf, _ = _filter(cfg, flight)
+    alone = alone_ekf.run(flight.segment(1), state_sigma)
+    assert (run.estimate.sigma < alone.estimate.sigma).all()
+    bridged_ekf, _ = _filter(cfg, flight)
+    bridged = bridged_ekf.run(replace(flight, segment_starts=(0,)), state_sigma)
+    assert not np.array_equal(bridged.history.position[a], flight.position[a])

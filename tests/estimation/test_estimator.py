@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
@@ -73,3 +75,22 @@ def test_too_short_and_mismatched_flights_are_refused(simulate_flight):
         estimate_parameters(flight.time_slice(0.0, 1.5), cfg)
     with pytest.raises(InputError, match="rotor"):
         estimate_parameters(flight, load_vehicle("quad_x"))
+
+
+def test_segmented_flight_refines_on_its_longest_segment(simulate_flight):
+    """A flight split by a gap is filtered whole and refined on its longest segment only,
+    with a note; both estimates are finite and near the truth."""
+    cfg = load_vehicle("firefly")
+    flight = simulate_flight(cfg, 4, duration=14.0)
+    keep = ~((flight.t > 4.0) & (flight.t < 4.5))
+    second = int(np.searchsorted(flight.t[keep], 4.5))
+    flight = replace(flight, t=flight.t[keep], position=flight.position[keep],
+                     quaternion=flight.quaternion[keep],
+                     rotor_speeds=flight.rotor_speeds[keep], segment_starts=(0, second))
+    result = estimate_parameters(flight, cfg)
+    note = [n for n in result.notes if n.startswith("batch refinement on the longest segment")]
+    assert note and "t = 4.500 to" in note[0] and "2 of 2" in note[0], result.notes
+    assert result.history.t.shape == flight.t.shape
+    for estimate in (result.filtered, result.refined):
+        error = np.abs(estimate.value[CORE] / flight.true_theta[CORE] - 1.0)
+        assert (error < 0.1).all(), error

@@ -22,6 +22,7 @@ TRUE_THETA = np.array([8.54858e-6, 0.0176, 1.36777e-7, 0.0347563, 0.0458929, 0.0
 SOURCE = "logs/synthetic/pose.csv"
 INNOVATIONS = [f"/innovations/{kind}/{axis}" for kind in ("position", "attitude")
                for axis in "xyz"] + ["/innovations/nis", "/innovations/nis_bound"]
+ROTORS = [f"/rotors/n{i}" for i in range(1, 7)]
 
 
 def synthetic(n: int = 120, m: int | None = None, *, truth: bool = True, refined: bool = True,
@@ -97,19 +98,35 @@ def test_entities_and_time_points(tmp_path, truth, refined):
     write_estimation_rrd(path, result, flight)
     suffixes = ["estimate", "upper", "lower"] + ["true"] * truth + ["refined"] * refined
     expected = {f"/parameters/{name}/{s}" for name in PARAMETER_NAMES for s in suffixes}
-    expected |= {"/world/measured", "/world/filtered", *INNOVATIONS}
+    expected |= {"/world/measured", "/world/filtered", *INNOVATIONS, *ROTORS}
     rows = temporal_rows(path)
     assert set(rows) == expected
     assert set(rows.values()) == {150}
 
 
 def test_measured_trajectory_follows_flight_samples(tmp_path):
-    """world/measured has one point per pose sample, world/filtered one per filter step."""
+    """world/measured and rotors/n<i> have one point per pose sample, world/filtered one
+    per filter step."""
     result, flight = synthetic(n=100, m=137)
     path = tmp_path / "e.rrd"
     write_estimation_rrd(path, result, flight)
     rows = temporal_rows(path)
     assert (rows["/world/measured"], rows["/world/filtered"]) == (137, 100)
+    assert {rows[r] for r in ROTORS} == {137}
+
+
+def test_rotor_speed_series_hold_the_logged_speeds(tmp_path):
+    """rotors/n<i> is column i of the flight's rotor speeds at the flight's times."""
+    result, flight = synthetic(n=80, m=97)
+    rng = np.random.default_rng(11)
+    speeds = rng.uniform(300.0, 800.0, flight.rotor_speeds.shape)
+    flight = FlightData(flight.t, flight.position, flight.quaternion, speeds, flight.source)
+    path = tmp_path / "e.rrd"
+    write_estimation_rrd(path, result, flight)
+    for i, entity in enumerate(ROTORS):
+        t, values = series(path, entity)
+        np.testing.assert_allclose(t, flight.t, atol=1e-9)
+        np.testing.assert_array_equal(values, speeds[:, i])
 
 
 def test_paths_are_static_line_strips(written):

@@ -19,7 +19,13 @@ from mavsysid.estimation.report import (
     write_estimate_json,
 )
 from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
-from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle, save_vehicle
+from mavsysid.vehicle.config import (
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    VehicleConfig,
+    load_vehicle,
+    save_vehicle,
+)
 
 GOLDEN = Path(__file__).parent / "golden"
 TRUE_THETA = np.array([8.54858e-6, 0.0176, 1.36777e-7, 0.0347563, 0.0458929, 0.0977])
@@ -201,7 +207,7 @@ def test_json_shape(truth, refined, firefly):
     result = synthetic_result(truth=truth, refined=refined)
     doc = result_to_json(result, firefly, "logs/a/pose.csv")
     blocks = ["parameters", "filter", "prior"] + (["refined"] if refined else [])
-    keys = {"value", "sigma", "relative_sigma", "convergence_time_s"}
+    keys = {"value", "unit", "sigma", "relative_sigma", "convergence_time_s"}
     keys |= {"true_value", "error_relative"} if truth else set()
     for block in blocks:
         assert list(doc[block]) == list(PARAMETER_NAMES)
@@ -210,6 +216,16 @@ def test_json_shape(truth, refined, firefly):
     assert doc["parameter_names"] == list(PARAMETER_NAMES)
     assert (doc["log"], doc["vehicle"]) == ("logs/a/pose.csv", "firefly")
     assert doc["software"] == {"name": "mavsysid", "version": software_version()}
+
+
+def test_json_gives_each_parameters_unit(firefly):
+    """Every block names each parameter's SI unit, the config's, and it survives the file."""
+    result = synthetic_result()
+    doc = json.loads(json.dumps(result_to_json(result, firefly, "x")))
+    for block in ("parameters", "filter", "refined", "prior"):
+        assert {n: doc[block][n]["unit"] for n in PARAMETER_NAMES} == PARAMETER_UNITS
+    assert doc["parameters"]["c_T"]["unit"] == "N/(rad/s)²"
+    assert doc["parameters"]["j_z"]["unit"] == "kg·m²"
 
 
 def test_json_values_are_the_final_estimate(firefly):

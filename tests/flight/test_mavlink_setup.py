@@ -22,12 +22,18 @@ def test_signing_key_file(tmp_path):
         signing_key_from_file(tmp_path / "missing")
 
 
-def test_connection_strings():
-    """Network forms pass through; serial ones give pymavlink's device and a baud rate."""
-    assert parse_connect("udp:127.0.0.1:14550") == ("udp:127.0.0.1:14550", None)
-    assert parse_connect("tcpin:0.0.0.0:5760") == ("tcpin:0.0.0.0:5760", None)
-    assert parse_connect("serial:/dev/ttyACM0:921600") == ("/dev/ttyACM0", 921600)
-    assert parse_connect("/dev/ttyUSB1") == ("/dev/ttyUSB1", 115200)
+@pytest.mark.parametrize(("connect", "expected"), [
+    ("udp:127.0.0.1:14550", ("udp:127.0.0.1:14550", None)),
+    ("tcpin:0.0.0.0:5760", ("tcpin:0.0.0.0:5760", None)),
+    ("serial:/dev/ttyACM0:921600", ("/dev/ttyACM0", 921600)),
+    ("serial:/dev/ttyACM0", ("/dev/ttyACM0", 115200)),
+    ("/dev/ttyUSB1", ("/dev/ttyUSB1", 115200)),
+    ("/dev/ttyACM0:57600", ("/dev/ttyACM0", 57600)),
+    ("COM3:57600", ("COM3", 57600)),
+])
+def test_connection_strings(connect, expected):
+    """Network forms pass through; serial ones, bare or not, give the device and a baud rate."""
+    assert parse_connect(connect) == expected
 
 
 def test_mavlink2_and_ardupilot_dialect():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import warnings
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,11 @@ from mavsysid.vehicle.config import (
     load_vehicle,
     save_vehicle,
     vehicle_to_toml,
+)
+from mavsysid.vehicle.config_checks import (
+    INERTIA_TRIANGLE_SLACK,
+    InertiaWarning,
+    triangle_violation,
 )
 
 from mavsysid.cli.main import exit_code
@@ -220,8 +226,6 @@ MALFORMED = [
                  "[parameters].J", id="J-zero"),
     pytest.param(_edit("J = [0.0082, 0.0082, 0.0149]", "J = [0.0082, true, 0.0149]"),
                  "[parameters].J", id="J-bool"),
-    pytest.param(_edit("J = [0.0082, 0.0082, 0.0149]", "J = [0.0082, 0.0082, 0.149]"),
-                 "[parameters].J", id="J-triangle"),
     pytest.param(_edit("[parameters]\n", "[params]\n"), "[params]", id="unknown-table"),
     pytest.param(_edit("rotor_speed_max = 1150.0\n", ""), "[limits].rotor_speed_max",
                  id="missing-rotor_speed_max"),
@@ -277,6 +281,39 @@ MALFORMED = [
                  "[[rotors]]", id="rotors-not-tables"),
     pytest.param(MINIMAL + "\n[noise]\nunknown = 1\n", "[noise].unknown", id="unknown-key"),
 ]
+
+
+def test_inertia_breaking_triangle_inequality_warns_and_loads(tmp_path: Path) -> None:
+    """A prior is a guess: an inertia beyond the triangle slack is warned about, not refused."""
+    path = _write(tmp_path, _edit("J = [0.0082, 0.0082, 0.0149]", "J = [0.0082, 0.0082, 0.149]"))
+    with pytest.warns(InertiaWarning) as record:
+        config = load_vehicle(path)
+    assert config.parameters.J == (0.0082, 0.0082, 0.149)
+    message = str(record[0].message)
+    assert "\n" not in message
+    assert str(path) in message or path.name in message
+    assert "[parameters].J" in message and "j_x + j_y" in message
+
+
+def test_inertia_within_triangle_slack_does_not_warn(tmp_path: Path) -> None:
+    """The shipped Firefly (j_z 21 % over j_x + j_y, inside the slack) loads silently."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InertiaWarning)
+        load_vehicle("firefly")
+        load_vehicle(_write(tmp_path, _edit("J = [0.0082, 0.0082, 0.0149]",
+                                            "J = [0.0082, 0.0082, 0.0204]")))
+
+
+@pytest.mark.parametrize(("j", "expected"), [
+    ((1.0, 1.0, 1.0), None),
+    ((1.0, 1.0, 2.0 * (1.0 + INERTIA_TRIANGLE_SLACK)), None),
+    ((1.0, 1.0, 2.0 * (1.0 + INERTIA_TRIANGLE_SLACK) * 1.001), (2, 0, 1)),
+    ((5.0, 1.0, 1.0), (0, 1, 2)),
+    ((1.0, 5.0, 1.0), (1, 2, 0)),
+])
+def test_triangle_violation(j: tuple[float, float, float],
+                            expected: tuple[int, int, int] | None) -> None:
+    assert triangle_violation(j) == expected
 
 
 @pytest.mark.parametrize(("text", "key"), MALFORMED)

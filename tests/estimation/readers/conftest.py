@@ -6,10 +6,8 @@ by Σ n² has something to find. The file side (NED/FRD) is derived through rota
 matrices, independently of the reader's quaternion formula.
 
 Writers: ``.tlog`` with pymavlink's own MAVLink packer (8-byte big-endian µs receipt time,
-then the packed message); ULog with the minimal writer below, following the ULog spec
-(file header, flag bits, format, add-logged and data messages: pyulog's ``write_ulog``
-only re-writes a parsed file); DataFlash with pymavlink's `DFFormat` for the struct
-layout and FMT messages, then data messages (pymavlink has no log writer).
+then the packed message); ULog and DataFlash with the library's writers
+(`mavsysid.formats.ulog_writer`, `mavsysid.formats.dataflash_writer`).
 """
 
 from __future__ import annotations
@@ -22,6 +20,8 @@ from typing import Any
 import numpy as np
 import pytest
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.formats.dataflash_writer import write_dataflash
+from mavsysid.formats.ulog_writer import write_ulog
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.rotation import matrix_to_quat, quat_exp, quat_to_matrix
@@ -103,53 +103,6 @@ def tlog_writer() -> Callable[..., None]:
 
 
 # ---------------------------------------------------------------------------- ULog
-
-_ULOG_CODES = {"int8_t": "b", "uint8_t": "B", "int16_t": "h", "uint16_t": "H", "int32_t": "i",
-               "uint32_t": "I", "int64_t": "q", "uint64_t": "Q", "float": "f", "double": "d",
-               "bool": "?"}
-
-
-def _ulog_message(kind: str, payload: bytes) -> bytes:
-    return struct.pack("<HB", len(payload), ord(kind)) + payload
-
-
-def _ulog_fields(name: str, formats: dict[str, str], prefix: str = "") -> list[tuple[str, str]]:
-    """Flattened (field name, struct code) of a format, nested types expanded as pyulog does."""
-    out = []
-    for item in filter(None, formats[name].split(";")):
-        kind, field = item.split(" ")
-        size = int(kind[kind.index("[") + 1:-1]) if "[" in kind else 0
-        kind = kind.split("[")[0]
-        names = [f"{field}[{i}]" for i in range(size)] if size else [field]
-        for n in names:
-            if kind in _ULOG_CODES:
-                out.append((prefix + n, _ULOG_CODES[kind]))
-            else:
-                out += _ulog_fields(kind, formats, f"{prefix}{n}.")
-    return out
-
-
-def write_ulog(path: Path, formats: dict[str, str],
-               topics: dict[str, list[dict[str, float]]]) -> None:
-    """Write a ULog file.
-
-    ``formats`` maps each type name to its fields (``"uint64_t timestamp;float[4] q;"``);
-    ``topics`` maps logged type names to rows of flattened field values (missing: 0).
-    """
-    out = bytearray(b"ULog\x01\x12\x35" + bytes([1]) + struct.pack("<Q", 0))
-    out += _ulog_message("B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
-    for name, fields in formats.items():
-        out += _ulog_message("F", f"{name}:{fields}".encode())
-    for msg_id, (name, rows) in enumerate(topics.items()):
-        out += _ulog_message("A", struct.pack("<BH", 0, msg_id) + name.encode())
-        fields = _ulog_fields(name, formats)
-        layout = struct.Struct("<H" + "".join(code for _, code in fields))
-        # Rows in the given order, topic after topic: pyulog needs no time order, and
-        # the tests of out-of-order timestamps need them kept.
-        for row in rows:
-            out += _ulog_message("D", layout.pack(msg_id, *(row.get(n, 0) for n, _ in fields)))
-    path.write_bytes(bytes(out))
-
 
 ULOG_FORMATS = {
     "vehicle_mocap_odometry": "uint64_t timestamp;uint64_t timestamp_sample;float[3] position;"
@@ -233,29 +186,6 @@ def ulog_writer() -> Callable[..., Path]:
 
 
 # ---------------------------------------------------------------------------- DataFlash
-
-
-def write_dataflash(path: Path, formats: dict[str, tuple[int, str, str]],
-                    rows: Iterable[tuple[str, tuple[Any, ...]]]) -> None:
-    """Write a DataFlash log: FMT for each (type id, format, columns), then the rows."""
-    from pymavlink.DFReader import DFFormat
-
-    fmt_fmt = DFFormat(0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")
-    parsed = {name: DFFormat(tid, name, 0, fmt, cols)
-              for name, (tid, fmt, cols) in formats.items()}
-
-    def message(f: Any, values: Iterable[Any]) -> bytes:
-        return bytes([0xA3, 0x95, f.type]) + struct.pack(f.msg_struct, *values)
-
-    out = bytearray(message(fmt_fmt, (0x80, 89, b"FMT", b"BBnNZ",
-                                      b"Type,Length,Name,Format,Columns")))
-    for name, f in parsed.items():
-        length = struct.calcsize(f.msg_struct) + 3
-        out += message(fmt_fmt, (f.type, length, name.encode(), f.format.encode(),
-                                 ",".join(f.columns).encode()))
-    for name, values in rows:
-        out += message(parsed[name], values)
-    path.write_bytes(bytes(out))
 
 
 @pytest.fixture

@@ -9,7 +9,10 @@ from typing import Any
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.estimation.readers.dataflash import read_dataflash
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+
+from mavsysid.errors import LogFormatError
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 
@@ -116,3 +119,25 @@ def test_dataflash_global_position_fallback(tmp_path: Path, firefly: VehicleConf
     np.testing.assert_allclose(data.position, x["position"] - origin, atol=0.02)
     sign = np.sign(np.sum(data.quaternion * x["quaternion"], axis=1))[:, None]
     np.testing.assert_allclose(sign * data.quaternion, x["quaternion"], atol=1e-5)
+
+
+REAL_LOG = (Path(__file__).resolve().parents[3] / ".." / "shared" / "real-logs"
+            / "ardupilot-test.BIN")
+
+
+def test_real_ardupilot_log_pose_and_inputs() -> None:
+    """pymavlink's test.BIN (ArduPlane 3.8.2-dev: per-core NKF1/NKQ1, NKF4 PI = 0, RCOU C1..C14):
+    the EKF2 core-0 pose with its quaternion and the RCOU outputs. It is < 1 s of an
+    ArduPlane flight (RCOU drives control surfaces), so it is refused, in one line naming
+    the file (for its motor outputs or its length, whichever check comes first)."""
+    if not REAL_LOG.exists():
+        pytest.skip(f"{REAL_LOG} absent")
+    quad = load_vehicle("quad_x")
+    streams = read_dataflash(REAL_LOG, quad)
+    assert streams.pose_source == "autopilot"
+    assert streams.pose is not None and streams.pose.label == "NKF1 core 0 + NKQ1 core 0"
+    assert [r.label for r in streams.rotors] == ["RCOU PWM"]
+    assert any("RCOU" in w for w in streams.warnings)
+    with pytest.raises(LogFormatError, match=r"ardupilot-test\.BIN: ") as refused:
+        load_flight(REAL_LOG, quad)
+    assert "\n" not in str(refused.value)

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.readers.checks import MAX_GAP, check_sampling
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError, LogFormatError
@@ -67,9 +68,6 @@ def _scale_quaternions(rows: slice, factor: float) -> Callable[[Rows], None]:
 @pytest.mark.parametrize(("kwargs", "says"), [
     ({"esc_count": 4}, "rotor speeds of 4 rotors, the vehicle config builtin:firefly has 6"),
     ({"duration": 1.5}, "only 1.47 s of pose and rotor speeds"),
-    ({"edit": _drop_window(21.0, 21.5)}, "gap of 0.5 s in the pose samples after t = 21.000 s"),
-    ({"edit": _drop_window(22.0, 22.4, "esc_status")},
-     "gap of 0.42 s in the esc_status rpm samples after t = 21.987 s"),
     ({"edit": _scale_quaternions(slice(40, 42), 1.5)}, "2 attitude quaternions of"),
     ({"pose": None}, "no pose in the log (no vehicle_mocap_odometry"),
 ])
@@ -116,3 +114,59 @@ def test_repairable_flight_warns_with_counts(tmp_path: Path, firefly: VehicleCon
     assert all(w.startswith(f"{path}: ") and "\n" not in w for w in data.warnings)
     assert (np.diff(data.t) > 0).all()
     assert_matches_truth(data, truth, 0.1)
+
+
+@pytest.mark.parametrize(("edit", "gap"), [
+    (_drop_window(23.0, 23.5), (23.0, 23.5)),
+    (_drop_window(24.0, 24.4, "esc_status"), (23.987, 24.407)),
+])
+def test_long_gap_splits_the_flight(tmp_path: Path, firefly: VehicleConfig, truth: Truth,
+                                    ulog_writer: Callable[..., Path],
+                                    assert_matches_truth: Callable[..., None],
+                                    edit: Callable[[Rows], None],
+                                    gap: tuple[float, float]) -> None:
+    """A gap (in the pose or in the rotor speeds) too long to bridge splits the flight in two
+    segments, with no sample inside the gap and a note saying so."""
+    path = ulog_writer(tmp_path / "flight.ulg", truth, firefly, duration=8.0, edit=edit)
+    data = load_flight(path, firefly)
+    assert len(data.segment_starts) == 2, data.warnings
+    second = data.segment_starts[1]
+    assert data.t[second - 1] <= gap[0] + 1e-9 and data.t[second] >= gap[1] - 1e-9
+    assert not ((data.t > gap[0] + 1e-9) & (data.t < gap[1] - 1e-9)).any()
+    assert [w for w in data.warnings if "split the flight into 2 segments" in w], data.warnings
+    assert_matches_truth(data, truth, 0.1)
+
+
+def test_gap_of_exactly_the_limit_is_bridged(tmp_path: Path, firefly: VehicleConfig,
+                                             truth: Truth,
+                                             ulog_writer: Callable[..., Path]) -> None:
+    """A 0.2 s gap (µs timestamps, floats) is not "more than 0.2 s": one segment."""
+    path = ulog_writer(tmp_path / "flight.ulg", truth, firefly, edit=_drop_window(20.01, 20.21))
+    data = load_flight(path, firefly)
+    assert data.segment_starts == (0,)
+    step = np.diff(data.t)
+    # In floats this gap is 0.2000000000000028 s: "more than 0.2 s" to an exact comparison.
+    assert 0.2 < step.max() < 0.2 + 1e-9
+
+
+def test_short_segment_is_dropped(tmp_path: Path, firefly: VehicleConfig, truth: Truth,
+                                  ulog_writer: Callable[..., Path]) -> None:
+    """A segment shorter than the minimum duration is dropped, with a note."""
+    path = ulog_writer(tmp_path / "flight.ulg", truth, firefly, edit=_drop_window(21.0, 21.5))
+    data = load_flight(path, firefly)
+    assert data.segment_starts == (0,) and data.t[0] >= 21.5
+    assert [w for w in data.warnings if "dropped the segment t = 20.0" in w and
+            "to 21.000 s, shorter than 2 s" in w], data.warnings
+
+
+@pytest.mark.parametrize("period", [0.25, 0.5])
+def test_slow_sampling_is_noted_not_refused(period: float) -> None:
+    """A series slower than every MAX_GAP is information too: one note, no error."""
+    rng = np.random.default_rng(5)
+    t = np.cumsum(np.full(40, period) + rng.uniform(-0.01, 0.01, 40))
+    notes = check_sampling(t, "log.ulg", "esc_status rpm")
+    assert period > MAX_GAP
+    assert notes == [f"log.ulg: esc_status rpm sampled only every {np.median(np.diff(t)):.3g} s "
+                     f"(slower than every {MAX_GAP:g} s): used, with the larger uncertainty "
+                     "that leaves between samples"]
+    assert check_sampling(t * (0.1 / period), "log.ulg", "esc_status rpm") == []

@@ -119,6 +119,32 @@ def test_tlog_holds_both_directions(ardupilot_flight):
     assert streams.pose is not None and streams.rotors
 
 
+def test_estimate_reads_the_streamed_tlog(ardupilot_flight, tmp_path):
+    """`estimate` reads the streamer's flight.tlog (slow telemetry before the rates are
+    raised included): by default only the trajectory window of meta.json, else the GUIDED
+    span of the HEARTBEATs; θ within 5 % of the sim's truth."""
+    from mavsysid.estimation.estimate_job import run_estimate
+    from mavsysid.estimation.estimator import EstimatorSettings
+    from mavsysid.estimation.readers import load_flight
+
+    directory, meta = ardupilot_flight["dir"], ardupilot_flight["meta"]
+    run = run_estimate(directory / "flight.tlog", "firefly",
+                       settings=EstimatorSettings(refine=False))
+    window = meta["trajectory_window"]
+    assert window["start"] <= run.flight.t[0] and run.flight.t[-1] <= window["end"]
+    assert [n for n in run.result.notes if "meta.json trajectory_window" in n]
+    truth = read_meta(ardupilot_flight["truth"] / "meta.json")["truth"]["parameters"]
+    theta = dict(zip(("c_T", "c_D", "c_M", "j_x", "j_y", "j_z"), run.result.final.value,
+                     strict=True))
+    for name in ("c_T", "c_M", "j_x", "j_y", "j_z"):
+        assert theta[name] == pytest.approx(truth[name], rel=0.05), name
+    alone = tmp_path / "flight.tlog"
+    alone.write_bytes((directory / "flight.tlog").read_bytes())
+    flight = load_flight(alone, load_vehicle("firefly"))
+    assert [w for w in flight.warnings if "GUIDED" in w]
+    assert flight.t[0] < window["start"] and flight.t[-1] > window["end"] - 1.0
+
+
 @pytest.mark.parametrize("speedup", ["4"])
 def test_px4_offboard_flight(tmp_path, speedup):
     """Against the PX4 personality: setpoints first, then OFFBOARD and arm; tracks < 5 cm."""

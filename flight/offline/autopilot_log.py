@@ -1,0 +1,165 @@
+"""A simulated flight written as an autopilot writes its log: the flight's common part.
+
+`LoggedFlight` is what an autopilot would have logged of a simulated flight: the measured
+pose (what motion capture or the autopilot's estimator reports), world velocity, the
+actual rotor speeds (what ESC telemetry reports) and the commanded ones (what the
+autopilot sends to its outputs), and the flight's phases. `write_ardupilot_log`
+(`mavsysid.flight.offline.ardupilot_log`) and `write_px4_log`
+(`mavsysid.flight.offline.px4_log`) turn it into a ``.bin`` and a ``.ulg``.
+
+Motor numbering: an autopilot numbers its motors its own way per frame (ArduPilot's
+``AP_MotorsMatrix``, PX4's airframe geometry), not in the vehicle config's rotor order.
+``motor_order[i]`` is the config rotor (0-based) that the autopilot's motor i + 1
+drives; a log written with it has ESC instance i / output i + 1 = that rotor.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mavsysid.flight.offline.phased_flight import FlightPhases
+from mavsysid.formats.poselog import read_pose_log
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.rotation import quat_to_matrix
+
+__all__ = ["LoggedFlight", "check_motor_order", "pwm_from_rotor_speed", "sample_indices"]
+
+
+@dataclass(frozen=True)
+class LoggedFlight:
+    """What an autopilot could log of one flight, at the simulator's log rate (S samples).
+
+    Attributes
+    ----------
+    t : ndarray, shape (S,)
+        s since the flight started.
+    position : ndarray, shape (S, 3)
+        Measured position, m, world ENU.
+    quaternion : ndarray, shape (S, 4)
+        Measured attitude [w, x, y, z], body FLU → world ENU.
+    velocity : ndarray, shape (S, 3)
+        World velocity, m/s, ENU.
+    rotor_speeds : ndarray, shape (S, k)
+        Actual rotor speeds, rad/s, in the config's rotor order.
+    commands : ndarray, shape (S, k)
+        Commanded rotor speeds, rad/s, in the config's rotor order.
+    phases : FlightPhases
+        Take-off, calibration part and landing, s on the same clock as ``t``.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    velocity: np.ndarray
+    rotor_speeds: np.ndarray
+    commands: np.ndarray
+    phases: FlightPhases
+
+    @property
+    def rotor_count(self) -> int:
+        """Number of rotors k."""
+        return int(self.rotor_speeds.shape[1])
+
+    @classmethod
+    def from_flight_dir(cls, directory: Path, rotor_count: int,
+                        phases: FlightPhases) -> LoggedFlight:
+        """The flight recorded by the offline simulator in ``directory``.
+
+        Parameters
+        ----------
+        directory : Path
+            A simulated flight directory: ``pose.csv`` (measured pose and rotor speeds)
+            and ``truth.csv`` (true body velocity and commanded rotor speeds).
+        rotor_count : int
+            k.
+        phases : FlightPhases
+            The flight's phases (from `mavsysid.flight.offline.phased_flight`).
+
+        Returns
+        -------
+        LoggedFlight
+        """
+        pose = read_pose_log(Path(directory) / "pose.csv", rotor_count)
+        truth = read_pose_log(Path(directory) / "truth.csv", rotor_count)
+        body = np.column_stack([truth.extra[f"v{a}_body"] for a in "xyz"])
+        velocity = np.einsum("nij,nj->ni", quat_to_matrix(truth.quaternion), body)
+        commands = np.column_stack([truth.extra[f"n_cmd{i + 1}"] for i in range(rotor_count)])
+        return cls(pose.t, pose.position, pose.quaternion, velocity, pose.rotor_speeds,
+                   commands, phases)
+
+
+def check_motor_order(motor_order: Sequence[int], rotor_count: int) -> np.ndarray:
+    """``motor_order`` as an index array, checked to be a permutation of the k rotors.
+
+    Parameters
+    ----------
+    motor_order : sequence of int
+        Config rotor (0-based) of the autopilot's motor 1, 2, ….
+    rotor_count : int
+        k.
+
+    Returns
+    -------
+    ndarray of int, shape (k,)
+
+    Raises
+    ------
+    ValueError
+        Not a permutation of 0 … k − 1.
+    """
+    order = np.asarray(motor_order, dtype=int)
+    if sorted(order.tolist()) != list(range(rotor_count)):
+        raise ValueError(f"motor order {list(motor_order)}: expected a permutation of the "
+                         f"{rotor_count} rotors 0 … {rotor_count - 1}")
+    return order
+
+
+def sample_indices(t: np.ndarray, rate: float, phase: float = 0.0) -> np.ndarray:
+    """Indices of the samples an autopilot logging at ``rate`` would write.
+
+    Parameters
+    ----------
+    t : ndarray, shape (S,)
+        The flight's sample times, s, increasing.
+    rate : float
+        Logging rate, Hz (at most the flight's own rate to be met exactly).
+    phase : float
+        s after ``t[0]`` of the first logged sample: topics of one log are not written
+        at the same instants.
+
+    Returns
+    -------
+    ndarray of int
+        Distinct indices into ``t``, the first sample at or after each logging instant.
+    """
+    instants = np.arange(t[0] + phase, t[-1], 1.0 / rate)
+    return np.unique(np.clip(np.searchsorted(t, instants - 1e-9), 0, t.size - 1))
+
+
+def pwm_from_rotor_speed(n: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
+    """Motor output pulse width, µs, for rotor speeds n (rad/s), with the `[motor]` curve.
+
+    The inverse of the curve the readers apply to motor outputs
+    (``mavsysid.estimation.readers.motor_curve``): thrust ∝ (1 − e) u + e u² ∝ n², so u
+    solves e u² + (1 − e) u − (n / n_max)² = 0; PWM = pwm_min + u (pwm_max − pwm_min).
+
+    Parameters
+    ----------
+    n : ndarray, any shape
+        Rotor speeds, rad/s.
+    vehicle : VehicleConfig
+        ``[motor]`` pwm_min, pwm_max, thrust_expo and ``[limits]`` rotor_speed_max.
+
+    Returns
+    -------
+    ndarray, same shape
+        PWM, µs, within [pwm_min, pwm_max].
+    """
+    motor = vehicle.motor
+    e = motor.thrust_expo
+    s = np.clip(np.asarray(n, dtype=float) / vehicle.limits.rotor_speed_max, 0.0, 1.0) ** 2
+    u = s if e == 0.0 else (-(1.0 - e) + np.sqrt((1.0 - e) ** 2 + 4.0 * e * s)) / (2.0 * e)
+    return motor.pwm_min + u * (motor.pwm_max - motor.pwm_min)

@@ -1,0 +1,185 @@
+"""A simulated flight written as PX4 writes its ULog (``.ulg``).
+
+Topics, fields and rates as PX4 1.14/1.15's logger writes them (``src/modules/logger/
+logged_topics.cpp``; message definitions in ``msg/``), with the high-rate profile
+(SDLOG_PROFILE) a system-identification flight uses:
+
+- ``vehicle_status`` (``nav_state``: POSCTL for the take-off, OFFBOARD for the
+  calibration part, what ``mavsysid stream`` commands, AUTO_LAND), at 2 Hz and on change;
+- ``vehicle_local_position`` (x, y, z, vx, vy, vz, NED) at 10 Hz (the default 100 ms
+  interval) and ``vehicle_attitude`` (q, NED/FRD) at the high-rate profile's full rate;
+- ``vehicle_mocap_odometry`` (position, q) at 30 Hz when the flight had motion capture;
+- ``esc_status`` (``esc[i].esc_rpm``) and ``actuator_motors`` (relative thrust
+  ``control[i]``, NaN for unused motors), both high-rate topics.
+
+ESC i and motor control i are PX4's motor i + 1, mapped to the config's rotors by
+``motor_order``. Timestamps are µs since boot; the flight starts ``boot_time`` after boot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mavsysid.flight.offline.autopilot_log import LoggedFlight, check_motor_order, sample_indices
+from mavsysid.formats.ulog_writer import Row, write_ulog
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
+from mavsysid.vehicle.frames import enu_to_ned, quaternion_enu_to_ned
+
+Stamp = Callable[[float], int]  # flight time, s → log time, µs since boot
+
+__all__ = ["NAVIGATION_STATES", "PX4_FORMATS", "PX4LogSettings", "write_px4_log"]
+
+#: vehicle_status.nav_state values used here (msg/VehicleStatus.msg).
+NAVIGATION_STATES: dict[str, int] = {"POSCTL": 2, "OFFBOARD": 14, "AUTO_LAND": 18}
+_ARMED = 2  # vehicle_status.arming_state
+_ESC_SLOTS, _MOTOR_SLOTS = 8, 12
+
+#: The formats written (subsets of PX4's fields; readers find fields by name).
+PX4_FORMATS: dict[str, str] = {
+    "vehicle_status": "uint64_t timestamp;uint64_t nav_state_timestamp;uint8_t nav_state;"
+                      "uint8_t arming_state;",
+    "vehicle_local_position": "uint64_t timestamp;uint64_t timestamp_sample;bool xy_valid;"
+                              "bool z_valid;float x;float y;float z;float vx;float vy;"
+                              "float vz;float heading;",
+    "vehicle_attitude": "uint64_t timestamp;uint64_t timestamp_sample;float[4] q;",
+    "vehicle_mocap_odometry": "uint64_t timestamp;uint64_t timestamp_sample;"
+                              "uint8_t pose_frame;float[3] position;float[4] q;",
+    "esc_report": "uint64_t timestamp;int32_t esc_rpm;float esc_voltage;float esc_current;"
+                  "uint8_t esc_address;",
+    "esc_status": "uint64_t timestamp;uint16_t counter;uint8_t esc_count;"
+                  "uint8_t esc_connectiontype;esc_report[8] esc;",
+    "actuator_motors": "uint64_t timestamp;uint64_t timestamp_sample;"
+                       "uint16_t reversible_flags;float[12] control;",
+}
+
+
+@dataclass(frozen=True)
+class PX4LogSettings:
+    """Rates, pose source and clock of the written log.
+
+    Attributes
+    ----------
+    local_position_rate, attitude_rate, mocap_rate, esc_rate, motors_rate : float
+        Hz of each topic (at most the flight's own rate is met).
+    motion_capture : bool
+        Write ``vehicle_mocap_odometry`` (motion capture forwarded to PX4).
+    boot_time : float
+        s from boot to the flight's t = 0.
+    """
+
+    local_position_rate: float = 10.0
+    attitude_rate: float = 100.0
+    mocap_rate: float = 30.0
+    esc_rate: float = 100.0
+    motors_rate: float = 100.0
+    motion_capture: bool = False
+    boot_time: float = 30.0
+
+
+def _status_rows(flight: LoggedFlight, stamp: Stamp) -> list[Row]:
+    """vehicle_status at 2 Hz and at each mode change, from take-off to landed."""
+    p = flight.phases
+    changes = [(p.takeoff, "POSCTL"), (p.calibration_start, "OFFBOARD"),
+               (p.calibration_end, "AUTO_LAND")]
+    times = np.union1d(np.arange(flight.t[0], flight.t[-1], 0.5), [t for t, _ in changes])
+    rows = []
+    for t in times:
+        since, name = max((c for c in changes if c[0] <= t), default=changes[0])
+        rows.append({"timestamp": stamp(t), "nav_state_timestamp": stamp(since),
+                     "nav_state": NAVIGATION_STATES[name], "arming_state": _ARMED})
+    return rows
+
+
+def _pose_topics(flight: LoggedFlight, s: PX4LogSettings, stamp: Stamp) -> dict[str, list[Row]]:
+    """vehicle_local_position, vehicle_attitude and, with motion capture, odometry."""
+    topics: dict[str, list[Row]] = {}
+    i = sample_indices(flight.t, s.local_position_rate, phase=0.003)
+    p, v = enu_to_ned(flight.position[i]), enu_to_ned(flight.velocity[i])
+    topics["vehicle_local_position"] = [
+        {"timestamp": stamp(t) + 200, "timestamp_sample": stamp(t), "xy_valid": 1,
+         "z_valid": 1, **dict(zip(("x", "y", "z", "vx", "vy", "vz"), (*p[j], *v[j]),
+                                  strict=True))}
+        for j, t in enumerate(flight.t[i])]
+    i = sample_indices(flight.t, s.attitude_rate, phase=0.0)
+    q = quaternion_enu_to_ned(flight.quaternion[i])
+    topics["vehicle_attitude"] = [
+        {"timestamp": stamp(t) + 150, "timestamp_sample": stamp(t),
+         **{f"q[{c}]": q[j, c] for c in range(4)}} for j, t in enumerate(flight.t[i])]
+    if s.motion_capture:
+        i = sample_indices(flight.t, s.mocap_rate, phase=0.004)
+        p, q = enu_to_ned(flight.position[i]), quaternion_enu_to_ned(flight.quaternion[i])
+        topics["vehicle_mocap_odometry"] = [
+            {"timestamp": stamp(t) + 3000, "timestamp_sample": stamp(t), "pose_frame": 1,
+             **{f"position[{c}]": p[j, c] for c in range(3)},
+             **{f"q[{c}]": q[j, c] for c in range(4)}} for j, t in enumerate(flight.t[i])]
+    return topics
+
+
+def _motor_topics(flight: LoggedFlight, order: np.ndarray, rotor_speed_max: float,
+                  s: PX4LogSettings, stamp: Stamp) -> dict[str, list[Row]]:
+    """esc_status rpm and actuator_motors relative thrust, in PX4's motor numbering."""
+    k = flight.rotor_count
+    i = sample_indices(flight.t, s.esc_rate, phase=0.006)
+    rpm = np.rint(flight.rotor_speeds[i][:, order] / RPM_TO_RAD_S).astype(int)
+    esc = [{"timestamp": stamp(t), "counter": j % 65536, "esc_count": k,
+            "esc_connectiontype": 6,  # DShot
+            **{f"esc[{m}].esc_rpm": int(rpm[j, m]) for m in range(k)},
+            **{f"esc[{m}].timestamp": stamp(t) for m in range(k)},
+            **{f"esc[{m}].esc_voltage": 16.0 for m in range(k)}}
+           for j, t in enumerate(flight.t[i])]
+    i = sample_indices(flight.t, s.motors_rate, phase=0.001)
+    # control is relative thrust: thrust ∝ n² (PX4 applies THR_MDL_FAC after it).
+    thrust = np.clip(flight.commands[i][:, order] / rotor_speed_max, 0.0, 1.0) ** 2
+    motors = [{"timestamp": stamp(t), "timestamp_sample": stamp(t),
+               **{f"control[{m}]": float(thrust[j, m]) if m < k else np.nan
+                  for m in range(_MOTOR_SLOTS)}}
+              for j, t in enumerate(flight.t[i])]
+    return {"esc_status": esc, "actuator_motors": motors}
+
+
+def write_px4_log(path: Path, flight: LoggedFlight, rotor_speed_max: float,
+                  motor_order: Sequence[int], settings: PX4LogSettings | None = None) -> Path:
+    """Write ``flight`` as PX4 would log it.
+
+    Parameters
+    ----------
+    path : Path
+        The ``.ulg`` file to write.
+    flight : LoggedFlight
+        The flight, in the config's conventions (ENU/FLU, rad/s, config rotor order).
+    rotor_speed_max : float
+        rad/s at full thrust: ``actuator_motors`` control = (n_cmd / n_max)².
+    motor_order : sequence of int
+        Config rotor (0-based) driven by PX4's motor 1, 2, … of the airframe.
+    settings : PX4LogSettings, optional
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        ``motor_order`` is not a permutation of the rotors, or more than 8 rotors.
+    """
+    settings = settings or PX4LogSettings()
+    order = check_motor_order(motor_order, flight.rotor_count)
+    if flight.rotor_count > _ESC_SLOTS:
+        raise ValueError(f"{flight.rotor_count} rotors: esc_status holds at most {_ESC_SLOTS}")
+
+    def stamp(t: float) -> int:
+        return round((settings.boot_time + t) * 1e6)
+
+    topics = {"vehicle_status": _status_rows(flight, stamp),
+              **_pose_topics(flight, settings, stamp),
+              **_motor_topics(flight, order, rotor_speed_max, settings, stamp)}
+    formats = {name: fields for name, fields in PX4_FORMATS.items()
+               if name in topics or name == "esc_report"}
+    write_ulog(path, formats, topics, info={"sys_name": "PX4", "ver_sw": "v1.15.0",
+                                            "sys_mcu": "mavsysid simulation"},
+               start_us=round(settings.boot_time * 1e6))
+    return path

@@ -1,0 +1,174 @@
+"""Tests of the plausibility check of an estimated θ (`mavsysid.estimation.plausibility`)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from mavsysid.discrepancy import diagnose_job
+from mavsysid.estimation import estimate_job
+from mavsysid.estimation.plausibility import PRIOR_FACTOR_MAX, check_plausible, implausibility
+from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
+from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK
+
+from mavsysid.cli.main import exit_code, main
+from mavsysid.errors import JobFailedError
+
+PRIOR = load_vehicle("quad_x").theta
+PRIOR_SIGMA = 0.5 * PRIOR
+
+
+def _theta(**changes: float) -> np.ndarray:
+    theta = PRIOR.copy()
+    for name, value in changes.items():
+        theta[PARAMETER_NAMES.index(name)] = value
+    return theta
+
+
+def test_prior_itself_is_plausible() -> None:
+    assert implausibility(PRIOR, PRIOR_SIGMA, PRIOR, PRIOR_SIGMA) is None
+
+
+def test_estimates_near_the_prior_are_plausible() -> None:
+    """Seeded draws within a factor 3 of the prior (J kept a rigid body) all pass."""
+    rng = np.random.default_rng(17)
+    for _ in range(200):
+        theta = PRIOR * np.exp(rng.uniform(-np.log(3.0), np.log(3.0), 6))
+        theta[3:] = PRIOR[3:] * rng.uniform(0.8, 1.2)  # one common factor keeps J's shape
+        assert implausibility(theta, 0.1 * theta, PRIOR, PRIOR_SIGMA) is None
+
+
+@pytest.mark.parametrize("name", PARAMETER_NAMES)
+@pytest.mark.parametrize("value", [0.0, -1e-15])
+def test_non_positive_parameter_is_refused(name: str, value: float) -> None:
+    theta = _theta(**{name: value})
+    reason = implausibility(theta, 0.1 * np.abs(PRIOR), PRIOR, PRIOR_SIGMA)
+    assert reason is not None and reason.startswith(f"{name} = ")
+    assert "not positive" in reason
+
+
+def test_held_zero_c_D_is_not_checked() -> None:
+    """A config with c_D = 0 and prior σ 0 holds c_D at 0: the user's choice, not refused."""
+    prior = _theta(c_D=0.0)
+    prior_sigma = 0.5 * prior
+    assert implausibility(prior, prior_sigma, prior, prior_sigma) is None
+    assert implausibility(prior, prior_sigma, prior, None) is not None
+
+
+@pytest.mark.parametrize("factor", [PRIOR_FACTOR_MAX * 1.01, 1.0 / (PRIOR_FACTOR_MAX * 1.01)])
+def test_far_outside_prior_is_refused(factor: float) -> None:
+    theta = _theta(c_M=PRIOR[2] * factor)
+    reason = implausibility(theta, 0.01 * theta, PRIOR, PRIOR_SIGMA)
+    assert reason is not None and reason.startswith("c_M = ")
+    assert ("above" if factor > 1 else "below") + " the prior" in reason
+    assert "the model does not fit this log" in reason  # σ small: not "undetermined"
+    assert "prior is wrong" in reason
+
+
+@pytest.mark.parametrize("factor", [PRIOR_FACTOR_MAX * 0.99, 1.0 / (PRIOR_FACTOR_MAX * 0.99)])
+def test_just_inside_prior_factor_passes(factor: float) -> None:
+    theta = _theta(c_T=PRIOR[0] * factor)
+    assert implausibility(theta, 0.01 * theta, PRIOR, PRIOR_SIGMA) is None
+
+
+def test_triangle_inequality_uses_the_config_slack() -> None:
+    j_x, j_y = PRIOR[3], PRIOR[4]
+    inside = _theta(j_z=(j_x + j_y) * (1.0 + INERTIA_TRIANGLE_SLACK) * 0.999)
+    outside = _theta(j_z=(j_x + j_y) * (1.0 + INERTIA_TRIANGLE_SLACK) * 1.001)
+    assert implausibility(inside, None, PRIOR) is None
+    reason = implausibility(outside, None, PRIOR)
+    assert reason is not None and "triangle inequality" in reason and "j_x + j_y" in reason
+
+
+def test_non_finite_value_or_sigma_is_refused() -> None:
+    assert implausibility(_theta(j_y=np.nan), None, PRIOR) is not None
+    sigma = 0.1 * PRIOR
+    sigma[1] = np.inf
+    assert implausibility(PRIOR, sigma, PRIOR) is not None
+
+
+def test_refusal_is_one_line_naming_file_parameter_and_numbers() -> None:
+    theta = _theta(c_M=1.29e-9)
+    sigma = 0.1 * PRIOR
+    sigma[2] = 6.6e-9
+    with pytest.raises(JobFailedError) as info:
+        check_plausible("flight.ulg", theta, sigma, PRIOR, PRIOR_SIGMA)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith("flight.ulg: c_M = 1.29e-09 ± 6.6e-09 N·m/(rad/s)²")
+    assert f"below the prior {PRIOR[2]:.3g}" in message
+    assert "the log does not determine it" in message  # σ larger than the value
+    assert exit_code(info.value) == 3
+
+
+# -- the jobs refuse before anything is written -------------------------------------------
+
+
+def _stub_result(theta: np.ndarray) -> SimpleNamespace:
+    final = SimpleNamespace(value=theta, sigma=0.05 * np.abs(theta))
+    prior = SimpleNamespace(value=PRIOR, sigma=PRIOR_SIGMA)
+    return SimpleNamespace(final=final, prior=prior)
+
+
+@pytest.fixture
+def stub_estimation(monkeypatch: pytest.MonkeyPatch) -> Callable[[np.ndarray], None]:
+    """Replace reading and estimating in `estimate_job` by stubs returning a given θ."""
+
+    def use(theta: np.ndarray) -> None:
+        monkeypatch.setattr(estimate_job, "load_flight",
+                            lambda log, config, **kw: SimpleNamespace(source=str(log)))
+        monkeypatch.setattr(estimate_job, "estimate_parameters",
+                            lambda flight, config, settings=None: _stub_result(theta))
+
+    return use
+
+
+def test_run_estimate_returns_a_plausible_estimate(stub_estimation) -> None:
+    stub_estimation(PRIOR * 1.3)
+    run = estimate_job.run_estimate("flight.ulg", "quad_x")
+    np.testing.assert_array_equal(run.result.final.value, PRIOR * 1.3)
+
+
+def test_estimate_command_refuses_negative_c_M_without_writing(
+    stub_estimation, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+) -> None:
+    stub_estimation(_theta(c_M=-5e-15))
+    out, toml = tmp_path / "estimate.json", tmp_path / "vehicle.toml"
+    code = main(["estimate", "flight.ulg", "--vehicle", "quad_x", "-o", str(out),
+                 "--update-vehicle", str(toml)])
+    err = capsys.readouterr().err
+    assert code == 3
+    assert err.splitlines() == [err.strip()]
+    assert err.startswith("mavsysid estimate: error: flight.ulg: c_M = -5e-15 ± ")
+    assert not out.exists() and not toml.exists()
+
+
+def test_diagnose_refuses_an_impossible_estimate_file_before_reading_the_log(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+) -> None:
+    estimate = tmp_path / "estimate.json"
+    theta = _theta(j_x=-0.01)
+    estimate.write_text(json.dumps({"parameters": {
+        n: {"value": float(v)} for n, v in zip(PARAMETER_NAMES, theta, strict=True)}}))
+
+    def no_read(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the log was read after an impossible θ")
+
+    monkeypatch.setattr(diagnose_job, "load_flight", no_read)
+    with pytest.raises(JobFailedError, match=r"estimate\.json: identified θ: j_x = -0\.01 "):
+        diagnose_job.run_diagnose("flight.ulg", "quad_x", estimate)
+
+
+def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -> None:
+    refit = _theta(c_T=PRIOR[0] / 500.0)
+    monkeypatch.setattr(diagnose_job, "load_flight",
+                        lambda log, config, **kw: SimpleNamespace(source=str(log)))
+    monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
+        theta_before=PRIOR.copy(), theta_after=refit))
+    with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted with the named "
+                       r"effects: c_T = .* is 500× below the prior"):
+        diagnose_job.run_diagnose("flight.ulg", "quad_x")
