@@ -42,7 +42,7 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
-from mavsysid.errors import InputError, JobFailedError
+from mavsysid.errors import InputError
 
 __all__ = [
     "MASS_NOTE",
@@ -191,14 +191,13 @@ def _nis_pair(flight: FlightData, config: VehicleConfig, known: tuple[ModelEffec
               ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
     """NIS without and with the named effects on ``grid`` (`_nis`), and notes.
 
-    The NIS is a check beside the diagnosis, not its basis: when the EKF cannot follow
-    the log (`JobFailedError`) the diagnosis stands without it and says why.
+    An EKF that cannot follow the log (`JobFailedError`, a diverged filter) is not caught:
+    such a log contradicts the model so grossly (a wrong vehicle, rotor order, or time on
+    the ground) that "no significant discrepancy" from the residual regression would be
+    a confident wrong answer, so the diagnosis is refused (exit 3) with the filter's reason.
     """
-    try:
-        before = _nis(flight, config, known, grid)
-        after = _nis(flight, config, (*known, *fitted), grid) if fitted else before
-    except JobFailedError as error:
-        return None, None, [f"no NIS: {error}"]
+    before = _nis(flight, config, known, grid)
+    after = _nis(flight, config, (*known, *fitted), grid) if fitted else before
     return before, after, []
 
 

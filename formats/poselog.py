@@ -12,19 +12,23 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import re
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from mavsysid.errors import LogFormatError
 
 __all__ = [
     "POSE_COLUMNS", "QUATERNION_TOLERANCE", "ROTOR_COLUMN", "PoseLog", "TruncatedLogWarning",
-    "check_positive_count", "read_pose_log", "read_text_file", "rotor_columns",
+    "check_positive_count", "parse_plain_rows", "read_pose_log", "read_text_file",
+    "rotor_columns",
 ]
 
 #: Required leading columns of a pose log, in the order the writer emits them.
@@ -35,6 +39,11 @@ QUATERNION_TOLERANCE = 1e-3
 
 #: Names of rotor-speed columns: n1, n2, … (no leading zero).
 ROTOR_COLUMN = re.compile(r"n([1-9][0-9]*)")
+
+# Text of decimal numbers, commas and line ends only. On such fields pandas' C parser
+# accepts exactly what numpy's loadtxt and Python's float accept, with the same values
+# (checked field by field in the tests); anything else (nan, inf, true, …) it may not.
+_PLAIN_TEXT = re.compile(r"[0-9eE.+\- \t\n,]*")
 
 
 class TruncatedLogWarning(UserWarning):
@@ -157,6 +166,34 @@ def read_text_file(path: Path, encoding: str = "utf-8") -> str:
         raise LogFormatError(f"{path}: not a text file (byte {e.start} is not UTF-8)") from None
 
 
+def parse_plain_rows(text: str, columns: Sequence[int] | None = None) -> np.ndarray | None:
+    """Parse CSV data rows of plain decimal numbers in bulk, with pandas' C parser.
+
+    Parameters
+    ----------
+    text : str
+        The data rows, no header, LF line ends; the caller has checked that every row
+        has the same field count.
+    columns : sequence of int, optional
+        Indices of the columns to return, in this order; all if None.
+
+    Returns
+    -------
+    ndarray of shape (N, m), or None
+        None if the text holds anything but plain decimal numbers (nan, inf, words, a
+        malformed number): the caller then parses it field by field, which can name
+        the line and column of a bad field.
+    """
+    if not text or _PLAIN_TEXT.fullmatch(text) is None:
+        return None
+    try:
+        frame = pd.read_csv(io.StringIO(text), header=None, usecols=columns, dtype=np.float64,
+                            na_filter=False, quoting=csv.QUOTE_NONE, engine="c")
+    except ValueError:  # pandas' ParserError and EmptyDataError are ValueErrors
+        return None
+    return frame.to_numpy() if columns is None else frame[list(columns)].to_numpy()
+
+
 def _is_number(text: str) -> bool:
     """Whether a CSV field is a number, as numpy's loadtxt parses it."""
     try:
@@ -214,7 +251,9 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
     cols = _locate_columns(path, names, rotor_count)
     body, ncol = lines[1:], len(names)
     _check_rows(path, body, ncol, newline_at_end)
-    data = _parse_body(path, body, names)
+    data = parse_plain_rows("\n".join(body))
+    if data is None:
+        data = _parse_body(path, body, names)
     q = _checked_quaternions(path, data, body, names, cols)
     known = set(cols.values())
     return PoseLog(
@@ -299,7 +338,7 @@ def _locate_columns(path: Path, names: list[str], rotor_count: int | None) -> di
 
 
 def _parse_body(path: Path, body: list[str], names: list[str]) -> np.ndarray:
-    """Parse data rows, all with the header's field count, into an (N, columns) array."""
+    """Parse data rows that are not all plain numbers, or raise naming the bad field."""
     with warnings.catch_warnings(), contextlib.suppress(ValueError, UserWarning):
         warnings.simplefilter("error")
         data = np.loadtxt(body, delimiter=",", dtype=np.float64, comments=None, ndmin=2)

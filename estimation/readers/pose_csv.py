@@ -15,7 +15,12 @@ from pathlib import Path
 import numpy as np
 from mavsysid.estimation.readers.streams import LogStreams, Series
 from mavsysid.formats.flight_dir import read_meta
-from mavsysid.formats.poselog import POSE_COLUMNS, read_pose_log, read_text_file
+from mavsysid.formats.poselog import (
+    POSE_COLUMNS,
+    parse_plain_rows,
+    read_pose_log,
+    read_text_file,
+)
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import LogFormatError
@@ -83,23 +88,33 @@ def read_external_pose(path: Path) -> Series:
     if missing:
         raise LogFormatError(f"{path}: missing pose column(s) {', '.join(missing)}")
     index = [names.index(c) for c in POSE_COLUMNS]
+    rows = [line for line in lines[1:] if line.strip()]
+    if not rows:
+        raise LogFormatError(f"{path}: no samples, only a header row")
+    data = None
+    if all(line.count(",") == len(names) - 1 for line in rows):
+        data = parse_plain_rows("\n".join(rows), index)
+    if data is None:  # not plain numbers, or a bad row: parse field by field
+        data = _parse_fields(path, lines, len(names), index)
+    return Series(data[:, 0], data[:, 1:], f"pose of {path.name}")
+
+
+def _parse_fields(path: Path, lines: list[str], ncol: int, index: list[int]) -> np.ndarray:
+    """The columns ``index`` of the data rows, by Python's float; raise at a bad row."""
     rows = []
     for number, line in enumerate(lines[1:], start=2):
         if not line.strip():
             continue
         fields = line.split(",")
-        if len(fields) != len(names):
+        if len(fields) != ncol:
             raise LogFormatError(f"{path}: line {number} has {len(fields)} fields, the header "
-                                 f"has {len(names)}")
+                                 f"has {ncol}")
         try:
             rows.append([float(fields[j]) for j in index])
         except ValueError:
             bad = next(fields[j].strip() for j in index if not _is_float(fields[j]))
             raise LogFormatError(f"{path}: line {number}: {bad[:24]!r} is not a number") from None
-    if not rows:
-        raise LogFormatError(f"{path}: no samples, only a header row")
-    data = np.array(rows, dtype=float)
-    return Series(data[:, 0], data[:, 1:], f"pose of {path.name}")
+    return np.array(rows, dtype=float)
 
 
 def _is_float(text: str) -> bool:

@@ -252,15 +252,13 @@ def test_motor_lag_filter_matches_its_recursion():
     np.testing.assert_allclose(MotorLag(tau=tau).acting_rotor_speeds(t, x), ref, rtol=1e-12)
 
 
-def test_a_filter_that_cannot_follow_the_log_leaves_the_diagnosis_without_nis(
-        config, flights, monkeypatch):
-    """The NIS is a check beside the diagnosis: an EKF refusal becomes a note, not an exit."""
+def test_a_filter_that_cannot_follow_the_log_refuses_the_diagnosis(config, flights, monkeypatch):
+    """A diverged EKF refuses the diagnosis (exit 3) instead of reporting no discrepancy."""
     import mavsysid.estimation.estimator as estimator
 
     def diverges(*args, **kwargs):
         raise JobFailedError("x.csv: the parameter filter diverged")
 
     monkeypatch.setattr(estimator, "estimate_with_effects", diverges)
-    d = diagnose_flight(flights((), 0), config, _start_theta(config, 0), with_nis=True)
-    assert d.gap.before.nis_mean is None and d.gap.after.nis_mean is None
-    assert "no NIS: x.csv: the parameter filter diverged" in d.notes
+    with pytest.raises(JobFailedError, match=r"x\.csv: the parameter filter diverged"):
+        diagnose_flight(flights((), 0), config, _start_theta(config, 0), with_nis=True)
