@@ -21,7 +21,7 @@ from mavsysid.discrepancy.diagnosis import Diagnosis
 from mavsysid.discrepancy.residuals import AXIS_NAMES, AXIS_UNITS
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.report_figures import plot_rotor_speeds, plot_wrench, save_figure
-from mavsysid.estimation.report_html import ReportTable, html_page
+from mavsysid.estimation.report_html import ReportTable, flight_lines, html_page, write_index
 from mavsysid.estimation.wrench_check import compare_wrench
 from mavsysid.vehicle.config import VehicleConfig
 
@@ -116,13 +116,10 @@ def write_diagnosis_report(directory: str | Path, diagnosis: Diagnosis, flight: 
     theta = np.asarray(diagnosis.theta_identified, float)
     plot_wrench(compare_wrench(flight, config, theta), directory / "wrench.png")
     lines = [
-        f"Log: {log_name}; {len(flight)} samples, {flight.duration:.1f} s.",
-        f"Vehicle: {config.name}, mass {config.mass:.4g} kg, {config.rotor_count} rotors.",
+        *flight_lines(log_name, flight, config),
         "Residual axes: body specific force f (m/s²) and angular acceleration dω (rad/s²).",
     ]
     page = html_page(f"Model diagnosis: {log_name}", lines,
                      [effects_table(diagnosis), gap_table(diagnosis)],
                      DIAGNOSIS_REPORT_FILES, diagnosis.notes)
-    index = directory / "index.html"
-    index.write_text(page, encoding="utf-8")
-    return index
+    return write_index(directory, page)

@@ -36,8 +36,8 @@ from mavsysid.estimation.results import EstimationResult
 from mavsysid.estimation.wrench_check import compare_wrench
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 
-__all__ = ["ESTIMATE_REPORT_FILES", "ReportTable", "estimate_table", "html_page",
-           "write_estimate_report"]
+__all__ = ["ESTIMATE_REPORT_FILES", "ReportTable", "estimate_table", "flight_lines",
+           "html_page", "write_estimate_report", "write_index"]
 
 #: What `write_estimate_report` writes, each PNG with its caption on the page.
 ESTIMATE_REPORT_FILES: tuple[tuple[str, str], ...] = (
@@ -73,6 +73,19 @@ def _table_html(table: ReportTable) -> str:
                      for row in table.rows)
     return (f"<table>\n<caption>{html.escape(table.caption)}</caption>\n"
             f"<tr>{head}</tr>\n{body}\n</table>")
+
+
+def flight_lines(log_name: str, flight: FlightData, config: VehicleConfig) -> list[str]:
+    """The page's first lines, shared by every report: the log and the vehicle."""
+    return [f"Log: {log_name}; {len(flight)} samples, {flight.duration:.1f} s.",
+            f"Vehicle: {config.name}, mass {config.mass:.4g} kg, {config.rotor_count} rotors."]
+
+
+def write_index(directory: Path, page: str) -> Path:
+    """Write a report's page as ``index.html`` in ``directory``; returns its path."""
+    index = directory / "index.html"
+    index.write_text(page, encoding="utf-8")
+    return index
 
 
 def html_page(title: str, lines: Sequence[str], tables: Sequence[ReportTable],
@@ -162,14 +175,11 @@ def write_estimate_report(directory: str | Path, result: EstimationResult,
     write_history_csv(directory / "history.csv", result.history)
     position_sigma, attitude_sigma = result.measurement_sigma
     lines = [
-        f"Log: {log_name}; {len(flight)} samples, {flight.duration:.1f} s.",
-        f"Vehicle: {config.name}, mass {config.mass:.4g} kg, {config.rotor_count} rotors.",
+        *flight_lines(log_name, flight, config),
         f"Pose source: {result.pose_source.replace('_', ' ')}; measurement σ assumed "
         f"{1e3 * position_sigma:.2f} mm, {math.degrees(attitude_sigma):.3f}°.",
         "The estimate over time is in history.csv (t, each parameter and its σ, NIS).",
     ]
     page = html_page(f"Parameter estimate: {log_name}", lines, [estimate_table(result)],
                      ESTIMATE_REPORT_FILES, result.notes)
-    index = directory / "index.html"
-    index.write_text(page, encoding="utf-8")
-    return index
+    return write_index(directory, page)

@@ -30,6 +30,7 @@ from mavsysid.flight.autopilot_modes import ARDUCOPTER_MODES
 from mavsysid.flight.offline.autopilot_log import (
     LoggedFlight,
     check_motor_order,
+    microsecond_stamp,
     pwm_from_rotor_speed,
     sample_indices,
 )
@@ -159,8 +160,7 @@ def write_ardupilot_log(path: Path, flight: LoggedFlight, vehicle: VehicleConfig
     if flight.rotor_count > _OUTPUTS:
         raise ValueError(f"{flight.rotor_count} rotors: RCOU logs at most {_OUTPUTS} outputs")
 
-    def stamp(t: float) -> int:
-        return round((settings.boot_time + t) * 1e6)
+    stamp = microsecond_stamp(settings.boot_time)
 
     start = stamp(flight.t[0]) - 1000
     header = [("MSG", (start, settings.firmware.encode()))]

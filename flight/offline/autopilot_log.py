@@ -15,7 +15,7 @@ drives; a log written with it has ESC instance i / output i + 1 = that rotor.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +25,8 @@ from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.rotation import quat_to_matrix
 
-__all__ = ["LoggedFlight", "check_motor_order", "pwm_from_rotor_speed", "sample_indices"]
+__all__ = ["LoggedFlight", "check_motor_order", "microsecond_stamp", "pwm_from_rotor_speed",
+           "sample_indices"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,15 @@ class LoggedFlight:
         commands = np.column_stack([truth.extra[f"n_cmd{i + 1}"] for i in range(rotor_count)])
         return cls(pose.t, pose.position, pose.quaternion, velocity, pose.rotor_speeds,
                    commands, phases)
+
+
+def microsecond_stamp(boot_time: float) -> Callable[[float], int]:
+    """Flight time (s) → the autopilot's timestamp: µs since its boot, ``boot_time`` s before
+    the flight starts (both ArduPilot's ``TimeUS`` and PX4's ``timestamp`` count so)."""
+    def stamp(t: float) -> int:
+        return round((boot_time + t) * 1e6)
+
+    return stamp
 
 
 def check_motor_order(motor_order: Sequence[int], rotor_count: int) -> np.ndarray:

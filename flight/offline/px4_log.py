@@ -23,7 +23,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mavsysid.flight.offline.autopilot_log import LoggedFlight, check_motor_order, sample_indices
+from mavsysid.flight.offline.autopilot_log import (
+    LoggedFlight,
+    check_motor_order,
+    microsecond_stamp,
+    sample_indices,
+)
 from mavsysid.formats.ulog_writer import Row, write_ulog
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import enu_to_ned, quaternion_enu_to_ned
@@ -171,8 +176,7 @@ def write_px4_log(path: Path, flight: LoggedFlight, rotor_speed_max: float,
     if flight.rotor_count > _ESC_SLOTS:
         raise ValueError(f"{flight.rotor_count} rotors: esc_status holds at most {_ESC_SLOTS}")
 
-    def stamp(t: float) -> int:
-        return round((settings.boot_time + t) * 1e6)
+    stamp = microsecond_stamp(settings.boot_time)
 
     topics = {"vehicle_status": _status_rows(flight, stamp),
               **_pose_topics(flight, settings, stamp),
