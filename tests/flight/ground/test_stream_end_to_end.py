@@ -122,14 +122,12 @@ def test_tlog_holds_both_directions(ardupilot_flight):
 def test_estimate_reads_the_streamed_tlog(ardupilot_flight, tmp_path):
     """`estimate` reads the streamer's flight.tlog (slow telemetry before the rates are
     raised included): by default only the trajectory window of meta.json, else the GUIDED
-    span of the HEARTBEATs; θ within 5 % of the sim's truth."""
+    span of the HEARTBEATs; the refined θ within 5 % of the sim's truth."""
     from mavsysid.estimation.estimate_job import run_estimate
-    from mavsysid.estimation.estimator import EstimatorSettings
     from mavsysid.estimation.readers import load_flight
 
     directory, meta = ardupilot_flight["dir"], ardupilot_flight["meta"]
-    run = run_estimate(directory / "flight.tlog", "firefly",
-                       settings=EstimatorSettings(refine=False))
+    run = run_estimate(directory / "flight.tlog", "firefly")
     window = meta["trajectory_window"]
     assert window["start"] <= run.flight.t[0] and run.flight.t[-1] <= window["end"]
     assert [n for n in run.result.notes if "meta.json trajectory_window" in n]
