@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.discrepancy.residuals import ResidualProblem
+from mavsysid.estimation.equation_error_fit import theta_jacobian
 from mavsysid.vehicle.model_effects import EFFECTS, ModelEffect
 
 __all__ = [
@@ -36,10 +37,6 @@ PROFILE_GRIDS: dict[str, np.ndarray] = {
     "pose_delay": np.arange(0.0, 0.0801, 0.005),
     "ground_effect": np.arange(0.0, 0.2501, 0.0125),
 }
-
-#: Relative step of the θ finite differences.
-_THETA_STEP = 1e-3
-
 
 @dataclass(frozen=True)
 class Candidate:
@@ -90,14 +87,7 @@ def theta_columns(problem: ResidualProblem, fixed: Sequence[ModelEffect], r0: np
     r0 : ndarray, shape (N, 6)
         The residual at θ̂ with ``fixed``.
     """
-    theta = problem.theta
-    cols = np.empty(r0.shape + (6,))
-    for j in range(6):
-        step = _THETA_STEP * (abs(theta[j]) if theta[j] != 0.0 else 1e-3)
-        shifted = theta.copy()
-        shifted[j] += step
-        cols[..., j] = -(problem.residual(fixed, shifted) - r0) / step
-    return cols
+    return theta_jacobian(lambda theta: problem.residual(fixed, theta), problem.theta, r0)
 
 
 def effect_columns(problem: ResidualProblem, candidate: Candidate,

@@ -30,6 +30,7 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
+from mavsysid.estimation.equation_error import MAX_JITTER, uniform_step
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.readers.frames import interpolate_quaternions
 from scipy.interpolate import CubicSpline
@@ -46,35 +47,12 @@ __all__ = [
     "uniform_step",
 ]
 
-#: Largest deviation of a sample interval from the median one, as a fraction of it, that
-#: the smoother takes as uniform (the log is then used as it is).
-MAX_JITTER = 0.05
-
 #: Longest interval interpolated across, in median sample intervals (up to three dropped
 #: samples); a longer one is a gap.
 MAX_INTERPOLATED = 4.0
 
 #: Logged samples an interpolated grid sample effectively depends on (cubic spline).
 INTERPOLATION_SUPPORT = 4
-
-
-def uniform_step(t: np.ndarray, source: str) -> float:
-    """The sample interval of a uniformly sampled log, s; refuses any other.
-
-    Parameters
-    ----------
-    t : ndarray, shape (N,)
-        Sample times, s.
-    source : str
-        The file the samples came from (named in the refusal).
-    """
-    dt = np.diff(t)
-    step = float(np.median(dt)) if dt.size else 0.0
-    if not step > 0.0 or np.max(np.abs(dt - step)) > MAX_JITTER * step:
-        raise InputError(f"{source}: the pose log is not sampled at a uniform rate "
-                         f"(jitter > {100 * MAX_JITTER:.0f} %); the diagnosis smoother "
-                         "needs uniform samples")
-    return step
 
 
 @dataclass(frozen=True)

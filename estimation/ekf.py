@@ -46,7 +46,7 @@ from mavsysid.vehicle.rotation import (
     quat_to_matrix,
 )
 
-from mavsysid.errors import JobFailedError
+from mavsysid.errors import JobFailedError, LogFormatError
 
 __all__ = ["FILTER_DIM", "FilterRun", "ParameterEKF", "rk4_step_kernel"]
 
@@ -206,7 +206,15 @@ def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
     for k in range(1, t.shape[0]):
         _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], t[k] - t[k - 1], mass, r, eps,
                         scale, Qc[k - 1], A, G, F, Q)
+        # A diverged state overflows: the update would invert a NaN S, or normalise the
+        # attitude to zero and divide by it next step. Stop; the caller refuses the run.
+        if not (np.isfinite(np.sum(x)) and np.isfinite(np.trace(P))):
+            x[:] = np.nan
+            return np.nan
         out_nis[k] = _update_kernel(x, P, z[k], R, scale, y, S, SI, K)
+        if not (np.isfinite(out_nis[k]) and abs(np.sum(x[6:10] * x[6:10]) - 1.0) < 1e-6):
+            x[:] = np.nan
+            return np.nan
         log_det = 2.0 * np.sum(np.log(np.diag(np.linalg.cholesky(S))))
         log_likelihood -= 0.5 * (out_nis[k] + log_det + 6.0 * np.log(2.0 * np.pi))
         out_innov[k] = y
@@ -313,11 +321,15 @@ class ParameterEKF(ExtendedKalmanFilter):
                       state_sigma: tuple[float, float, float, float]) -> None:
         """Restart the model state from samples ``i``, ``i + 1`` of ``flight`` (finite
         differences), with σ ``state_sigma``; θ and its covariance are kept, the states'
-        cross-covariance with θ is dropped."""
-        dt0 = flight.t[i + 1] - flight.t[i]
-        q0, q1 = flight.quaternion[i], flight.quaternion[i + 1]
+        cross-covariance with θ is dropped. Jittered stamps can put the next sample a
+        microsecond after this one: the difference spans at least half the median step."""
+        t = flight.t
+        step = 0.5 * float(np.median(np.diff(t[i:i + 64])))
+        j = min(max(int(np.searchsorted(t, t[i] + step)), i + 1), t.size - 1)
+        dt0 = t[j] - t[i]
+        q0, q1 = flight.quaternion[i], flight.quaternion[j]
         rates = quat_log(quat_multiply(q0 * [1, -1, -1, -1], q1)) / dt0
-        v_world = (flight.position[i + 1] - flight.position[i]) / dt0
+        v_world = (flight.position[j] - flight.position[i]) / dt0
         v_body = quat_to_matrix(q0).T @ v_world
         self.P[:12, :] = 0.0
         self.P[:, :12] = 0.0
@@ -339,6 +351,9 @@ class ParameterEKF(ExtendedKalmanFilter):
         already be in the model's terms (effects' pose and rotor-speed channels applied).
         """
         t = np.ascontiguousarray(flight.t, dtype=float)
+        if t.size < 2 or not np.all(np.diff(t) > 0.0):
+            # Readers drop repeated stamps; a zero step would divide by zero in `start_segment`.
+            raise LogFormatError(f"{flight.source}: the sample times must increase strictly")
         self.start_segment(flight, 0, state_sigma)
         z = np.ascontiguousarray(np.hstack([flight.position, flight.quaternion]))
         n = np.ascontiguousarray(flight.rotor_speeds, dtype=float)

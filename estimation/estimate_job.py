@@ -8,17 +8,23 @@ physically impossible or far outside the prior is refused here
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.plausibility import check_plausible
+from mavsysid.estimation.guard import check_agreement
+from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import EstimationResult
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
-__all__ = ["EstimateRun", "run_estimate"]
+__all__ = ["EstimateRun", "Estimator", "run_estimate"]
+
+#: What estimates θ from a read flight: `estimate_parameters` or a caller's (e.g. with the
+#: effects a diagnosis names, `mavsysid.discrepancy.checked_estimate`).
+Estimator = Callable[[FlightData, VehicleConfig, EstimatorSettings | None], EstimationResult]
 
 
 @dataclass(frozen=True)
@@ -34,6 +40,7 @@ def run_estimate(
     log: str | Path, vehicle: str | Path = "firefly", pose: str | Path | None = None,
     time_offset: float | None = None, settings: EstimatorSettings | None = None,
     start: float | None = None, end: float | None = None,
+    estimate: Estimator | None = None,
 ) -> EstimateRun:
     """Read a flight log and estimate θ.
 
@@ -51,6 +58,9 @@ def run_estimate(
     settings : EstimatorSettings, optional
     start, end : float, optional
         The window of the log to use, s on its clock (default: `load_flight`'s).
+    estimate : Estimator, optional
+        Estimates θ from the flight read (default: `estimate_parameters`, the vehicle
+        config's model).
 
     Returns
     -------
@@ -60,13 +70,19 @@ def run_estimate(
     ------
     JobFailedError
         The final θ is physically impossible (c_T, c_D, c_M or J ≤ 0, J breaking the
-        triangle inequality) or far outside the prior; one line naming the log, the
-        parameter and the numbers.
+        triangle inequality) or far outside the prior, or the log's equation-error fit
+        contradicts it (`mavsysid.estimation.guard.check_agreement`); one line naming the
+        log, the parameter and the numbers.
     """
     config = load_vehicle(vehicle)
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
-    result = estimate_parameters(flight, config, settings)
+    result = (estimate or estimate_parameters)(flight, config, settings)
     final = result.final
     check_plausible(flight.source, final.value, final.sigma, result.prior.value,
-                    result.prior.sigma)
+                    result.prior.sigma,
+                    may_vanish=vanishing_parameters(e.name for e in result.effects))
+    if result.equation_error is not None:
+        # The log's own force and torque balance referees the final θ (paper model only:
+        # with effects in the model it is no referee).
+        check_agreement(flight.source, final, result.equation_error)
     return EstimateRun(config, flight, result)

@@ -22,10 +22,13 @@ import numpy as np
 from mavsysid.estimation import effect_fit
 from mavsysid.estimation.batch import refine
 from mavsysid.estimation.effect_channels import ModelTerms
-from mavsysid.estimation.effect_fit import EffectFit, reference_terms
+from mavsysid.estimation.effect_fit import EffectFit
 from mavsysid.estimation.ekf import ParameterEKF
+from mavsysid.estimation.equation_error_fit import EquationErrorFit, fit_equation_error
 from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
-from mavsysid.estimation.noise_fit import fit_noise_scale
+from mavsysid.estimation.guarded_filter import guarded_filter
+from mavsysid.estimation.noise_fit import NOISE_SCALE_LIMITS, fit_noise_scale
+from mavsysid.estimation.pose_noise import pose_sigma
 from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.report import convergence_time
 from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
@@ -33,7 +36,7 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
 from mavsysid.vehicle.linearization import initial_state_sigma
 from mavsysid.vehicle.model_effects import ModelEffect
 
-from mavsysid.errors import InputError
+from mavsysid.errors import InputError, JobFailedError
 
 __all__ = ["EstimatorSettings", "estimate_parameters", "estimate_with_effects",
            "flight_initial_state_sigma", "prior_from_config"]
@@ -57,6 +60,13 @@ class EstimatorSettings:
     fit_effects : bool
         Fit the parameters of the config's model effects jointly with θ (else hold them
         at the config's values); used by `estimate_parameters`.
+    guard : bool
+        Fit θ by equation error (`mavsysid.estimation.equation_error_fit`), restart a
+        diverged filter from it and refuse a final θ it contradicts
+        (`mavsysid.estimation.guard`).
+    start_from_equation_error : bool
+        Start the filter at the equation-error θ (with the prior's covariance) rather than
+        at the prior; the MAP prior stays the vehicle file's either way.
     """
 
     prior_relative_sigma: float = 0.5
@@ -65,6 +75,8 @@ class EstimatorSettings:
     autopilot_attitude_sigma: float = math.radians(1.0)
     c_D_scale: float = 0.01
     fit_effects: bool = True
+    guard: bool = True
+    start_from_equation_error: bool = False
 
 
 def prior_from_config(config: VehicleConfig, settings: EstimatorSettings) -> ParameterEstimate:
@@ -79,10 +91,13 @@ def prior_from_config(config: VehicleConfig, settings: EstimatorSettings) -> Par
 
 
 def _measurement_sigma(flight: FlightData, config: VehicleConfig,
-                       settings: EstimatorSettings) -> tuple[float, float]:
+                       settings: EstimatorSettings) -> tuple[tuple[float, float], str | None]:
+    """The σ assumed for the pose source, raised to the log's measured noise if larger."""
     if flight.pose_source == "autopilot":
-        return settings.autopilot_position_sigma, settings.autopilot_attitude_sigma
-    return config.noise.position_sigma, config.noise.attitude_sigma
+        assumed = settings.autopilot_position_sigma, settings.autopilot_attitude_sigma
+    else:
+        assumed = config.noise.position_sigma, config.noise.attitude_sigma
+    return pose_sigma(flight, assumed)
 
 
 def flight_initial_state_sigma(
@@ -197,15 +212,20 @@ def estimate_with_effects(
     settings = settings or EstimatorSettings()
     effects = _check_inputs(flight, config, effects)
     prior = prior_from_config(config, settings)
-    sigma = _measurement_sigma(flight, config, settings)
+    sigma, sigma_note = _measurement_sigma(flight, config, settings)
     state_sigma = flight_initial_state_sigma(flight, sigma)
-    notes = list(flight.warnings)
+    notes = list(flight.warnings) + ([sigma_note] if sigma_note else [])
+    ee = _equation_error(flight, config, prior, notes) if settings.guard else None
+    start = prior
+    if ee is not None and settings.start_from_equation_error:
+        start = ParameterEstimate(ee.estimate.value, prior.covariance)
+        notes.append("filter started at the equation-error θ")
 
     fit = None
     used = tuple(FittedEffect(e, np.full(len(e.parameters), np.nan), False) for e in effects)
     if fit_effects and any(e.parameters for e in effects):
         report_stage("fitting the model effects' parameters")
-        fit = effect_fit.fit_effects(flight, config, effects, prior, sigma, state_sigma)
+        fit = effect_fit.fit_effects(flight, config, effects, start, sigma, state_sigma)
         used = fit.effects
         effects = tuple(fe.effect for fe in fit.effects)
         notes.append(_effect_note(fit))
@@ -213,12 +233,15 @@ def estimate_with_effects(
         notes.append("model effects held at the given values: "
                      + "; ".join(repr(e) for e in effects))
     report_stage(f"filtering {len(flight)} samples")
-    terms, run = reference_terms(flight, effects, config, prior, sigma, state_sigma)
+    terms, run, start, sigma = guarded_filter(flight, effects, config, (prior, start), sigma,
+                                              state_sigma, ee, notes)
+    state_sigma = flight_initial_state_sigma(flight, sigma)
     log_likelihood = run.log_likelihood
 
     refined = None
     if settings.refine:
-        refined, log_likelihood = _refine(terms, fit, config, prior, sigma, state_sigma, notes)
+        refined, log_likelihood = _refine(terms, fit, config, (prior, start), sigma,
+                                          state_sigma, notes)
     increment = None if fit is None else fit.theta_covariance_increment()
     filtered = _with_increment(run.estimate, increment)
     refined = _with_increment(refined, increment)
@@ -234,28 +257,53 @@ def estimate_with_effects(
         convergence_time=conv, true_theta=truth, measurement_sigma=sigma,
         pose_source=flight.pose_source, notes=tuple(notes), effects=used,
         log_likelihood=log_likelihood,
+        equation_error=None if ee is None or effects else ee.estimate,
     )
 
 
+def _equation_error(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
+                    notes: list[str]) -> EquationErrorFit | None:
+    """The equation-error fit, or None (with a note) on a flight too short for it."""
+    try:
+        return fit_equation_error(flight, config, prior)
+    except JobFailedError as error:
+        notes.append(f"no equation-error check: {error}")
+        return None
+
+
 def _refine(
-    terms: ModelTerms, fit: EffectFit | None, config: VehicleConfig, prior: ParameterEstimate,
-    sigma: tuple[float, float], state_sigma: tuple[float, float, float, float], notes: list[str],
+    terms: ModelTerms, fit: EffectFit | None, config: VehicleConfig,
+    priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
+    state_sigma: tuple[float, float, float, float], notes: list[str],
 ) -> tuple[ParameterEstimate, float]:
     """Step 2: the process-noise level (the effect fit's, or fitted now) and the batch MAP.
 
-    Appends its notes to ``notes``; returns the refined θ and the log-likelihood of the
-    filter run at the fitted noise level.
+    ``priors`` is (the MAP prior, the filter's start). Appends its notes to ``notes``;
+    returns the refined θ and the log-likelihood of the filter run at the fitted noise
+    level. A noise level at the upper edge of its search range is refused
+    (`JobFailedError`).
     """
+    prior, start_prior = priors
     if fit is not None:
         noise_cfg, scale, at_bound = fit.config, fit.noise_scale, fit.noise_at_bound
+        # The effect fit searches `NOISE_SCALE_BOUNDS`, which straddle 1.
+        at_upper = at_bound and scale > 1.0
         start, terms_r = fit.run, fit.terms
     else:
         report_stage("fitting the process noise")
-        nf = fit_noise_scale(terms.flight, config, prior, sigma, state_sigma,
+        nf = fit_noise_scale(terms.flight, config, start_prior, sigma, state_sigma,
                              wrench=terms.wrench)
         noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
             nf.run, terms
+        at_upper = nf.at_upper_bound
     nz = noise_cfg.noise
+    if at_upper:
+        # At the upper edge the filter needs more unmodelled force than any range allows:
+        # the model does not fit. (At the lower edge it fits better than configured.)
+        raise JobFailedError(
+            f"{terms.flight.source}: the process-noise fit ended at the edge of its range "
+            f"({scale:.3g} × the configured densities, at most {NOISE_SCALE_LIMITS[1]:g}); "
+            "the model does not describe this log's forces")
     notes.append(
         f"process noise fitted to the flight: {scale:.3g} × the configured densities "
         f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"

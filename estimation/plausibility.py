@@ -11,6 +11,11 @@ An estimate is refused (`JobFailedError`, exit 3) when
 * a value is more than `PRIOR_FACTOR_MAX` times above or below the prior (the config's
   nominal value).
 
+An entry the model lets vanish (``may_vanish``; `vanishing_parameters` of the model's
+effects: c_D when ``rotor_drag_linear`` carries the rotor drag) may be ≈ 0: a value
+within `VANISH_SIGMAS` σ of 0, or any positive value below the prior, is then the right
+answer and not refused.
+
 A parameter the prior holds fixed (prior σ = 0, value 0) is the user's choice, not an
 estimate, and is not checked. The first problem found is reported, in θ order.
 """
@@ -18,7 +23,7 @@ estimate, and is not checked. The first problem found is reported, in θ order.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
@@ -26,7 +31,8 @@ from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK, triangle_viol
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["PRIOR_FACTOR_MAX", "check_plausible", "implausibility"]
+__all__ = ["PRIOR_FACTOR_MAX", "VANISHES_WITH", "VANISH_SIGMAS", "check_plausible",
+           "implausibility", "vanishing_parameters"]
 
 #: An estimate more than this factor above or below its prior is "far outside the prior".
 #: Why 10: with the default prior σ of 50 %, a factor 10 above is 18 σ away and a factor 10
@@ -36,7 +42,40 @@ __all__ = ["PRIOR_FACTOR_MAX", "check_plausible", "implausibility"]
 #: even when the model does not fit it (the wrong answers of issue 17 had small σ).
 PRIOR_FACTOR_MAX = 10.0
 
+#: θ entries a model effect takes over, so that ≈ 0 is a correct estimate with it in the
+#: model: rotor drag linear in rotor speed replaces the paper's quadratic c_D law.
+VANISHES_WITH: dict[str, tuple[str, ...]] = {"rotor_drag_linear": ("c_D",)}
+
+#: A vanishing entry may be this many σ below 0 (an unbiased estimate of 0 is negative half
+#: the time; 2 σ keeps the false refusals near 2.5 %).
+VANISH_SIGMAS = 2.0
+
 _J_FIRST = PARAMETER_NAMES.index("j_x")
+
+
+def vanishing_parameters(effect_names: Iterable[str]) -> np.ndarray:
+    """Which θ entries the model's effects let vanish (`VANISHES_WITH`).
+
+    Parameters
+    ----------
+    effect_names : iterable of str
+        Names of the model effects in the model (``rotor_drag_linear`` …).
+
+    Returns
+    -------
+    ndarray of bool, shape (6,)
+        True for an entry that may be ≈ 0, `PARAMETER_NAMES` order.
+    """
+    mask = np.zeros(len(PARAMETER_NAMES), bool)
+    for name in effect_names:
+        for parameter in VANISHES_WITH.get(name, ()):
+            mask[PARAMETER_NAMES.index(parameter)] = True
+    return mask
+
+
+def _vanishes(v: float, s: float | None) -> bool:
+    """Whether ``v`` ± ``s`` is ≈ 0: positive, or within `VANISH_SIGMAS` σ below 0."""
+    return v > 0.0 or (s is not None and v >= -VANISH_SIGMAS * s)
 
 
 def _quantity(name: str, value: float, sigma: float | None) -> str:
@@ -73,6 +112,7 @@ def _why(sigma: float | None, value: float) -> str:
 def implausibility(
     value: Sequence[float] | np.ndarray, sigma: Sequence[float] | np.ndarray | None,
     prior: Sequence[float] | np.ndarray, prior_sigma: Sequence[float] | np.ndarray | None = None,
+    may_vanish: Sequence[bool] | np.ndarray | None = None,
 ) -> str | None:
     """What makes θ physically impossible or implausible, as one phrase; None if nothing.
 
@@ -86,6 +126,9 @@ def implausibility(
         The prior (config's nominal) θ, SI.
     prior_sigma : array_like, shape (6,), optional
         The prior's σ, SI; a parameter with prior σ 0 and value 0 is held, not checked.
+    may_vanish : array_like of bool, shape (6,), optional
+        Entries the model lets vanish (`vanishing_parameters`): ≤ 0 within `VANISH_SIGMAS`
+        σ of 0 is accepted, and so is any value below the prior; default none.
 
     Returns
     -------
@@ -98,6 +141,7 @@ def implausibility(
     nominal = np.asarray(prior, dtype=float).reshape(6)
     held = np.zeros(6, bool) if prior_sigma is None else (
         (np.asarray(prior_sigma, dtype=float).reshape(6) == 0.0) & (nominal == 0.0))
+    vanish = np.zeros(6, bool) if may_vanish is None else np.asarray(may_vanish, bool).reshape(6)
     for i, name in enumerate(PARAMETER_NAMES):
         if held[i]:
             continue
@@ -105,7 +149,7 @@ def implausibility(
         v = float(theta[i])
         if not math.isfinite(v) or (s is not None and not math.isfinite(s)):
             return f"{_quantity(name, v, s)} is not a finite estimate; the filter failed"
-        if v <= 0.0:
+        if v <= 0.0 and not (vanish[i] and _vanishes(v, s)):
             return (f"{_quantity(name, v, s)} is not positive, which is physically "
                     f"impossible; {_why(s, v)}")
     violation = triangle_violation(theta[_J_FIRST:])
@@ -119,6 +163,8 @@ def implausibility(
                 f"{INERTIA_TRIANGLE_SLACK:.0%} over); {why}")
     for i, name in enumerate(PARAMETER_NAMES):
         far = None if held[i] else _prior_factor(float(theta[i]), float(nominal[i]))
+        if far is not None and vanish[i] and theta[i] < nominal[i]:
+            far = None  # any value between ≈ 0 and the prior is possible then
         if far is not None:
             s = None if sig is None else float(sig[i])
             return f"{_quantity(name, float(theta[i]), s)} is {far}; {_why(s, float(theta[i]))}"
@@ -128,7 +174,7 @@ def implausibility(
 def check_plausible(
     source: str, value: Sequence[float] | np.ndarray, sigma: Sequence[float] | np.ndarray | None,
     prior: Sequence[float] | np.ndarray, prior_sigma: Sequence[float] | np.ndarray | None = None,
-    what: str = "",
+    what: str = "", may_vanish: Sequence[bool] | np.ndarray | None = None,
 ) -> None:
     """Raise `JobFailedError` in one line naming ``source`` if θ is implausible.
 
@@ -136,7 +182,7 @@ def check_plausible(
     ----------
     source : str
         The log (or estimate file) the θ comes from, named first in the message.
-    value, sigma, prior, prior_sigma
+    value, sigma, prior, prior_sigma, may_vanish
         As for `implausibility`.
     what : str
         Optional qualifier after the file name (e.g. ``"θ refitted without effects"``).
@@ -146,7 +192,7 @@ def check_plausible(
     JobFailedError
         ``"<source>: [<what>: ]<reason>"``, exit code 3.
     """
-    reason = implausibility(value, sigma, prior, prior_sigma)
+    reason = implausibility(value, sigma, prior, prior_sigma, may_vanish)
     if reason is not None:
         head = f"{source}: {what}: " if what else f"{source}: "
         raise JobFailedError(" ".join((head + reason).split()))

@@ -3,7 +3,9 @@
 The estimator announces its stages (filtering, noise fit, refinement, …) with
 `report_stage`; nothing is shown unless a caller installs a listener with
 `stage_listener`. A context variable carries the listener, so library callers, tests and
-worker processes see nothing and the estimator keeps no global state.
+worker processes see nothing and the estimator keeps no global state. Long stages also
+report their steps (`report_progress`: "batch refinement 2/30: cost …"), so a slow run
+shows where it is.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import TextIO
 
-__all__ = ["StageLog", "progress_wanted", "report_stage", "stage_listener"]
+__all__ = ["StageLog", "progress_wanted", "report_progress", "report_stage", "stage_listener"]
 
 _LISTENER: ContextVar[Callable[[str], None] | None] = ContextVar(
     "mavsysid_stage_listener", default=None)
@@ -25,6 +27,17 @@ def report_stage(message: str) -> None:
     listener = _LISTENER.get()
     if listener is not None:
         listener(message)
+
+
+def report_progress(stage: str, step: int, total: int, detail: str = "") -> None:
+    """Announce step ``step`` of at most ``total`` of a long stage, with an optional detail.
+
+    The listener receives ``"<stage> <step>/<total>: <detail>"``; nothing is formatted
+    unless a listener is installed.
+    """
+    listener = _LISTENER.get()
+    if listener is not None:
+        listener(f"{stage} {step}/{total}" + (f": {detail}" if detail else ""))
 
 
 @contextmanager

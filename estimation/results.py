@@ -164,6 +164,9 @@ class EstimationResult:
     log_likelihood : float
         Innovation log-likelihood Σ log N(y_k; 0, S_k) of the filter at the fitted process
         noise and effects (at the config's noise when refinement is off); NaN if unknown.
+    equation_error : ParameterEstimate or None
+        θ by equation error (`mavsysid.estimation.equation_error_fit`), the independent
+        check of the final θ; None when the guard is off.
     """
 
     prior: ParameterEstimate
@@ -177,6 +180,7 @@ class EstimationResult:
     notes: tuple[str, ...] = ()
     effects: tuple[FittedEffect, ...] = ()
     log_likelihood: float = math.nan
+    equation_error: ParameterEstimate | None = None
 
     @property
     def final(self) -> ParameterEstimate:

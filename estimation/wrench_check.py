@@ -22,7 +22,7 @@ from mavsysid.vehicle.mav_model import rotor_wrench
 from mavsysid.vehicle.rotation import quat_conjugate, quat_multiply, quat_to_matrix
 from scipy.signal import savgol_filter
 
-__all__ = ["SMOOTHING_WINDOW", "WrenchComparison", "compare_wrench"]
+__all__ = ["SMOOTHING_WINDOW", "WrenchComparison", "compare_wrench", "uniform_grid"]
 
 #: Savitzky–Golay window, s: wide enough that motion-capture noise differentiated twice
 #: stays well below the rotor forces, short enough to keep manoeuvres (a few Hz).
@@ -52,7 +52,8 @@ class WrenchComparison:
     model_torque: np.ndarray
 
 
-def _uniform(flight: FlightData) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
+def uniform_grid(flight: FlightData
+                 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
     """Grid times, step and position, quaternion, rotor speeds interpolated onto it."""
     t = np.asarray(flight.t, float)
     dt = float(np.median(np.diff(t)))
@@ -95,7 +96,7 @@ def compare_wrench(flight: FlightData, config: VehicleConfig, theta: np.ndarray
         Empty arrays when the flight is too short for the smoother.
     """
     theta = np.asarray(theta, float)
-    t, dt, p, q, n = _uniform(flight)
+    t, dt, p, q, n = uniform_grid(flight)
     win = _window(dt, len(t))
     if win < _POLYORDER + 2:
         empty = np.empty((0, 3))

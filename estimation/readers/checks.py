@@ -99,6 +99,14 @@ def repair_samples(t: np.ndarray, values: np.ndarray, source: str,
         notes.append(f"{source}: dropped {_plural(int(repeat.sum()), 'sample')} of {what} "
                      "with a duplicate timestamp")
         t, values = t[~repeat], values[~repeat]
+    # A jittered clock can stamp two samples a microsecond apart, a period's motion in
+    # no time, which no model follows: keep the first, as of equal stamps.
+    close = np.concatenate([[False], np.diff(t) < 0.05 * np.median(np.diff(t))]) if (
+        t.shape[0] > 2) else np.zeros(t.shape[0], dtype=bool)
+    if close.any():
+        notes.append(f"{source}: dropped {_plural(int(close.sum()), 'sample')} of {what} "
+                     "stamped within 5 % of a sample period after the previous one")
+        t, values = t[~close], values[~close]
     return t, values, notes
 
 

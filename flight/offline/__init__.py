@@ -7,6 +7,9 @@
   flies the same physics behind a MAVLink endpoint;
 - `controller`: the geometric controller on the config's nominal θ;
 - `effects`: truth-side effects (what the world does that the model may not know);
+- `sensor_path`, `log_timing`: a pose from an on-board estimator (lagged, smoothed,
+  correlated noise) and a logger's stamp jitter and dropped samples, to fly a vehicle
+  the way real small vehicles are logged;
 - `excitation`: the built-in excitation trajectory.
 - `phased_flight`: take-off, a calibration part and landing as one trajectory;
 - `autopilot_log`, `ardupilot_log`, `px4_log`: a simulated flight written as ArduPilot and PX4

@@ -5,9 +5,12 @@ directly: read the log, run the filter and the refinement): print the table, wri
 JSON, the updated vehicle config and the Rerun recording on request. The vehicle
 config's model effects (``[effects.NAME]``) are part of the model; their parameters are
 fitted with θ (or held with ``--fixed-effects``), reported, and written back by
-``--update-vehicle``. ``--report DIR`` writes figures, the estimate over time and a
-one-page HTML; ``--history CSV`` the estimate over time alone. While it works, the
-stages are shown on stderr (on a terminal, or always with ``-v``; never with ``-q``).
+``--update-vehicle``. ``--auto-effects`` lets the diagnosis name the effects the log
+shows and estimates θ again with them
+(`mavsysid.discrepancy.checked_estimate.run_estimate_with_named_effects`). ``--report DIR``
+writes figures, the estimate over time and a one-page HTML; ``--history CSV`` the estimate
+over time alone. While it works, the stages are shown on stderr (on a terminal, or always
+with ``-v``; never with ``-q``).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import sys
 from pathlib import Path
 
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
+from mavsysid.discrepancy.checked_estimate import run_estimate_with_named_effects
 from mavsysid.estimation.estimate_job import EstimateRun, run_estimate
 from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.history_table import write_history_csv
@@ -56,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fixed-effects", action="store_true",
                         help="hold the vehicle config's model effects ([effects.NAME]) at "
                         "their values instead of fitting their parameters with θ")
+    parser.add_argument("--auto-effects", action="store_true",
+                        help="diagnose the flight and, if it names effects the model lacks "
+                        "(wind, motor lag …), estimate θ again with them fitted (slower)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -65,8 +72,9 @@ def main(args: argparse.Namespace) -> int:
     show = progress_wanted(args.verbosity, sys.stderr)
     with stage_listener(StageLog("mavsysid estimate", sys.stderr) if show else None):
         report_stage(f"reading {args.log}")
-        run = run_estimate(args.log, args.vehicle, args.pose, args.time_offset, settings,
-                           start=args.start, end=args.end)
+        job = run_estimate_with_named_effects if args.auto_effects else run_estimate
+        run = job(args.log, args.vehicle, args.pose, args.time_offset, settings,
+                  start=args.start, end=args.end)
         _write_extras(args, run)
     if args.output is not None:
         write_estimate_json(args.output, run.result, run.config, args.log)

@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 from mavsysid.discrepancy import diagnose_job
 from mavsysid.estimation import estimate_job
-from mavsysid.estimation.plausibility import PRIOR_FACTOR_MAX, check_plausible, implausibility
+from mavsysid.estimation.plausibility import (
+    PRIOR_FACTOR_MAX,
+    check_plausible,
+    implausibility,
+    vanishing_parameters,
+)
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK
 
@@ -111,7 +116,7 @@ def test_refusal_is_one_line_naming_file_parameter_and_numbers() -> None:
 def _stub_result(theta: np.ndarray) -> SimpleNamespace:
     final = SimpleNamespace(value=theta, sigma=0.05 * np.abs(theta))
     prior = SimpleNamespace(value=PRIOR, sigma=PRIOR_SIGMA)
-    return SimpleNamespace(final=final, prior=prior)
+    return SimpleNamespace(final=final, prior=prior, equation_error=None, effects=())
 
 
 @pytest.fixture
@@ -172,3 +177,50 @@ def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -
     with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted with the named "
                        r"effects: c_T = .* is 500× below the prior"):
         diagnose_job.run_diagnose("flight.ulg", "quad_x")
+
+
+def test_vanishing_parameters_of_rotor_drag_linear() -> None:
+    """Only c_D may vanish, and only with rotor drag linear in rotor speed in the model."""
+    assert not vanishing_parameters([]).any()
+    assert not vanishing_parameters(["wind", "motor_lag"]).any()
+    mask = vanishing_parameters(["wind", "rotor_drag_linear"])
+    assert list(np.flatnonzero(mask)) == [PARAMETER_NAMES.index("c_D")]
+
+
+@pytest.mark.parametrize("sigma_factor", [0.3, 1.0, 1.9])
+def test_c_d_near_zero_is_accepted_with_linear_rotor_drag(sigma_factor: float) -> None:
+    """c_D ≤ 0 within 2 σ of 0 (the issue's −2.51e-05 ± 0.00015 s/m) is refused by
+    default and accepted when the model lets c_D vanish."""
+    sigma = PRIOR_SIGMA.copy()
+    i = PARAMETER_NAMES.index("c_D")
+    sigma[i] = 1.5e-4
+    theta = _theta(c_D=-sigma_factor * sigma[i])
+    may_vanish = vanishing_parameters(["rotor_drag_linear"])
+    assert "is not positive" in implausibility(theta, sigma, PRIOR, PRIOR_SIGMA)
+    assert implausibility(theta, sigma, PRIOR, PRIOR_SIGMA, may_vanish) is None
+    check_plausible("x.csv", theta, sigma, PRIOR, PRIOR_SIGMA, may_vanish=may_vanish)
+
+
+def test_vanishing_c_d_far_below_zero_or_without_sigma_is_refused() -> None:
+    """More than 2 σ below 0, or no σ to judge by, is still refused; so is any other
+    parameter at 0."""
+    sigma = PRIOR_SIGMA.copy()
+    i = PARAMETER_NAMES.index("c_D")
+    sigma[i] = 1.5e-4
+    may_vanish = vanishing_parameters(["rotor_drag_linear"])
+    assert "c_D" in implausibility(_theta(c_D=-2.1 * sigma[i]), sigma, PRIOR, PRIOR_SIGMA,
+                                   may_vanish)
+    assert "c_D" in implausibility(_theta(c_D=-1e-6), None, PRIOR, None, may_vanish)
+    assert "c_M" in implausibility(_theta(c_M=-1e-12), sigma, PRIOR, PRIOR_SIGMA, may_vanish)
+
+
+def test_vanishing_c_d_may_be_far_below_its_prior_but_not_above() -> None:
+    """A small positive c_D far below the prior passes when it may vanish; far above not."""
+    i = PARAMETER_NAMES.index("c_D")
+    may_vanish = vanishing_parameters(["rotor_drag_linear"])
+    small = _theta(c_D=PRIOR[i] / (10 * PRIOR_FACTOR_MAX))
+    assert "below the prior" in implausibility(small, PRIOR_SIGMA, PRIOR, PRIOR_SIGMA)
+    assert implausibility(small, PRIOR_SIGMA, PRIOR, PRIOR_SIGMA, may_vanish) is None
+    large = _theta(c_D=PRIOR[i] * 10 * PRIOR_FACTOR_MAX)
+    assert "above the prior" in implausibility(large, PRIOR_SIGMA, PRIOR, PRIOR_SIGMA,
+                                               may_vanish)

@@ -23,7 +23,23 @@ from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
 
-__all__ = ["ground_trajectory", "hidden_flight"]
+__all__ = ["ISSUE_MAGNITUDES", "ground_trajectory", "hidden_flight"]
+
+#: Every catalogue effect at the magnitudes of issue 6 for the Firefly (the same as
+#: bench/diagnose_accuracy.py CASES): motor τ 40 ms, pose delay 20 ms, body drag 5 % of
+#: the weight at 3 m/s, rotor drag linear in n, wind 2 m/s, marker offset 3 cm, CoG
+#: offset 1 cm, thrust −8 % over 30 s, ground effect (ρ = 0.1 m) near the ground.
+ISSUE_MAGNITUDES: dict[str, dict[str, float]] = {
+    "motor_lag": {"tau": 0.04},
+    "pose_delay": {"delay": 0.02},
+    "body_drag": {"k": 0.05 * 1.56779 * 9.81 / 9.0},
+    "rotor_drag_linear": {"k": 3e-4},
+    "marker_offset": {"x": 0.02, "y": -0.02, "z": 0.01},
+    "cog_offset": {"x": 0.006, "y": -0.005, "z": 0.006},
+    "wind": {"x": 1.6, "y": 1.2},
+    "thrust_drift": {"rate": -0.08 / 30.0},
+    "ground_effect": {"rotor_radius": 0.1},
+}
 
 
 def ground_trajectory(duration: float = 30.0, low: float = 0.15) -> PiecewisePolynomial:

@@ -1,0 +1,157 @@
+"""Mismatch coverage (issue 18 acceptance): does the 95 % interval cover the truth?
+
+Five truths, each hidden from the model, plus the clean flight as a control. For every
+truth and seed: fly the Firefly on the built-in 30 s excitation (`tests.support.hidden`,
+catalogue physics from `mavsysid.vehicle.model_effects`), draw the prior ±50 % around the
+scoring truth (seeded, as `bench/estimate_accuracy.py` does), run
+`mavsysid.estimation.estimator.estimate_parameters` (what ``mavsysid estimate`` runs) and
+score its final (refined) θ. Prints per truth and parameter the median |relative error|
+and the share of flights whose 95 % interval (θ ± 1.96 σ) covers the truth.
+
+Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
+
+* ``motor_lag`` τ = 40 ms, ``wind`` (1.6, 1.2) m/s, ``body_drag`` 5 % of the weight at
+  3 m/s, ``pose_delay`` 20 ms: the nominal θ plus the hidden effect; scored against the
+  nominal θ.
+* ``rotor_drag_linear``: rotor drag linear in rotor speed *instead of* the paper's
+  quadratic law, as in the issue's independent simulator. The truth flies with
+  c_D = 0 and a hidden ``rotor_drag_linear`` of k = c_T c_D n_h (c_T, c_D nominal; n_h the
+  hover rotor speed √(m g / (rotors · c_T))), so both laws give the same drag in hover.
+  The estimate is scored against the nominal θ, i.e. c_D's hover equivalent.
+
+``--reestimate`` measures the second candidate of the issue (what ``mavsysid estimate
+--auto-effects`` runs): `mavsysid.discrepancy.checked_estimate.estimate_with_named_effects`
+estimates θ, lets `mavsysid.discrepancy.diagnosis.diagnose_flight` (from the estimate,
+without the NIS) name effects, and estimates θ again with them (fitted jointly); that θ is
+scored (the first estimate when nothing is named). When
+``rotor_drag_linear`` is among them, c_D is scored as its hover equivalent
+c_D + k / (c_T n_h) with σ² = σ_cD² + (σ_k / (c_T n_h))² (their correlation ignored).
+
+    nice python bench/mismatch_coverage.py [--seeds 20] [--truths clean,wind] [--workers 2]
+        [--reestimate]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from mavsysid.discrepancy.checked_estimate import estimate_with_named_effects
+from mavsysid.estimation.estimator import estimate_parameters
+from mavsysid.estimation.results import Z95, EstimationResult
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
+
+from bench.diagnose_accuracy import CASES
+from mavsysid.errors import JobFailedError
+from tests.support.hidden import hidden_flight
+
+TRUTHS = ("clean", "rotor_drag_linear", "motor_lag", "wind", "body_drag", "pose_delay")
+VEHICLE = "firefly"
+
+
+def truth_side(config: VehicleConfig, truth: str) -> tuple[np.ndarray, list[ModelEffect]]:
+    """The θ the truth flies with and its hidden effects (see the module docstring).
+
+    Returns
+    -------
+    theta : ndarray, shape (6,)
+        SI; differs from ``config.theta`` only for ``rotor_drag_linear`` (c_D = 0).
+    effects : list of ModelEffect
+    """
+    theta = config.theta.copy()
+    if truth == "clean":
+        return theta, []
+    if truth != "rotor_drag_linear":
+        return theta, [effect_from_values(truth, CASES[truth])]
+    theta[1] = 0.0
+    k = config.theta[0] * config.theta[1] * hover_speed(config, config.theta[0])
+    return theta, [effect_from_values(truth, {"k": k})]
+
+
+def hover_speed(config: VehicleConfig, c_T: float) -> float:
+    """n_h = √(m g / (rotors · c_T)), rad/s."""
+    return math.sqrt(config.mass * GRAVITY / (config.rotor_count * c_T))
+
+
+def scored(result: EstimationResult, config: VehicleConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The final θ and σ (6,), c_D as its hover equivalent if rotor_drag_linear is fitted."""
+    final = result.refined if result.refined is not None else result.filtered
+    value, sigma = final.value.copy(), np.sqrt(np.diag(final.covariance))
+    for fitted in result.effects:
+        if fitted.name == "rotor_drag_linear":
+            per_k = 1.0 / (value[0] * hover_speed(config, value[0]))
+            value[1] += fitted.value[0] * per_k
+            sigma[1] = math.hypot(sigma[1], fitted.sigma[0] * per_k)
+    return value, sigma
+
+
+def run(truth: str, seed: int, root: str, reestimate: bool = False
+        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One flight: (scoring truth, estimate, σ), each shape (6,), SI."""
+    config = load_vehicle(VEHICLE)
+    flown, effects = truth_side(config, truth)
+    flight = hidden_flight(config, Path(root) / f"{truth}-{seed}", effects, seed=seed,
+                           true_theta=flown)
+    rng = np.random.default_rng(10_000 + seed)
+    prior = config.with_parameters(config.theta * (1.0 + rng.uniform(-0.5, 0.5, 6)))
+    try:
+        result = (estimate_with_named_effects(flight, prior)[0] if reestimate
+                  else estimate_parameters(flight, prior))
+    except JobFailedError:  # refused (exit 3): scored as not covering, error NaN
+        return config.theta, np.full(6, np.nan), np.full(6, np.nan)
+    return (config.theta, *scored(result, prior))
+
+
+def table(truth: str, rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> str:
+    """Median |relative error| (%), 95 % coverage (%) and median |error|/σ per parameter.
+
+    A refused flight (NaN) counts as not covered; medians are over the others.
+    """
+    reference, value, sigma = (np.array(a) for a in zip(*rows, strict=True))
+    error = value - reference
+    z = np.abs(error) / sigma
+    refused = int(np.sum(np.isnan(value[:, 0])))
+    z = np.where(np.isnan(z), np.inf, z)
+    error = error[~np.isnan(value[:, 0])]
+    reference = reference[~np.isnan(value[:, 0])]
+    lines = [f"\n{truth}: {len(rows)} flights, {refused} refused", f"{'':22}"
+             + "  ".join(f"{n:>8}" for n in PARAMETER_NAMES)]
+    stats = (("median |error| %", 100 * np.median(np.abs(error / reference), 0)),
+             ("95 % covers %", 100 * np.mean(z <= Z95, 0)),
+             ("median |error|/σ", np.median(z, 0)))
+    lines += [f"{label:<22}" + "  ".join(f"{v:>8.3f}" for v in stat) for label, stat in stats]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--truths", default=",".join(TRUTHS),
+                        help=f"comma-separated, of {', '.join(TRUTHS)}")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--reestimate", action="store_true",
+                        help="estimate again with the effects a diagnosis names")
+    args = parser.parse_args()
+    truths = [t for t in args.truths.split(",") if t]
+    unknown = sorted(set(truths) - set(TRUTHS))
+    if unknown:
+        parser.error(f"unknown truth {', '.join(unknown)}; expected some of {', '.join(TRUTHS)}")
+    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.workers) as pool:
+        jobs = {t: [pool.submit(run, t, seed, tmp, args.reestimate)
+                    for seed in range(args.seeds)] for t in truths}
+        for truth, futures in jobs.items():
+            print(table(truth, [f.result() for f in futures]), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,158 @@
+"""Compiled kernels of the batch refinement: state ⊞/⊟, the shooting residuals, Jacobian
+and normal equations (`mavsysid.estimation.batch`).
+
+The unknowns are the 12-D error of each shooting node and the scaled θ error (6). The
+Jacobian rows of one sample touch node k and θ; the defect between node k and k+1
+touches nodes k, k+1 and θ. So JᵀJ is block tridiagonal in the nodes with a dense θ
+border: `shoot_kernel` accumulates those blocks directly (``mode`` 2) instead of
+building J as a sparse matrix and multiplying (``mode`` 1 still gives J in COO form,
+for `scipy.optimize.least_squares` and the tests).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from mavsysid.estimation.ekf import rk4_step_kernel
+from mavsysid.vehicle.linearization import jacobian_kernel, transition_kernel
+from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
+
+__all__ = ["MODE_COO", "MODE_NORMAL", "MODE_RESIDUALS", "accumulate_kernel",
+           "difference_kernel", "inject_kernel", "shoot_kernel"]
+
+#: ``shoot_kernel`` modes: residuals only; with J in COO form; with JᵀJ and Jᵀr in blocks.
+MODE_RESIDUALS, MODE_COO, MODE_NORMAL = 0, 1, 2
+
+
+@numba.njit(cache=True)
+def inject_kernel(x, d, out):
+    """out = x ⊞ d for a model state x (13,) and a 12-D error d."""
+    out[0:6] = x[0:6] + d[0:6]
+    q = multiply_kernel(x[6:10], exp_kernel(d[6:9]))
+    out[6:10] = q / np.sqrt(np.sum(q * q))
+    out[10:13] = x[10:13] + d[9:12]
+
+
+@numba.njit(cache=True)
+def difference_kernel(x, x_ref, out):
+    """out = x ⊟ x_ref, 12-D."""
+    out[0:6] = x[0:6] - x_ref[0:6]
+    c = np.array([x_ref[6], -x_ref[7], -x_ref[8], -x_ref[9]])
+    out[6:9] = log_kernel(multiply_kernel(c, x[6:10]))
+    out[9:12] = x[10:13] - x_ref[10:13]
+
+
+@numba.njit(cache=True)
+def accumulate_kernel(Jr, r, m, ncols, k, D, U, B, T, g, gt):
+    """Add the rows Jr[:m, :ncols] (residuals r[:m]) to the blocks of JᵀJ and Jᵀr.
+
+    Local columns: 0–11 node k, 12–17 θ, 18–29 node k+1 (only with ``ncols`` 30).
+    D (K, 12, 12) diagonal node blocks; U (K-1, 12, 12) the (k, k+1) blocks; B (K, 12, 6)
+    node–θ blocks; T (6, 6) the θ block; g (K, 12) and gt (6,) Jᵀr.
+    """
+    J = np.ascontiguousarray(Jr[:m, :ncols])
+    Jt = np.ascontiguousarray(J.T)
+    M = Jt @ J
+    v = Jt @ np.ascontiguousarray(r[:m])
+    D[k] += M[0:12, 0:12]
+    B[k] += M[0:12, 12:18]
+    T += M[12:18, 12:18]
+    g[k] += v[0:12]
+    gt += v[12:18]
+    if ncols > 18:
+        U[k] += M[0:12, 18:30]
+        B[k + 1] += M[18:30, 12:18]
+        D[k + 1] += M[18:30, 18:30]
+        g[k + 1] += v[18:30]
+
+
+@numba.njit(cache=True)
+def _write_coo(Jr, m, ncols, row, k, th_col, rows, cols, vals, e):
+    for a in range(m):
+        for b in range(ncols):
+            rows[e] = row + a
+            if b < 12:
+                cols[e] = 12 * k + b
+            elif b < 18:
+                cols[e] = th_col + b - 12
+            else:
+                cols[e] = 12 * (k + 1) + b - 18
+            vals[e] = Jr[a, b]
+            e += 1
+    return e
+
+
+@numba.njit(cache=True)
+def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p, sig_a,
+                 mode, want_q, res, rows, cols, vals, Q_out, D, U, B, T, g, gt):
+    """Residuals of the shooting problem, and its Jacobian as ``mode`` asks.
+
+    w (N, 6) is the known effects' extra body force and torque per sample (as in the EKF);
+    Qc (N, 6, 6) the process-noise density of the step from each sample to the next.
+    Column layout of J: node k's error at 12k … 12k+11, the θ error (scaled) at 12K … 12K+5.
+    ``mode`` 1 writes J as COO (rows, cols, vals); ``mode`` 2 adds JᵀJ and Jᵀr into the
+    blocks D, U, B, T, g, gt (see `accumulate_kernel`; zero them first). ``Q_out``
+    (K-1, 12, 12) receives the process noise accumulated over each interval if ``want_q``.
+    Returns the number of residual rows and of COO entries written.
+    """
+    K = nodes.shape[0]
+    th_col = 12 * K
+    row = 0
+    e = 0
+    A = np.empty((18, 18))
+    G = np.empty((18, 6))
+    F = np.empty((18, 18))
+    Qs = np.empty((18, 18))
+    x = np.empty(13)
+    x_next = np.empty(13)
+    d = np.empty(12)
+    Jr = np.zeros((12, 30))
+    want_jac = mode != MODE_RESIDUALS
+    for k in range(K):
+        x[:] = nodes[k]
+        Phi = np.eye(18)
+        Qacc = np.zeros((18, 18))
+        last = node_idx[k + 1] if k < K - 1 else node_idx[K] - 1
+        for i in range(node_idx[k], last + 1):
+            if i < node_idx[k + 1]:  # measurement at sample i
+                res[row:row + 3] = (z[i, 0:3] - x[0:3]) / sig_p
+                c = np.array([x[6], -x[7], -x[8], -x[9]])
+                res[row + 3:row + 6] = log_kernel(multiply_kernel(c, z[i, 3:7])) / sig_a
+                if want_jac:
+                    for a in range(6):
+                        src = a if a < 3 else a + 3
+                        s = sig_p if a < 3 else sig_a
+                        for b in range(18):
+                            Jr[a, b] = -Phi[src, b] / s
+                    if mode == MODE_COO:
+                        e = _write_coo(Jr, 6, 18, row, k, th_col, rows, cols, vals, e)
+                    else:
+                        accumulate_kernel(Jr, res[row:row + 6], 6, 18, k, D, U, B, T, g, gt)
+                row += 6
+            if i == last:
+                break
+            dt = t[i + 1] - t[i]
+            if want_jac or (want_q and k < K - 1):
+                jacobian_kernel(x, n[i], theta, mass, r, eps, scale, A, G)
+                transition_kernel(A, G, Qc[i], dt, F, Qs)
+                first = i == node_idx[k]  # Phi = I and Qacc = 0 so far: skip the products
+                Phi = F.copy() if first else F @ Phi
+                if want_q:
+                    Qacc = Qs.copy() if first else F @ Qacc @ F.T + Qs
+            rk4_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps, x_next)
+            x[:] = x_next
+        if k < K - 1:
+            if want_q:
+                Q_out[k] = Qacc[0:12, 0:12]
+            difference_kernel(nodes[k + 1], x, d)
+            res[row:row + 12] = W[k] @ d
+            if want_jac:
+                WPhi = W[k] @ np.ascontiguousarray(Phi[0:12, :])
+                Jr[:, 0:18] = -WPhi
+                Jr[:, 18:30] = W[k]
+                if mode == MODE_COO:
+                    e = _write_coo(Jr, 12, 30, row, k, th_col, rows, cols, vals, e)
+                else:
+                    accumulate_kernel(Jr, res[row:row + 12], 12, 30, k, D, U, B, T, g, gt)
+            row += 12
+    return row, e

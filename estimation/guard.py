@@ -1,0 +1,123 @@
+"""The estimator's guard: a diverging filter, and a θ the force balance contradicts.
+
+Divergence. A consistent filter's normalised innovation squared (NIS) averages the
+measurement dimension m = 6; its mean over a window of w samples lies below the
+χ²(m w)/w 99.9 % bound. A model that cannot follow the log (θ far off, c_T 70× too
+small) makes the innovations grow by orders of magnitude. Model mismatch on good flights
+(wind, motor lag, a smoothed on-board pose) raises the NIS several-fold too, so the
+bound is widened by `NIS_FACTOR`: the filter counts as diverged when the median of its
+windowed mean NIS over the flight's second half exceeds `NIS_FACTOR` × the bound, or when
+its θ is physically impossible or `PRIOR_FACTOR_MAX` off the prior
+(`mavsysid.estimation.plausibility`). A diverged filter restarts from the equation-error
+θ with its measurement σ scaled by √(NIS level / m) (at least 1): the innovations
+measure the pose noise the filter met, which a smoothed on-board pose hides from the
+log's white residual (`mavsysid.estimation.pose_noise`).
+
+Contradiction. The final θ and the equation-error θ (`mavsysid.estimation.equation_error_fit`)
+are two estimates from one log. A parameter contradicts the force balance when they
+differ by more than `AGREEMENT_SIGMAS` × √(σ² + σ_EE²) *and* by more than the relative
+tolerance `AGREEMENT_TOLERANCE` (5 %, c_D 15 %: the accuracy asked of the estimator,
+below which model mismatch biases both fits by different amounts without either being
+wrong).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mavsysid.estimation.plausibility import implausibility
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
+from mavsysid.vehicle.linearization import MEAS_DIM
+from scipy.stats import chi2
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "NIS_FACTOR", "NIS_WINDOW",
+           "check_agreement", "divergence", "nis_level"]
+
+#: Window of the NIS mean, s.
+NIS_WINDOW = 1.0
+
+#: Windowed mean NIS beyond this multiple of its 99.9 % χ² bound is a diverged filter.
+NIS_FACTOR = 20.0
+
+#: Agreement rule of the cross-check: sigmas and relative tolerance per parameter.
+AGREEMENT_SIGMAS = 3.0
+AGREEMENT_TOLERANCE = np.array([0.05, 0.15, 0.05, 0.05, 0.05, 0.05])
+
+
+def nis_level(t: np.ndarray, nis: np.ndarray) -> tuple[float, float]:
+    """Median windowed mean NIS over the flight's second half, and its 99.9 % χ² bound.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s.
+    nis : ndarray, shape (N,)
+        The filter's NIS per sample (the first is not an innovation).
+
+    Returns
+    -------
+    level, bound : float
+        NaN level when the half is shorter than one window; inf when not finite.
+    """
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    w = max(1, round(NIS_WINDOW / dt))
+    bound = float(chi2.ppf(0.999, MEAS_DIM * w)) / w
+    x = np.asarray(nis, float)[1:]
+    half = x[x.size // 2:]
+    if not np.all(np.isfinite(half)):
+        return float("inf"), bound
+    if half.size < w:
+        return float("nan"), bound
+    return float(np.median(np.convolve(half, np.ones(w) / w, mode="valid"))), bound
+
+
+def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
+               prior: ParameterEstimate, may_vanish: np.ndarray | None = None) -> str | None:
+    """Why a filter run counts as diverged, as one phrase; None when it did not.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s.
+    nis : ndarray, shape (N,)
+        The filter's NIS per sample.
+    theta : ParameterEstimate
+        The filter's final θ.
+    prior : ParameterEstimate
+        The prior (the vehicle file's θ and σ).
+    may_vanish : ndarray of bool, shape (6,), optional
+        θ entries the model lets be ≈ 0 (`mavsysid.estimation.plausibility.vanishing_parameters`).
+    """
+    reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish)
+    if reason is not None:
+        return reason
+    level, bound = nis_level(t, nis)
+    if level > NIS_FACTOR * bound:
+        return (f"mean normalised innovation squared {level:.3g} over {NIS_WINDOW:g} s "
+                f"windows, {level / bound:.3g}× its χ² bound {bound:.3g}")
+    return None
+
+
+def check_agreement(source: str, final: ParameterEstimate, ee: ParameterEstimate) -> None:
+    """Refuse (`JobFailedError`, one line) a final θ the equation-error fit contradicts.
+
+    Parameters
+    ----------
+    source : str
+        The log, named first.
+    final, ee : ParameterEstimate
+        The estimator's θ and the equation-error θ, SI.
+    """
+    delta = final.value - ee.value
+    spread = np.sqrt(final.sigma**2 + ee.sigma**2)
+    bad = (np.abs(delta) > AGREEMENT_SIGMAS * spread) & (
+        np.abs(delta) > AGREEMENT_TOLERANCE * np.abs(ee.value))
+    for i in np.flatnonzero(bad):
+        name, unit = PARAMETER_NAMES[i], PARAMETER_UNITS[PARAMETER_NAMES[i]]
+        raise JobFailedError(
+            f"{source}: the estimate {name} = {final.value[i]:.4g} ± {final.sigma[i]:.2g} "
+            f"{unit} contradicts the log's force and torque balance ({name} = "
+            f"{ee.value[i]:.4g} ± {ee.sigma[i]:.2g} {unit}, {abs(delta[i]) / spread[i]:.1f} σ "
+            "apart); the model does not fit this log as the filter assumed")

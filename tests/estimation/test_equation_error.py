@@ -1,0 +1,98 @@
+"""The equation-error fit (robust start, independent check) and the log's measured noise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mavsysid.discrepancy import residuals
+from mavsysid.estimation import equation_error
+from mavsysid.estimation.equation_error_fit import fit_equation_error
+from mavsysid.estimation.estimator import EstimatorSettings, prior_from_config
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.pose_noise import NOISE_TOLERANCE, measured_pose_noise, pose_sigma
+from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.rotation import quat_exp, quat_multiply
+from scipy.ndimage import uniform_filter1d
+
+from mavsysid.errors import JobFailedError
+
+
+def test_discrepancy_uses_the_estimation_law():
+    """The diagnosis' smoother and model are the estimator's objects, not copies."""
+    assert residuals.smooth_pose is equation_error.smooth_pose
+    assert residuals.model_accelerations is equation_error.model_accelerations
+    assert residuals.SmootherSettings is equation_error.SmootherSettings
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "factor"), [(1, 1.5), (2, 0.5), (3, 1.3)])
+def test_fit_recovers_theta_from_a_prior_far_off(simulate_flight, seed, factor):
+    """Prior 30–50 % off: c_T, j_x, j_y within 1 %, c_D 5 %, c_M/j_z ratio 2 %; truth ≤ 4 σ."""
+    cfg = load_vehicle("firefly")
+    flight = simulate_flight(cfg, seed, duration=20.0)
+    truth = np.asarray(flight.true_theta)
+    prior = prior_from_config(cfg.with_parameters(cfg.theta * factor), EstimatorSettings())
+    fit = fit_equation_error(flight, cfg, prior)
+    err = fit.estimate.value / truth - 1.0
+    assert np.all(np.abs(err[[0, 3, 4]]) < 0.01), err
+    assert abs(err[1]) < 0.05, err
+    ratio = (fit.estimate.value[2] / fit.estimate.value[5]) / (truth[2] / truth[5])
+    assert abs(ratio - 1.0) < 0.02, ratio
+    z = (fit.estimate.value - truth) / fit.estimate.sigma
+    assert np.all(np.abs(z[[0, 1, 3, 4]]) < 4.0), z
+    assert 0 < fit.effective_rows <= fit.rows
+
+
+def test_too_short_a_flight_is_a_one_line_refusal():
+    cfg = load_vehicle("firefly")
+    t = np.arange(50) * 0.01
+    flight = FlightData(t, np.zeros((50, 3)), np.tile([1.0, 0, 0, 0], (50, 1)),
+                        np.full((50, 6), 500.0), "short.csv")
+    prior = prior_from_config(cfg, EstimatorSettings())
+    with pytest.raises(JobFailedError, match=r"^short\.csv: .*equation-error") as info:
+        fit_equation_error(flight, cfg, prior)
+    assert "\n" not in str(info.value)
+
+
+def _pose(seed: int, sigma_p: float, sigma_a: float, n: int = 3000, dt: float = 0.01
+          ) -> FlightData:
+    """A smooth figure-eight with white pose noise of known σ (seeded)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    p = np.column_stack([np.sin(0.7 * t), np.sin(1.4 * t), 1.0 + 0.2 * np.cos(0.5 * t)])
+    angles = np.column_stack([0.2 * np.sin(1.1 * t), 0.15 * np.cos(0.9 * t), 0.3 * t])
+    # Body-frame rotation noise of σ_a per axis on top of the motion.
+    q = quat_multiply(quat_exp(angles), quat_exp(rng.normal(0.0, sigma_a, angles.shape)))
+    p = p + rng.normal(0.0, sigma_p, p.shape)
+    return FlightData(t, p, q, np.full((n, 4), 1000.0), "noise.csv")
+
+
+@pytest.mark.parametrize(("seed", "sigma_p", "sigma_a"), [(0, 5e-4, 1e-3), (1, 5e-3, 1e-2),
+                                                          (2, 2e-2, 3e-3)])
+def test_measured_noise_matches_the_injected_noise(seed, sigma_p, sigma_a):
+    position, attitude = measured_pose_noise(_pose(seed, sigma_p, sigma_a))
+    assert position == pytest.approx(sigma_p, rel=0.1)
+    assert attitude == pytest.approx(sigma_a, rel=0.1)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_smoothed_pose_is_floored_at_the_assumed_sigma(seed):
+    """A smoothed (on-board estimator) pose hides its noise: the assumed σ is the floor."""
+    flight = _pose(seed, 5e-3, 1e-2)
+    smooth = FlightData(flight.t, uniform_filter1d(flight.position, 25, axis=0),
+                        flight.quaternion, flight.rotor_speeds, "smooth.csv")
+    assert measured_pose_noise(smooth)[0] < 0.5 * 5e-3
+    (used_p, _), _ = pose_sigma(smooth, (5e-3, 1e-2))
+    assert used_p == 5e-3
+
+
+def test_noise_matching_the_assumption_changes_nothing():
+    """Within `NOISE_TOLERANCE` of the assumed σ the assumption stands, with no note."""
+    flight = _pose(5, 5e-4, 1.7e-3)
+    assumed = (5e-4, 1.7e-3)
+    assert pose_sigma(flight, assumed) == (assumed, None)
+    noisy = _pose(6, 3 * NOISE_TOLERANCE * 5e-4, 1.7e-3)
+    (used_p, used_a), note = pose_sigma(noisy, assumed)
+    assert used_p == pytest.approx(3 * NOISE_TOLERANCE * 5e-4, rel=0.1)
+    assert used_a == assumed[1]
+    assert note is not None and "measured from the pose" in note
