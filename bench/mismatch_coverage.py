@@ -5,8 +5,10 @@ truth and seed: fly the Firefly on the built-in 30 s excitation (`tests.support.
 catalogue physics from `mavsysid.vehicle.model_effects`), draw the prior ±50 % around the
 scoring truth (seeded, as `bench/estimate_accuracy.py` does), run
 `mavsysid.estimation.estimator.estimate_parameters` (what ``mavsysid estimate`` runs) and
-score its final (refined) θ. Prints per truth and parameter the median |relative error|
-and the share of flights whose 95 % interval (θ ± 1.96 σ) covers the truth.
+score its final (refined) θ after the checks `mavsysid estimate` applies
+(`mavsysid.estimation.estimate_job.check_result`; a refusal counts as not covering).
+Prints per truth and parameter the median |relative error| and the share of flights
+whose 95 % interval (θ ± 1.96 σ) covers the truth.
 
 Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
 
@@ -45,6 +47,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from mavsysid.discrepancy.checked_estimate import estimate_with_named_effects
+from mavsysid.estimation.estimate_job import check_result
 from mavsysid.estimation.estimator import estimate_parameters
 from mavsysid.estimation.results import Z95, EstimationResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
@@ -107,6 +110,7 @@ def run(truth: str, seed: int, root: str, reestimate: bool = False
     try:
         result = (estimate_with_named_effects(flight, prior)[0] if reestimate
                   else estimate_parameters(flight, prior))
+        check_result(flight.source, result)  # what `mavsysid estimate` refuses
     except JobFailedError:  # refused (exit 3): scored as not covering, error NaN
         return config.theta, np.full(6, np.nan), np.full(6, np.nan)
     return (config.theta, *scored(result, prior))

@@ -48,7 +48,7 @@ from mavsysid.vehicle.rotation import (
 
 from mavsysid.errors import JobFailedError, LogFormatError
 
-__all__ = ["FILTER_DIM", "FilterRun", "ParameterEKF", "rk4_step_kernel"]
+__all__ = ["FILTER_DIM", "FilterOverflow", "FilterRun", "ParameterEKF", "rk4_step_kernel"]
 
 #: Length of the nominal filter state x = [p, v_B, q, ω, θ].
 FILTER_DIM = STATE_DIM + 6
@@ -320,9 +320,8 @@ class ParameterEKF(ExtendedKalmanFilter):
     def start_segment(self, flight: FlightData, i: int,
                       state_sigma: tuple[float, float, float, float]) -> None:
         """Restart the model state from samples ``i``, ``i + 1`` of ``flight`` (finite
-        differences), with σ ``state_sigma``; θ and its covariance are kept, the states'
-        cross-covariance with θ is dropped. Jittered stamps can put the next sample a
-        microsecond after this one: the difference spans at least half the median step."""
+        differences), with σ ``state_sigma``; θ and its covariance kept, the states'
+        cross-covariance with θ dropped. The difference spans ≥ half the median step."""
         t = flight.t
         step = 0.5 * float(np.median(np.diff(t[i:i + 64])))
         j = min(max(int(np.searchsorted(t, t[i] + step)), i + 1), t.size - 1)
@@ -347,8 +346,7 @@ class ParameterEKF(ExtendedKalmanFilter):
         each segment's start and carries θ and its covariance across the gap.
         ``wrench`` (N, 6): extra body force (N) and torque (N·m) of known model effects at
         every sample (`mavsysid.estimation.effect_channels.ModelTerms`); zeros by default.
-        ``flight`` must
-        already be in the model's terms (effects' pose and rotor-speed channels applied).
+        ``flight`` is in the model's terms (effects' pose and rotor-speed channels applied).
         """
         t = np.ascontiguousarray(flight.t, dtype=float)
         if t.size < 2 or not np.all(np.diff(t) > 0.0):
@@ -360,7 +358,7 @@ class ParameterEKF(ExtendedKalmanFilter):
         N = t.size
         out_x = np.empty((N, FILTER_DIM))
         out_sigma = np.empty((N, 6))
-        out_innov = np.empty((N, MEAS_DIM))
+        out_innov = np.full((N, MEAS_DIM), np.nan)  # NaN: not reached (`FilterOverflow`)
         out_nis = np.empty(N)
         mass, r, eps, scale = self._kernel_args
         w = np.zeros((N, 6)) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
@@ -380,9 +378,9 @@ class ParameterEKF(ExtendedKalmanFilter):
         except (ZeroDivisionError, np.linalg.LinAlgError) as error:
             # A model that cannot follow the log (wrong vehicle or rotor order) drives the
             # state to overflow; the compiled kernel then fails on a division or on S.
-            raise JobFailedError(_diverged(flight)) from error
+            raise FilterOverflow(flight, out_innov) from error
         if not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.P))):
-            raise JobFailedError(_diverged(flight))
+            raise FilterOverflow(flight, out_innov)
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
         history = EstimationHistory(
             t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],
@@ -392,8 +390,11 @@ class ParameterEKF(ExtendedKalmanFilter):
                          ParameterEstimate(self.theta, self.theta_covariance), log_likelihood)
 
 
-def _diverged(flight: FlightData) -> str:
-    """The one-line message of a filter run that diverged."""
-    return (f"{flight.source}: the parameter filter diverged (the model cannot follow this "
-            "log's motion with these rotor speeds); check --vehicle, its rotor order and "
-            "the log's motor outputs")
+class FilterOverflow(JobFailedError):
+    """The filter's state overflowed; ``innovation`` (n, 6): the innovations before it."""
+
+    def __init__(self, flight: FlightData, innovation: np.ndarray) -> None:
+        super().__init__(f"{flight.source}: the parameter filter diverged (the model cannot "
+                         "follow this log's motion with these rotor speeds); check --vehicle, "
+                         "its rotor order and the log's motor outputs")
+        self.innovation = innovation[np.all(np.isfinite(innovation), axis=1)]

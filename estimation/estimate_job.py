@@ -17,10 +17,11 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.guard import check_agreement
 from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.results import EstimationResult
+from mavsysid.estimation.results import EstimationResult, ParameterEstimate
+from mavsysid.estimation.robust_covariance import widened
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
-__all__ = ["EstimateRun", "Estimator", "run_estimate"]
+__all__ = ["EstimateRun", "Estimator", "check_result", "run_estimate"]
 
 #: What estimates θ from a read flight: `estimate_parameters` or a caller's (e.g. with the
 #: effects a diagnosis names, `mavsysid.discrepancy.checked_estimate`).
@@ -77,12 +78,26 @@ def run_estimate(
     config = load_vehicle(vehicle)
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
     result = (estimate or estimate_parameters)(flight, config, settings)
+    check_result(flight.source, result)
+    return EstimateRun(config, flight, result)
+
+
+def check_result(source: str, result: EstimationResult) -> None:
+    """Refuse, in one line naming ``source``, a result `run_estimate` would not print.
+
+    The final θ must be physically possible and near the prior
+    (`mavsysid.estimation.plausibility.check_plausible`), and, for the paper's model, agree
+    with the log's own force and torque balance (`mavsysid.estimation.guard.check_agreement`,
+    judged on the σ before the disagreement widened it).
+
+    Raises
+    ------
+    JobFailedError
+    """
     final = result.final
-    check_plausible(flight.source, final.value, final.sigma, result.prior.value,
-                    result.prior.sigma,
+    check_plausible(source, final.value, final.sigma, result.prior.value, result.prior.sigma,
                     may_vanish=vanishing_parameters(e.name for e in result.effects))
     if result.equation_error is not None:
-        # The log's own force and torque balance referees the final θ (paper model only:
-        # with effects in the model it is no referee).
-        check_agreement(flight.source, final, result.equation_error)
-    return EstimateRun(config, flight, result)
+        unwidened = final if result.mismatch_widening is None else ParameterEstimate(
+            final.value, widened(final.covariance, 1.0 / result.mismatch_widening))
+        check_agreement(source, unwidened, result.equation_error)

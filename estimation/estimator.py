@@ -32,6 +32,7 @@ from mavsysid.estimation.pose_noise import pose_sigma
 from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.report import convergence_time
 from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
+from mavsysid.estimation.robust_covariance import disagreement_widening, widened
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
 from mavsysid.vehicle.linearization import initial_state_sigma
 from mavsysid.vehicle.model_effects import ModelEffect
@@ -236,21 +237,21 @@ def estimate_with_effects(
     terms, run, start, sigma = guarded_filter(flight, effects, config, (prior, start), sigma,
                                               state_sigma, ee, notes)
     state_sigma = flight_initial_state_sigma(flight, sigma)
-    log_likelihood = run.log_likelihood
-
-    refined = None
+    log_likelihood, refined = run.log_likelihood, None
     if settings.refine:
         refined, log_likelihood = _refine(terms, fit, config, (prior, start), sigma,
                                           state_sigma, notes)
     increment = None if fit is None else fit.theta_covariance_increment()
-    filtered = _with_increment(run.estimate, increment)
-    refined = _with_increment(refined, increment)
-
+    filtered, refined = (_with_increment(e, increment) for e in (run.estimate, refined))
+    widening = None
+    if ee is not None and not effects:
+        filtered, refined, widening = _widen_by_disagreement(filtered, refined, ee.estimate,
+                                                             notes)
     truth = flight.true_theta
     final = refined if refined is not None else filtered
-    reference = truth if truth is not None else final.value
     history = run.history
-    conv = convergence_time(history.t - history.t[0], history.theta, reference)
+    conv = convergence_time(history.t - history.t[0], history.theta,
+                            truth if truth is not None else final.value)
     notes.extend(_closing_notes(flight, sigma, final))
     return EstimationResult(
         prior=prior, filtered=filtered, refined=refined, history=history,
@@ -258,7 +259,26 @@ def estimate_with_effects(
         pose_source=flight.pose_source, notes=tuple(notes), effects=used,
         log_likelihood=log_likelihood,
         equation_error=None if ee is None or effects else ee.estimate,
+        mismatch_widening=widening,
     )
+
+
+def _widen_by_disagreement(
+    filtered: ParameterEstimate, refined: ParameterEstimate | None, ee: ParameterEstimate,
+    notes: list[str],
+) -> tuple[ParameterEstimate, ParameterEstimate | None, np.ndarray]:
+    """The final θ's σ widened where the equation-error θ disagrees (model mismatch)."""
+    final = refined if refined is not None else filtered
+    factor = disagreement_widening(final.value, final.sigma, ee.value, ee.sigma)
+    if np.all(factor == 1.0):
+        return filtered, refined, factor
+    wide = ", ".join(f"{n} ×{f:.3g}" for n, f in zip(PARAMETER_NAMES, factor, strict=True)
+                     if f > 1.0)
+    notes.append(f"σ widened where the equation-error θ disagrees beyond both σ ({wide}): the "
+                 "physics differ from the model; --auto-effects or mavsysid diagnose names "
+                 "what it misses")
+    final = ParameterEstimate(final.value, widened(final.covariance, factor))
+    return (filtered, final, factor) if refined is not None else (final, None, factor)
 
 
 def _equation_error(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,

@@ -32,14 +32,20 @@ from scipy.stats import chi2
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "NIS_FACTOR", "NIS_WINDOW",
-           "check_agreement", "divergence", "nis_level"]
+__all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "CORRELATED_RHO", "NIS_FACTOR",
+           "NIS_WINDOW", "check_agreement", "correlated_noise_sigma", "divergence", "nis_level"]
 
 #: Window of the NIS mean, s.
 NIS_WINDOW = 1.0
 
 #: Windowed mean NIS beyond this multiple of its 99.9 % χ² bound is a diverged filter.
 NIS_FACTOR = 20.0
+
+#: Lag-one autocorrelation of the innovations above which the pose noise counts as
+#: correlated (a consistent filter's innovations are white, ρ ≈ 0; a few samples'
+#: smoothing gives ≈ 0.8), and the largest one believed.
+CORRELATED_RHO = 0.9
+_RHO_MAX = 0.999
 
 #: Agreement rule of the cross-check: sigmas and relative tolerance per parameter.
 AGREEMENT_SIGMAS = 3.0
@@ -71,6 +77,45 @@ def nis_level(t: np.ndarray, nis: np.ndarray) -> tuple[float, float]:
     if half.size < w:
         return float("nan"), bound
     return float(np.median(np.convolve(half, np.ones(w) / w, mode="valid"))), bound
+
+
+def correlated_noise_sigma(innovation: np.ndarray) -> tuple[float, float]:
+    """Position and attitude σ of a pose whose noise is correlated in time; NaN: white.
+
+    An on-board estimator's pose error drifts over a fraction of a second, yet the filter
+    weighs every 500 Hz sample as independent: it becomes overconfident long before θ is
+    determined, fits inertia to the drift and can lock there (or overflow). For AR(1)
+    noise of σ s and lag-one correlation ρ a mean over N samples has the variance of N
+    (1 − ρ) / (1 + ρ) independent ones, so the white σ that carries the same information
+    is s √((1 + ρ) / (1 − ρ)). s is the RMS of the innovations over the three position
+    (attitude) channels, ρ the median of their lag-one autocorrelations (at most
+    `_RHO_MAX`). Both are NaN (no change) unless one group's ρ exceeds `CORRELATED_RHO`:
+    noise smoothed over a few samples (ρ ≈ 0.8) is left to the white σ.
+
+    Parameters
+    ----------
+    innovation : ndarray, shape (N, 6)
+        The filter's innovations [δp (m), δφ (rad)]; the first row is not one.
+
+    Returns
+    -------
+    tuple of 2 float
+        σ of position (m) and attitude (rad), or NaN.
+    """
+    y = np.asarray(innovation, float)[1:]
+    y = y[np.all(np.isfinite(y), axis=1)]
+    if y.shape[0] < 3:
+        return float("nan"), float("nan")
+    y = y - y.mean(axis=0)
+    power = np.sum(y * y, axis=0)
+    rho = np.sum(y[1:] * y[:-1], axis=0) / np.where(power > 0.0, power, 1.0)
+    groups = (slice(0, 3), slice(3, 6))
+    r = np.clip([np.median(rho[g]) for g in groups], 0.0, _RHO_MAX)
+    if not np.max(r) > CORRELATED_RHO:
+        return float("nan"), float("nan")
+    rms = [float(np.sqrt(np.mean(power[g]) / y.shape[0])) for g in groups]
+    out = [s * float(np.sqrt((1.0 + c) / (1.0 - c))) for s, c in zip(rms, r, strict=True)]
+    return out[0], out[1]
 
 
 def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,

@@ -15,11 +15,12 @@ import math
 import numpy as np
 from mavsysid.estimation.effect_channels import ModelTerms
 from mavsysid.estimation.effect_fit import reference_terms
-from mavsysid.estimation.ekf import FilterRun
+from mavsysid.estimation.ekf import FilterOverflow, FilterRun
 from mavsysid.estimation.equation_error_fit import EquationErrorFit
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.guard import divergence, nis_level
+from mavsysid.estimation.guard import correlated_noise_sigma, divergence, nis_level
 from mavsysid.estimation.plausibility import vanishing_parameters
+from mavsysid.estimation.pose_noise import NOISE_TOLERANCE
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM, initial_state_sigma
@@ -27,7 +28,14 @@ from mavsysid.vehicle.model_effects import ModelEffect
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["MAX_RESTARTS", "filter_attempt", "guarded_filter"]
+__all__ = ["DECORRELATION_PASSES", "MAX_RESTARTS", "OVERFLOW_SHARE", "decorrelated_attempt",
+           "filter_attempt", "guarded_filter"]
+
+#: Filter passes that may raise the measurement σ for correlated pose noise.
+DECORRELATION_PASSES = 3
+
+#: Share of an overflowed run's innovations (the first ones) that measure the pose noise.
+OVERFLOW_SHARE = 0.75
 
 #: Restarts of a diverged filter from the equation-error θ before the estimate is refused.
 MAX_RESTARTS = 2
@@ -41,14 +49,57 @@ def filter_attempt(
 
     An entry of θ that ``effects`` let vanish (c_D with ``rotor_drag_linear``) may be ≈ 0.
     """
+    terms, run, reason, _ = _attempt(flight, effects, config, start, prior, sigma)
+    return terms, run, reason
+
+
+def _attempt(
+    flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
+    start: ParameterEstimate, prior: ParameterEstimate, sigma: tuple[float, float],
+) -> tuple[ModelTerms | None, FilterRun | None, str | None, np.ndarray]:
+    """`filter_attempt` and the run's innovations (N, 6); of an overflowed run, those
+    of its first `OVERFLOW_SHARE` of samples (its last ones are the blow-up)."""
     state_sigma = initial_state_sigma(sigma[0], sigma[1], float(flight.t[1] - flight.t[0]))
     try:
         terms, run = reference_terms(flight, effects, config, start, sigma, state_sigma)
+    except FilterOverflow as error:
+        innovation = error.innovation[:int(OVERFLOW_SHARE * error.innovation.shape[0])]
+        return None, None, "the state overflowed", innovation
     except JobFailedError:
-        return None, None, "the state overflowed"
+        return None, None, "the state overflowed", np.empty((0, MEAS_DIM))
     may_vanish = vanishing_parameters(e.name for e in effects)
     return terms, run, divergence(run.history.t, run.history.nis, run.estimate, prior,
-                                  may_vanish)
+                                  may_vanish), run.history.innovation
+
+
+def decorrelated_attempt(
+    flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
+    start: ParameterEstimate, prior: ParameterEstimate, sigma: tuple[float, float],
+    notes: list[str],
+) -> tuple[ModelTerms | None, FilterRun | None, str | None, tuple[float, float]]:
+    """`filter_attempt`, rerun with σ widened while its innovations are correlated.
+
+    A pose whose noise drifts (an on-board estimator's) makes the innovations correlated;
+    the filter at white-noise σ is overconfident and fits θ to the drift. Each pass
+    raises σ to `mavsysid.estimation.guard.correlated_noise_sigma` of the last run's
+    innovations (an overflowed run's too) when that is clearly larger (a filter at too
+    small a σ follows the drift and sees only part of it, hence up to
+    `DECORRELATION_PASSES` passes). Returns also the σ of the returned run.
+    """
+    terms, run, reason, innovation = _attempt(flight, effects, config, start, prior, sigma)
+    for _ in range(DECORRELATION_PASSES):
+        target = correlated_noise_sigma(innovation)
+        wider = tuple(t if t > NOISE_TOLERANCE * s else s
+                      for t, s in zip(target, sigma, strict=True))
+        if wider == sigma:
+            break
+        sigma = wider  # type: ignore[assignment]
+        notes.append(f"the filter's innovations are correlated in time (pose noise that "
+                     f"drifts): measurement σ raised to {1000 * sigma[0]:.2g} mm, "
+                     f"{math.degrees(sigma[1]):.2g}°, the white σ of equal information")
+        terms, run, reason, innovation = _attempt(flight, effects, config, start, prior,
+                                                  sigma)
+    return terms, run, reason, sigma
 
 
 def guarded_filter(
@@ -62,8 +113,9 @@ def guarded_filter(
     Filter from ``start``; if it diverged, restart from the equation-error θ with the
     prior's covariance and the measurement σ widened to the innovations' level (at most
     `MAX_RESTARTS` times, while a restart has something new to try); refuse if it still
-    diverges. ``priors`` is (the prior, the filter's start). Returns the terms, the run,
-    and the start and measurement σ the run used.
+    diverges, unless widening σ for correlated pose noise (`decorrelated_attempt`, from
+    the equation-error θ) ends the divergence. ``priors`` is (the prior, the filter's
+    start). Returns the terms, the run, and the start and measurement σ the run used.
     """
     prior, start = priors
     if ee is None:
@@ -84,6 +136,10 @@ def guarded_filter(
                      f"with the measurement σ × {widen:.3g} (the innovations' level): "
                      f"{1000 * sigma[0]:.2g} mm, {math.degrees(sigma[1]):.2g}°")
         terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
+    if reason is not None:  # last resort: pose noise that drifts (an on-board estimator's)
+        start = restart
+        terms, run, reason, sigma = decorrelated_attempt(flight, effects, config, start,
+                                                         prior, sigma, notes)
     if reason is not None or terms is None or run is None:
         raise JobFailedError(" ".join(
             f"{flight.source}: the parameter filter diverged, also when restarted from the "

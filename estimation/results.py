@@ -167,6 +167,10 @@ class EstimationResult:
     equation_error : ParameterEstimate or None
         θ by equation error (`mavsysid.estimation.equation_error_fit`), the independent
         check of the final θ; None when the guard is off.
+    mismatch_widening : ndarray, shape (6,), or None
+        σ multipliers (≥ 1) already applied to the final θ's covariance where it and the
+        equation-error θ disagree beyond their σ
+        (`mavsysid.estimation.robust_covariance.disagreement_widening`); None if not checked.
     """
 
     prior: ParameterEstimate
@@ -181,6 +185,7 @@ class EstimationResult:
     effects: tuple[FittedEffect, ...] = ()
     log_likelihood: float = math.nan
     equation_error: ParameterEstimate | None = None
+    mismatch_widening: np.ndarray | None = None
 
     @property
     def final(self) -> ParameterEstimate:

@@ -34,8 +34,14 @@ from collections.abc import Callable
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["andrews_bartlett_bandwidth", "hac_covariance", "inflated_theta_covariance",
-           "influence_by_sample", "robust_theta_covariance"]
+__all__ = ["DISAGREEMENT_SIGMAS", "andrews_bartlett_bandwidth", "disagreement_widening",
+           "hac_covariance", "inflated_theta_covariance", "influence_by_sample",
+           "robust_theta_covariance", "widened"]
+
+#: Two estimators that are both consistent under a correct model differ by more than this
+#: many combined σ in 5 % of flights (per parameter); beyond it, their disagreement is
+#: counted as model error.
+DISAGREEMENT_SIGMAS = 2.0
 
 #: AR(1) coefficients are clipped here: a unit root would make the bandwidth infinite.
 MAX_AUTOCORRELATION = 0.995
@@ -225,3 +231,40 @@ def inflated_theta_covariance(
         for i in range(draws)], axis=0)
     inflation = np.sqrt(np.maximum(1.0, data / reference))
     return naive * np.outer(inflation, inflation), inflation
+
+
+def disagreement_widening(value: np.ndarray, sigma: np.ndarray, other_value: np.ndarray,
+                          other_sigma: np.ndarray) -> np.ndarray:
+    """σ multipliers (6,) ≥ 1 that make each interval hold a second estimator's disagreement.
+
+    The batch MAP (output error) and the equation-error fit are both consistent when the
+    model is right, so they differ by about their combined σ. When the physics differ from
+    the model each converges to its own pseudo-true θ, and the gap between them is a
+    measured lower bound of what the mismatch does to θ (the idea of Hausman's
+    specification test). A parameter whose two estimates differ by more than
+    `DISAGREEMENT_SIGMAS` combined σ gets σ' = √(σ² + Δ²); the others keep σ.
+
+    Parameters
+    ----------
+    value, sigma : ndarray, shape (P,)
+        The reported estimate and its σ.
+    other_value, other_sigma : ndarray, shape (P,)
+        The independent estimate and its σ, same units.
+
+    Returns
+    -------
+    ndarray, shape (P,)
+        σ'/σ, ≥ 1.
+    """
+    delta = np.asarray(value, float) - np.asarray(other_value, float)
+    sigma = np.asarray(sigma, float)
+    spread = np.sqrt(sigma**2 + np.asarray(other_sigma, float) ** 2)
+    far = np.abs(delta) > DISAGREEMENT_SIGMAS * spread
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.sqrt(1.0 + (delta / sigma) ** 2)
+    return np.where(far & np.isfinite(factor), factor, 1.0)
+
+
+def widened(covariance: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """D C D with D = diag(``factor``): σ scaled, correlations kept; shape (P, P)."""
+    return np.asarray(covariance) * np.outer(factor, factor)

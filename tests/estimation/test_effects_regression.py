@@ -39,6 +39,10 @@ def test_no_effects_reproduce_the_recorded_estimates(stored_flight, golden):
     np.testing.assert_allclose(result.filtered.value, golden["filtered"], rtol=1e-9)
     np.testing.assert_allclose(result.filtered.covariance, golden["filtered_cov"], rtol=1e-7)
     np.testing.assert_allclose(result.refined.value, golden["refined"], rtol=1e-9)
-    np.testing.assert_allclose(result.refined.covariance, golden["refined_cov"], rtol=1e-7)
+    # The recording predates the widening where the equation-error θ disagrees (on this
+    # short flight j_z's, tested in test_robust_covariance): compare the covariance before it.
+    w = result.mismatch_widening
+    np.testing.assert_allclose(result.refined.covariance / np.outer(w, w), golden["refined_cov"],
+                               rtol=1e-7)
     np.testing.assert_allclose(result.history.nis[1:][::25], golden["nis"], rtol=1e-9)
     assert result.effects == ()

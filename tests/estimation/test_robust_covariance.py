@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 from mavsysid.estimation.robust_covariance import (
     andrews_bartlett_bandwidth,
+    disagreement_widening,
     hac_covariance,
     inflated_theta_covariance,
     influence_by_sample,
     robust_theta_covariance,
+    widened,
 )
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
@@ -149,3 +152,21 @@ def test_hac_matches_statsmodels() -> None:
     for lags in (0, 1, 17, 299):
         np.testing.assert_allclose(hac_covariance(u, lags), S_hac_simple(u, nlags=lags),
                                    rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_disagreement_widening_holds_the_other_estimate(seed):
+    """A disagreement beyond 2 combined σ widens σ to cover it; agreement leaves σ alone."""
+    rng = np.random.default_rng(seed)
+    sigma, other_sigma = rng.uniform(0.5, 2.0, 6), rng.uniform(0.5, 2.0, 6)
+    spread = np.sqrt(sigma**2 + other_sigma**2)
+    delta = spread * np.array([0.5, 1.9, 2.1, 5.0, -3.0, -1.0])
+    factor = disagreement_widening(delta, sigma, np.zeros(6), other_sigma)
+    far = np.abs(delta) > 2.0 * spread
+    np.testing.assert_array_equal(factor[~far], 1.0)
+    assert np.all(factor[far] * sigma[far] >= np.abs(delta[far]))
+    cov = np.diag(sigma**2) + 0.1 * np.outer(sigma, sigma)
+    wide = widened(cov, factor)
+    corr = cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov)))
+    wide_corr = wide / np.outer(np.sqrt(np.diag(wide)), np.sqrt(np.diag(wide)))
+    np.testing.assert_allclose(wide_corr, corr)
