@@ -33,12 +33,7 @@ from mavsysid.flight.mavlink_setup import GCS_COMPONENT, GCS_SYSTEM, load_mavuti
 
 from mavsysid.errors import JobFailedError
 
-__all__ = [
-    "HeartbeatLost",
-    "MavlinkLink",
-    "Ticker",
-    "VehicleState",
-]
+__all__ = ["HeartbeatLost", "LinkClosed", "MavlinkLink", "Ticker", "VehicleState"]
 
 _ARMED_FLAG = 128  # MAV_MODE_FLAG_SAFETY_ARMED
 _LONGEST_WAIT = 0.05  # wall s per select(): bounds how late an interrupt is noticed
@@ -46,6 +41,10 @@ _LONGEST_WAIT = 0.05  # wall s per select(): bounds how late an interrupt is not
 
 class HeartbeatLost(JobFailedError):
     """The vehicle's heartbeat stopped for longer than the link's loss threshold."""
+
+
+class LinkClosed(HeartbeatLost):
+    """The other end closed the TCP link (pymavlink would print "EOF" on every read)."""
 
 
 class Ticker(Protocol):
@@ -158,9 +157,16 @@ class MavlinkLink:
         elif device.startswith("tcp:"):
             opts["retries"] = 1  # a refused connection is reported, not retried for seconds
         try:
-            return self.mavutil.mavlink_connection(device, **opts)
+            conn = self.mavutil.mavlink_connection(device, **opts)
         except OSError as error:
             raise JobFailedError(f"cannot open {connect}: {error.strerror or error}") from None
+        if device.startswith("tcp:"):  # pymavlink's hooks for a closed socket
+            conn.handle_eof = conn.handle_disconnect = self._closed
+        return conn
+
+    def _closed(self) -> None:
+        raise LinkClosed(f"the link {self.connect} was closed by the other end; stopped, the "
+                         "vehicle is left to its own failsafe")
 
     @property
     def mav(self) -> Any:
@@ -188,7 +194,7 @@ class MavlinkLink:
             while not self._stop.is_set():
                 try:
                     self.send(self.mav.heartbeat_encode(*msg_args))
-                except (OSError, ValueError):
+                except (OSError, ValueError, LinkClosed):
                     return  # the link was closed under us
                 now = time.monotonic()
                 due = due + wall_period if due + wall_period > now else now + wall_period

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import hashlib
+import socket
 import time
 
 import pytest
 from mavsysid.flight.gc_freeze import frozen_collector
-from mavsysid.flight.ground.mavlink_link import HeartbeatLost, MavlinkLink
+from mavsysid.flight.ground.mavlink_link import HeartbeatLost, LinkClosed, MavlinkLink
 from mavsysid.flight.ground.tlog_writer import LinkClock
-from mavsysid.flight.loopback_ports import free_udp_port
+from mavsysid.flight.loopback_ports import free_tcp_port, free_udp_port
 from mavsysid.flight.mavlink_setup import load_mavutil
 
 from mavsysid.errors import InputError, JobFailedError
@@ -182,3 +183,20 @@ def test_refused_tcp_connection_is_one_line():
     with pytest.raises(JobFailedError, match=f"cannot open tcp:127.0.0.1:{port}: "
                        "Connection refused"):
         MavlinkLink(f"tcp:127.0.0.1:{port}")
+
+
+def test_closed_tcp_link_ends_in_one_line(capfd):
+    """A vehicle closing the TCP link ends polling with LinkClosed; pymavlink prints nothing."""
+    port = free_tcp_port()
+    with socket.create_server(("127.0.0.1", port)) as server:
+        server.settimeout(10.0)
+        link = MavlinkLink(f"tcp:127.0.0.1:{port}")
+        peer, _ = server.accept()
+        peer.close()
+        try:
+            with pytest.raises(LinkClosed, match=f"tcp:127.0.0.1:{port} was closed"):
+                for _ in range(200):  # the EOF shows on the first read after the close
+                    link.poll(0.01)
+        finally:
+            link.close()
+    assert "EOF" not in capfd.readouterr().out
