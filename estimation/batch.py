@@ -32,7 +32,7 @@ from mavsysid.estimation.batch_problem import (
     node_indices,
     whitening,
 )
-from mavsysid.estimation.block_solve import BlockSystem, factor
+from mavsysid.estimation.block_solve import BlockSystem, ThetaBorderedFactor, factor
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.progress import report_progress
 from mavsysid.estimation.results import ParameterEstimate
@@ -90,15 +90,15 @@ def shooting_problem(
     return problem, nodes
 
 
-def _theta_covariance(system: BlockSystem, theta_scale: np.ndarray) -> np.ndarray:
-    """θ covariance (6, 6), SI: the θ block of (JᵀJ)⁻¹."""
-    cov = factor(system).theta_inverse() * np.outer(theta_scale, theta_scale)
+def _theta_covariance(fac: ThetaBorderedFactor, theta_scale: np.ndarray) -> np.ndarray:
+    """θ covariance (6, 6), SI: the θ block of (JᵀJ)⁻¹, from its factorisation."""
+    cov = fac.theta_inverse() * np.outer(theta_scale, theta_scale)
     return 0.5 * (cov + cov.T)
 
 
 # --- honest σ (issue 18, C): begin ------------------------------------------------------
 def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarray,
-                    system: BlockSystem) -> np.ndarray:
+                    fac: ThetaBorderedFactor) -> np.ndarray:
     """σ multiplier (6,) ≥ 1 of each parameter at the optimum, from the residuals' HAC.
 
     `mavsysid.estimation.robust_covariance.inflated_theta_covariance` on this problem:
@@ -106,7 +106,6 @@ def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarr
     rows apart), H⁻¹ b by the optimum's block factorisation.
     """
     res, J = problem.jacobian(nodes, theta)
-    fac = factor(system)
     K = problem.node_count
 
     def solve(b: np.ndarray) -> np.ndarray:
@@ -193,9 +192,10 @@ def refine(
         if improvement <= 1e-9 * cost0 or np.max(np.abs(step[1])) < 1e-7:
             break
 
-    inflation = sigma_inflation(problem, nodes, theta, system)  # honest σ (issue 18, C)
+    optimum = factor(system)  # one factorisation for the covariance and its inflation
+    inflation = sigma_inflation(problem, nodes, theta, optimum)  # honest σ (issue 18, C)
     return BatchResult(
-        estimate=ParameterEstimate(theta, _theta_covariance(system, model.theta_scale)
+        estimate=ParameterEstimate(theta, _theta_covariance(optimum, model.theta_scale)
                                    * np.outer(inflation, inflation)),
         states=nodes,
         node_times=flight.t[problem.node_idx[:-1]], iterations=iterations, cost_initial=cost0,

@@ -25,8 +25,8 @@ from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
 
 __all__ = ["ISSUE_MAGNITUDES", "ground_trajectory", "hidden_flight"]
 
-#: Every catalogue effect at the magnitudes of issue 6 for the Firefly (the same as
-#: bench/diagnose_accuracy.py CASES): motor τ 40 ms, pose delay 20 ms, body drag 5 % of
+#: Every catalogue effect at the magnitudes of issue 6 for the Firefly (the benches'
+#: hidden truths): motor τ 40 ms, pose delay 20 ms, body drag 5 % of
 #: the weight at 3 m/s, rotor drag linear in n, wind 2 m/s, marker offset 3 cm, CoG
 #: offset 1 cm, thrust −8 % over 30 s, ground effect (ρ = 0.1 m) near the ground.
 ISSUE_MAGNITUDES: dict[str, dict[str, float]] = {
