@@ -39,7 +39,9 @@ from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.estimation.robust_covariance import inflated_theta_covariance
 from mavsysid.vehicle.linearization import ErrorStateModel
 
-__all__ = ["BatchResult", "refine", "shooting_problem", "sigma_inflation"]
+from mavsysid.errors import JobFailedError
+
+__all__ = ["BatchResult", "factor_at_optimum", "refine", "shooting_problem", "sigma_inflation"]
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,25 @@ def _damped_step(system: BlockSystem, lam: float) -> tuple[np.ndarray, np.ndarra
         return None
 
 
+def factor_at_optimum(system: BlockSystem, source: str) -> ThetaBorderedFactor:
+    """The factor of JᵀJ at the optimum, for the covariance and its inflation.
+
+    The prior rows keep JᵀJ positive definite in exact arithmetic, but the defect weights
+    span many decades and a node block can lose definiteness to rounding; a relative
+    damping of 1e-12 or 1e-10 changes no σ in its fourth digit. Past that the flight leaves
+    the states or θ undetermined to working precision, and the estimate is refused.
+    """
+    for lam in (0.0, 1e-12, 1e-10):
+        try:
+            return factor(system, lam)
+        except np.linalg.LinAlgError:
+            continue
+    raise JobFailedError(
+        f"{source}: estimate refused: the flight does not determine θ (the batch normal "
+        "matrix is singular at its optimum); check the vehicle file, or fly a more "
+        "exciting trajectory")
+
+
 def refine(
     flight: FlightData, filtered_states: np.ndarray, filtered: ParameterEstimate,
     model: ErrorStateModel, prior: ParameterEstimate, sigma: tuple[float, float],
@@ -192,7 +213,7 @@ def refine(
         if improvement <= 1e-9 * cost0 or np.max(np.abs(step[1])) < 1e-7:
             break
 
-    optimum = factor(system)  # one factorisation for the covariance and its inflation
+    optimum = factor_at_optimum(system, flight.source)
     inflation = sigma_inflation(problem, nodes, theta, optimum)  # honest σ (issue 18, C)
     return BatchResult(
         estimate=ParameterEstimate(theta, _theta_covariance(optimum, model.theta_scale)

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.batch import refine, shooting_problem
+from mavsysid.estimation.batch import factor_at_optimum, refine, shooting_problem
 from mavsysid.estimation.batch_problem import node_indices
 from mavsysid.estimation.batch_scipy import solve_least_squares
 from mavsysid.estimation.block_solve import BlockSystem, factor
@@ -24,6 +24,8 @@ from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.config import load_vehicle
+
+from mavsysid.errors import JobFailedError
 
 
 def random_system(K: int, seed: int) -> BlockSystem:
@@ -68,6 +70,15 @@ def test_block_solver_refuses_an_indefinite_matrix():
     s.D[1][np.diag_indices(12)] *= -1.0
     with pytest.raises(np.linalg.LinAlgError):
         factor(s)
+
+
+def test_an_indefinite_optimum_is_refused_in_one_line():
+    """Where no small damping makes JᵀJ definite, the estimate is refused naming the log."""
+    s = random_system(3, seed=1)
+    assert np.allclose(factor_at_optimum(s, "x.tlog").theta_inverse(), factor(s).theta_inverse())
+    s.D[1][np.diag_indices(12)] *= -1.0
+    with pytest.raises(JobFailedError, match=r"^x\.tlog: estimate refused: .*singular"):
+        factor_at_optimum(s, "x.tlog")
 
 
 def test_node_indices_cover_the_flight():
