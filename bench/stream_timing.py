@@ -6,7 +6,8 @@ then prints:
 
 - the achieved setpoint rate and the deviation of each setpoint period from nominal
   (mean, p99, max; the streamer's own send times, cross-checked with the gaps between the
-  SET_POSITION_TARGET_LOCAL_NED records of flight.tlog), late and dropped setpoints;
+  SET_POSITION_TARGET_LOCAL_NED records of flight.tlog), stalls, late and dropped
+  setpoints, and the scheduling the streamer ran with (`mavsysid.flight.ground.realtime`);
 - the end-to-end latency setpoint → telemetry reflecting it. There is no echo of the
   setpoint in the telemetry (the sim sends no POSITION_TARGET_LOCAL_NED), so it is
   measured on the vehicle's response: while hovering after the trajectory, with ESC and
@@ -18,7 +19,11 @@ then prints:
   steps of the motors (τ = 25 ms: the first tick already moves the rpm sum by ~100), the
   wait for the telemetry slot (≤ 4 ms at 250 Hz) and the downlink.
 
-    python bench/stream_timing.py [--duration 60] [--rate 50] [--steps 20]
+    python bench/stream_timing.py [--duration 60] [--rate 50] [--steps 20] [--load 4]
+
+``--load N`` starts N busy processes (``while :; do :; done``) for the whole run, to
+measure the stream with other processes competing for the cores; they are stopped at
+the end. A stall is a setpoint period more than 100 ms longer than nominal.
 
 The period figures measure the computer as much as the streamer: with other processes
 competing for the cores, wake-ups come late by milliseconds. On a shared machine run it
@@ -104,12 +109,28 @@ def _tlog_periods(path: Path, t0: float, t1: float) -> np.ndarray:
     return np.diff(s[(s >= t0) & (s <= t1)])
 
 
+def _busy(count: int) -> list[subprocess.Popen]:
+    """``count`` busy-loop processes competing for the cores (the caller stops them)."""
+    return [subprocess.Popen(["sh", "-c", "while :; do :; done"]) for _ in range(count)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=60.0, help="trajectory, s")
     parser.add_argument("--rate", type=float, default=50.0, help="setpoints, Hz")
     parser.add_argument("--steps", type=int, default=20, help="latency steps")
+    parser.add_argument("--load", type=int, default=0, help="busy processes competing")
     args = parser.parse_args()
+    busy = _busy(args.load)
+    try:
+        _run(args)
+    finally:
+        for process in busy:
+            process.kill()
+            process.wait()
+
+
+def _run(args: argparse.Namespace) -> None:
     config = load_vehicle("firefly")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -124,7 +145,9 @@ def main() -> None:
         experiment = LatencySteps(args.steps)
         try:
             outcome = run_stream(traj, StreamSettings(connect=f"udp:127.0.0.1:{port}",
-                                                      rate=args.rate, log_dir=tmp / "logs"),
+                                                      rate=args.rate, log_dir=tmp / "logs",
+                                                      max_tracking_error=3.0,
+                                                      heartbeat_timeout=180.0),
                                  say=lambda text: print(f"  {text}", file=sys.stderr),
                                  progress=False, at_end=experiment)
         finally:
@@ -142,15 +165,19 @@ def main() -> None:
                              epoch + window["streamer_end"])
         nominal = 1.0 / args.rate
         dev = np.abs(gaps - nominal)
-        print(f"stream  {args.duration:g} s trajectory at {args.rate:g} Hz, real time "
-              f"(vehicle time {window['start']:.1f}–{window['end']:.1f} s)")
+        print(f"stream  {args.duration:g} s trajectory at {args.rate:g} Hz, real time, "
+              f"{args.load} busy processes (vehicle time {window['start']:.1f}–"
+              f"{window['end']:.1f} s)")
         print(f"  achieved rate         {sp['rate_hz']:.3f} Hz ({sp['sent']} sent)")
         print(f"  period deviation      mean {1e3 * sp['period_deviation_mean_s']:.3f} ms, "
               f"p99 {1e3 * sp['period_deviation_p99_s']:.3f} ms, max "
               f"{1e3 * sp['period_deviation_max_s']:.3f} ms (streamer send times)")
         print(f"  tlog cross-check      p99 {1e3 * np.percentile(dev, 99):.3f} ms over "
               f"{dev.size} gaps (tlog record stamps)")
+        print(f"  stalls (> 100 ms)     {int(np.sum(gaps - nominal > 0.1))} (tlog), max gap "
+              f"{1e3 * float(gaps.max()):.1f} ms")
         print(f"  late (> 10 % period)  {sp['late']}")
+        print(f"  scheduling            {meta['stream'].get('scheduling', '?')}")
         print(f"  dropped               {sp['dropped']}")
         tracking = meta.get("tracking", {})
         if tracking.get("rows"):

@@ -194,6 +194,9 @@ def _describe(value: Any) -> str:
         return "nothing (key missing)"
     if value is None or isinstance(value, bool):
         return json.dumps(value)
+    if isinstance(value, int) and abs(value) > 10**30:
+        # repr of a huge int is slow, or refused beyond 4300 digits.
+        return f"an integer of {len(format(abs(value), 'x')) * 4} bits"
     if isinstance(value, list | dict):
         return f"a list of {len(value)}" if isinstance(value, list) else "an object"
     return repr(value[:40] + "…" if isinstance(value, str) and len(value) > 40 else value)
@@ -210,9 +213,13 @@ def _get(doc: Mapping[str, Any], key: str) -> Any:
 
 def _number(file: str, key: str, value: Any, positive: bool = False) -> float:
     ok = isinstance(value, int | float) and not isinstance(value, bool)
-    if not ok or not math.isfinite(value) or (positive and value <= 0.0):
+    try:
+        number = float(value) if ok else math.nan  # an int beyond 1e308 overflows
+    except OverflowError:
+        number = math.nan
+    if not math.isfinite(number) or (positive and number <= 0.0):
         _fail(file, key, "a positive number" if positive else "a finite number", value)
-    return float(value)
+    return number
 
 
 def _vector(file: str, key: str, value: Any, length: int | None = None) -> np.ndarray:
@@ -296,9 +303,11 @@ def parse_trajectory(document: Any, source: str) -> TrajectoryFile:
         _fail(source, "kind", "a non-empty string", kind)
     trajectory = _segments(source, _get(doc, "segments"))
     duration = _number(source, "duration", _get(doc, "duration"), True)
-    if not math.isclose(duration, trajectory.duration, rel_tol=1e-9, abs_tol=1e-9):
-        _fail(source, "duration", f"the sum of the segment durations "
-              f"({trajectory.duration!r} s)", duration)
+    with np.errstate(over="ignore"):  # durations near 1e308 sum to inf: refused below
+        total = float(np.sum(trajectory.durations))
+    if not math.isclose(duration, total, rel_tol=1e-9, abs_tol=1e-9):
+        _fail(source, "duration", f"the sum of the segment durations ({total!r} s)",
+              duration)
     vehicle = _get(doc, "vehicle")
     if not isinstance(vehicle, dict):
         _fail(source, "vehicle", "an object with name and config_toml", vehicle)
@@ -323,8 +332,8 @@ def parse_trajectory(document: Any, source: str) -> TrajectoryFile:
                   corners.tolist())
         box = tuple(corners.tolist())
     start = _vector(source, "start", _get(doc, "start"), 4)
-    first = trajectory.flat_outputs(np.array([0.0]))
-    at_zero = np.array([*first.position[0], first.yaw[0]])
+    # The constant terms: the flight at t = 0 (evaluating more could overflow).
+    at_zero = np.array([*trajectory.position_coeffs[0, :, 0], trajectory.yaw_coeffs[0, 0]])
     if np.max(np.abs(start - at_zero)) > _START_TOLERANCE:
         _fail(source, "start", f"the first segment's start {at_zero.tolist()}", start.tolist())
     return TrajectoryFile(
@@ -353,4 +362,11 @@ def read_trajectory(path: str | Path) -> TrajectoryFile:
     except json.JSONDecodeError as error:
         raise InputError(f"{path}: line {error.lineno}, column {error.colno}: not valid "
                          f"JSON: {error.msg}") from None
-    return parse_trajectory(document, str(path))
+    except (ValueError, RecursionError) as error:
+        # An integer of more than 4300 digits, or arrays nested thousands deep.
+        what = "nested too deeply" if isinstance(error, RecursionError) else str(error)
+        raise InputError(f"{path}: not a usable JSON document: {what}") from None
+    try:
+        return parse_trajectory(document, str(path))
+    except RecursionError:
+        raise InputError(f"{path}: not a usable JSON document: nested too deeply") from None

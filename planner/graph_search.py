@@ -26,6 +26,7 @@ from mavsysid.planner.belief import (
 )
 from mavsysid.planner.feasibility import check_segment
 from mavsysid.planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
+from mavsysid.planner.kinematic_check import exceeded_limits
 from mavsysid.planner.refine import StopChoice
 from mavsysid.planner.results import PlannerSettings, PlanProgress
 from mavsysid.planner.search_setup import (
@@ -137,8 +138,10 @@ class GraphSearch:
         return self.transfer_of(segment)
 
     def feasible(self, segment: Segment) -> bool:
+        limits = self.settings.autopilot_limits
         return check_segment(segment, self.config, self.box,
-                             rotor_headroom=self.settings.rotor_headroom).feasible
+                             rotor_headroom=self.settings.rotor_headroom).feasible and (
+            limits is None or not exceeded_limits(segment, limits))
 
     def stop_at(self, state: VertexState, with_transfer: bool = True) -> StopChoice | None:
         """The shortest feasible stopping segment from ``state``; None if there is none.

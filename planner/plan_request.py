@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 from mavsysid.planner.feasibility import check_rotor_headroom
+from mavsysid.planner.kinematic_check import check_limits
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.mav_model import rotor_thrust
@@ -119,10 +120,13 @@ def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
         A budget or planning time ≤ 0, no limit on planning at all, a sample count ≤ 0,
         a negative seed or refinement step count, a refinement share outside [0, 1) or
         split < 1, a malformed or too small box, a start closer to a wall than the
-        rotors reach, or a rotor headroom outside [0, 0.5) or without the hover speed;
+        rotors reach, a rotor headroom outside [0, 0.5) or without the hover speed, or an
+        autopilot limit that is not > 0;
         or (`ConfigError`) limits the vehicle cannot hover within. One line each.
     """
     _check_numbers(settings)
     _check_box(settings, config)
     _check_hover(config)
     check_rotor_headroom(config, settings.rotor_headroom, "--rotor-headroom")
+    if settings.autopilot_limits is not None:
+        check_limits(settings.autopilot_limits)

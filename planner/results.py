@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.kinematic_limits import KinematicLimits
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 __all__ = ["PlanProgress", "PlanResult", "PlannerGraph", "PlannerSettings", "PlannerStats"]
@@ -59,6 +60,10 @@ class PlannerSettings:
         the plan leaves free at each end, for the autopilot's feedback and for a true
         vehicle whose θ differs from the planner's
         (`mavsysid.planner.feasibility.rotor_square_range`).
+    autopilot_limits : KinematicLimits or None
+        The envelope of the autopilot that will fly the plan (``plan --autopilot-limits``):
+        every segment keeps its peaks inside it (`mavsysid.planner.kinematic_check`);
+        None: the vehicle's own limits only.
     """
 
     budget: float = 30.0
@@ -74,6 +79,7 @@ class PlannerSettings:
     refine_steps: int = 100_000
     refine_split: int = 2
     rotor_headroom: float = 0.0
+    autopilot_limits: KinematicLimits | None = None
 
     @property
     def start_pose(self) -> np.ndarray:

@@ -116,6 +116,7 @@ def _build(values: dict[str, Any], name: str, source: str) -> VehicleConfig:
         source=source,
         effects=tuple(effect_from_values(n, v) for n, v in values["effects"]),
         autopilot_frame=values["autopilot_frame"],
+        box=values["box"],
     )
 
 

@@ -18,6 +18,9 @@ The optional ``[autopilot]`` table names the autopilot frame whose motor outputs
 rotors are (``frame = "ardupilot:quad_x"``, a name of
 `mavsysid.vehicle.motor_order.FRAME_NAMES`); the rotors must then match that frame's
 layout in angle and spin direction (`mavsysid.vehicle.motor_order.output_to_rotor`).
+
+The optional ``[flight]`` table holds ``box = [x_min, y_min, z_min, x_max, y_max, z_max]``
+(m, world ENU, each min below its max): where the vehicle may be flown.
 """
 
 from __future__ import annotations
@@ -94,6 +97,7 @@ _TOP_LEVEL: dict[str, str] = {
     "noise": "[noise]",
     "effects": "[effects]",
     "autopilot": "[autopilot]",
+    "flight": "[flight]",
 }
 #: Parameters of effects that have a sign by their meaning, ``(effect, parameter) →
 #: "positive" | "nonnegative"``; the rest may be negative. Read by the effect fits too.
@@ -321,6 +325,24 @@ def _autopilot_frame(file: str, doc: Mapping[str, Any],
     return frame
 
 
+def _flight_box(file: str, doc: Mapping[str, Any]) -> tuple[float, ...] | None:
+    """Validate the optional ``[flight]`` table: ``box``, six numbers, each min < max."""
+    raw = doc.get("flight")
+    if raw is None:
+        return None
+    expected = "[x_min, y_min, z_min, x_max, y_max, z_max] (m), each min below its max"
+    if not isinstance(raw, Mapping) or set(raw) != {"box"}:
+        raise_config_error(file, "[flight]", "a table with only box = " + expected,
+                           describe_value(raw))
+    box = raw["box"]
+    if not isinstance(box, list) or len(box) != 6:
+        raise_config_error(file, "[flight].box", expected, describe_value(box))
+    values = [_number(file, "[flight].box", v, "m", None) for v in box]
+    if any(lo >= hi for lo, hi in zip(values[:3], values[3:], strict=True)):
+        raise_config_error(file, "[flight].box", expected, describe_value(box))
+    return tuple(values)
+
+
 def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     """Check a parsed TOML document key by key and return normalised values.
 
@@ -338,7 +360,8 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
         (position tuple in m, direction int)), and ``parameters``, ``limits``, ``motor``,
         ``noise``: dicts holding only the keys present in the file, as floats (``J`` a
         tuple of 3 floats); ``effects``: list of (effect name, {parameter: float}) in
-        file order; ``autopilot_frame``: the ``[autopilot] frame`` name or None.
+        file order; ``autopilot_frame``: the ``[autopilot] frame`` name or None;
+        ``box``: the ``[flight] box`` (6 floats, m) or None.
 
     Raises
     ------
@@ -358,4 +381,5 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     tables = {section: _table(file, doc, section) for section in _TABLES}
     return {"name": doc.get("name"), "mass": mass, "rotors": rotors, **tables,
             "effects": _effects(file, doc),
-            "autopilot_frame": _autopilot_frame(file, doc, rotors)}
+            "autopilot_frame": _autopilot_frame(file, doc, rotors),
+            "box": _flight_box(file, doc)}

@@ -65,6 +65,9 @@ def vehicle_to_toml(config: VehicleConfig) -> str:
     if config.autopilot_frame is not None:
         lines += ["", "# The rotors are this autopilot frame's motor outputs.", "[autopilot]",
                   f"frame = {_toml_string(config.autopilot_frame)}"]
+    if config.box is not None:
+        lines += ["", "# Flight box, m, world ENU: x_min, y_min, z_min, x_max, y_max, z_max.",
+                  "[flight]", f"box = {_toml_value(tuple(config.box))}"]
     # The tables are flat tables of floats (J a float triple): writing every field
     # keeps fields added to the dataclasses later saved without touching this function.
     for table, section in (("parameters", config.parameters), ("limits", config.limits),

@@ -189,6 +189,10 @@ class VehicleConfig:
         (a name of `mavsysid.vehicle.motor_order.FRAME_NAMES`); the readers put a log's
         motor outputs into the config's rotor order through it. None: log output i is
         rotor i.
+    box : tuple of 6 float or None
+        ``[flight] box``: the flight box [x_min, y_min, z_min, x_max, y_max, z_max], m,
+        world ENU, where this vehicle may be flown (``mavsysid stream`` uses it when no
+        ``--box`` is given). None: not set.
     """
 
     name: str
@@ -201,6 +205,7 @@ class VehicleConfig:
     source: str = ""
     effects: tuple[ModelEffect, ...] = ()
     autopilot_frame: str | None = None
+    box: tuple[float, ...] | None = None
 
     @property
     def rotor_count(self) -> int:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.readers.dataflash import read_dataflash
+from mavsysid.estimation.readers.guard import check_log_size
 from mavsysid.estimation.readers.merge import merge_pose
 from mavsysid.estimation.readers.pose_csv import read_pose_csv
 from mavsysid.estimation.readers.streams import LogStreams, to_flight_data
@@ -43,11 +44,12 @@ READERS: dict[str, Callable[[Path, VehicleConfig], LogStreams]] = {
 
 
 def _existing_file(path: str | Path, what: str) -> Path:
-    """`path` as a Path if it is a readable regular file, else a one-line `InputError`."""
+    """`path` as a Path if it is a regular file of at most `MAX_LOG_BYTES`, else one line."""
     path = Path(path)
     if not path.is_file():
         found = "a directory" if path.is_dir() else "no such file"
         raise InputError(f"{path}: {what}: expected a file, found {found}")
+    check_log_size(path)
     return path
 
 

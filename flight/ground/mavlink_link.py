@@ -23,11 +23,17 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from mavsysid.flight.autopilot_modes import Autopilot, mode_name
+from mavsysid.flight.autopilot_modes import Autopilot
+from mavsysid.flight.ground.link_state import (
+    MIN_SILENCE_WALL,
+    HeartbeatLost,
+    LinkClosed,
+    VehicleState,
+    link_loss_problem,
+)
 from mavsysid.flight.ground.tlog_writer import LinkClock, TlogWriter
 from mavsysid.flight.mavlink_setup import GCS_COMPONENT, GCS_SYSTEM, load_mavutil, parse_connect
 
@@ -35,16 +41,7 @@ from mavsysid.errors import JobFailedError
 
 __all__ = ["HeartbeatLost", "LinkClosed", "MavlinkLink", "Ticker", "VehicleState"]
 
-_ARMED_FLAG = 128  # MAV_MODE_FLAG_SAFETY_ARMED
 _LONGEST_WAIT = 0.05  # wall s per select(): bounds how late an interrupt is noticed
-
-
-class HeartbeatLost(JobFailedError):
-    """The vehicle's heartbeat stopped for longer than the link's loss threshold."""
-
-
-class LinkClosed(HeartbeatLost):
-    """The other end closed the TCP link (pymavlink would print "EOF" on every read)."""
 
 
 class Ticker(Protocol):
@@ -55,34 +52,6 @@ class Ticker(Protocol):
 
     def fire(self, now: float) -> None:
         """Do the job; ``now`` is the streamer time, s."""
-
-
-@dataclass
-class VehicleState:
-    """What the vehicle's last HEARTBEAT said, and when (streamer time, s)."""
-
-    system: int = 0
-    component: int = 0
-    autopilot: Autopilot | None = None
-    autopilot_id: int = 0
-    mav_type: int = 0
-    base_mode: int = 0
-    custom_mode: int = 0
-    system_status: int = 0
-    last_heartbeat: float | None = None
-    heartbeats: int = 0
-
-    @property
-    def armed(self) -> bool:
-        """Whether the motors are armed (MAV_MODE_FLAG_SAFETY_ARMED)."""
-        return bool(self.base_mode & _ARMED_FLAG)
-
-    @property
-    def mode(self) -> str:
-        """The flight mode's name (``"mode N"`` when unknown)."""
-        if self.autopilot is None:
-            return f"mode {self.custom_mode}"
-        return mode_name(self.autopilot, self.custom_mode)
 
 
 Listener = Callable[[Any, float], None]
@@ -105,6 +74,9 @@ class MavlinkLink:
         32-byte MAVLink 2 secret key: sign everything sent, accept only signed messages.
     heartbeat_loss : float
         The vehicle is lost after this long without its HEARTBEAT, streamer s.
+    link_loss : float
+        ... or after this long without any message, once `watch_silence` is set, streamer
+        s (never below `MIN_SILENCE_WALL` wall s; see `mavsysid.flight.ground.link_state`).
     spin : float
         Wall seconds before a tick that `poll` spends polling without sleeping: waking
         from a sleep can take milliseconds on a busy machine, a spin does not.
@@ -119,21 +91,25 @@ class MavlinkLink:
         Signed messages accepted without a key to check them (the vehicle signs; we don't).
     watch_heartbeat : bool
         Whether `poll` raises `HeartbeatLost` (off until the flight wants it).
+    watch_silence : bool
+        Whether `poll` also raises it after `link_loss` s without any message (set once
+        the telemetry streams).
     interrupt_pending : bool
         Set by a signal handler: the next `poll` raises `KeyboardInterrupt` (once).
     """
 
     def __init__(self, connect: str, tlog: Path | None = None, clock: LinkClock | None = None,
                  signing_key: bytes | None = None, heartbeat_loss: float = 3.0,
-                 spin: float = 0.0) -> None:
+                 spin: float = 0.0, link_loss: float = 1.0) -> None:
         self.mavutil = load_mavutil()
         self.clock = clock or LinkClock()
         self.connect = connect
         self.heartbeat_loss = heartbeat_loss
+        self.link_loss = max(link_loss, MIN_SILENCE_WALL * self.clock.speedup)
         self.spin = spin
         self.vehicle = VehicleState()
         self.rejected_signed = self.rejected_unsigned = self.unverified_signed = 0
-        self.watch_heartbeat = False
+        self.watch_heartbeat = self.watch_silence = False
         self.interrupt_pending = False
         self._interrupt_delivered = False
         self._listeners: list[Listener] = []
@@ -271,11 +247,11 @@ class MavlinkLink:
                 self._interrupt_delivered = True
                 raise KeyboardInterrupt
             now = self.clock.now()
+            self._check_heartbeat(now)  # before a setpoint goes out: none into a dead link
             ticker = self._ticker
             if ticker is not None and now >= ticker.next_deadline():
                 ticker.fire(now)
                 continue
-            self._check_heartbeat(now)
             msg = self._conn.recv_msg()
             if msg is not None:
                 self._handle(msg)
@@ -283,6 +259,8 @@ class MavlinkLink:
             now = self.clock.now()
             if now >= deadline:
                 return
+            if (ack := self.clock.take_ack()) is not None:  # lock-step: caught up, about to wait
+                self.send(self.mav.system_time_encode(ack * 1000, ack))
             wake = deadline
             if ticker is not None:
                 wake = min(deadline, ticker.next_deadline() - self.spin * self.clock.speedup)
@@ -294,12 +272,13 @@ class MavlinkLink:
         return None if last is None else self.clock.now() - last
 
     def _check_heartbeat(self, now: float) -> None:
-        last = self.vehicle.last_heartbeat
-        if self.watch_heartbeat and last is not None and now - last > self.heartbeat_loss:
-            raise HeartbeatLost(
-                f"vehicle heartbeat lost: nothing for {now - last:.1f} s (limit "
-                f"{self.heartbeat_loss:g} s); stopped streaming, the vehicle is left to its "
-                "own failsafe")
+        if not self.watch_heartbeat:
+            return
+        problem = link_loss_problem(self.vehicle, now, self.heartbeat_loss,
+                                    self.link_loss if self.watch_silence else None)
+        if problem is not None:
+            raise HeartbeatLost(f"{problem}; stopped streaming, the vehicle is left to its "
+                                "own failsafe")
 
     def _handle(self, msg: Any) -> None:
         kind = msg.get_type()
@@ -312,7 +291,8 @@ class MavlinkLink:
                 else:
                     self.rejected_unsigned += 1
             return
-        t = self.clock.now()
+        self.clock.observe(msg)  # lock-step frames set the clock (LinkClock)
+        t = self.clock.received(msg)
         if self._tlog is not None:
             self._tlog.write(msg.get_msgbuf())
         # Without a key pymavlink reads signed packets unchecked and calls them unsigned.
@@ -323,6 +303,7 @@ class MavlinkLink:
             self._note_heartbeat(msg, t)
         if system != self.vehicle.system or self.vehicle.system == 0:
             return
+        self.vehicle.last_message = t
         for listener in tuple(self._listeners):
             listener(msg, t)
 

@@ -1,7 +1,9 @@
 """Pre-flight checks of a streamed flight: refuse with the reason, or warn.
 
 Two groups. Before connecting (`check_plan`): the trajectory was made for this vehicle,
-and every sample of it at 100 Hz lies inside the flight box. After connecting and before
+every sample of it at 100 Hz lies inside the flight box, and nothing between the samples
+leaves the box or exceeds the vehicle's limits (speed, thrust, jerk, yaw rate, continuity;
+`mavsysid.flight.ground.trajectory_safety`). After connecting and before
 arming (`check_vehicle`): the airframe reported in the HEARTBEAT has the configured
 rotor count, the vehicle stands under the box (its climb and its transfer to the start
 then stay inside it), it is healthy and disarmed, and the telemetry the estimator needs
@@ -16,8 +18,9 @@ from typing import Any
 
 import numpy as np
 from mavsysid.flight.ground.mavlink_link import VehicleState
+from mavsysid.flight.ground.trajectory_safety import check_trajectory, flight_limits
 from mavsysid.vehicle.config import VehicleConfig
-from mavsysid.vehicle.trajectory import Trajectory
+from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
 
 from mavsysid.errors import JobFailedError
 
@@ -95,13 +98,21 @@ def check_takeoff_point(position: Sequence[float], box: Sequence[float]) -> list
 
 
 def check_plan(trajectory: Trajectory, trajectory_vehicle: str, config: VehicleConfig,
-               box: Sequence[float]) -> PreflightReport:
-    """Checks that need no vehicle: the trajectory's vehicle name and the box."""
+               box: Sequence[float], box_source: str = "the box") -> PreflightReport:
+    """Checks that need no vehicle: the trajectory's vehicle name, the box, the limits.
+
+    The limits (`check_trajectory`) are checked when the box is not already left, so a
+    refusal names one problem; ``box_source`` says whose box it is in the message.
+    """
     refusals = []
     if trajectory_vehicle != config.name:
         refusals.append(f"the trajectory was made for vehicle {trajectory_vehicle!r}, "
                         f"not {config.name!r}")
-    refusals += check_box(trajectory, box)
+    with np.errstate(all="ignore"):  # a mutated file may overflow; the checks say so
+        outside = [f"{line} (box: {box_source})" for line in check_box(trajectory, box)]
+    refusals += outside
+    if not outside and isinstance(trajectory, PiecewisePolynomial):
+        refusals += check_trajectory(trajectory, flight_limits(config, box), box_source)
     return PreflightReport(tuple(refusals))
 
 

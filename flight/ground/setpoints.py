@@ -12,6 +12,12 @@ one was due is dropped (counted), never sent late in a burst.
 
 `SmoothMove` is a rest-to-rest quintic move between two poses (take-off to the start,
 fly to the start), so that even these transfers carry consistent feed-forward.
+
+`SetpointLimits` is the last line of defence: the stream asks it about every setpoint
+before sending (`SetpointLimits.violation`, a few µs of plain float arithmetic), and a
+setpoint outside the operator's box or beyond the vehicle's limits is never sent
+(`UnsafeSetpoint`). The limits are derived from the vehicle in
+`mavsysid.flight.ground.trajectory_safety.flight_limits`.
 """
 
 from __future__ import annotations
@@ -20,15 +26,20 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.frames import enu_to_ned, wrap_angle, yaw_enu_to_ned, yaw_rate_enu_to_ned
 from mavsysid.vehicle.trajectory import Trajectory
+
+from mavsysid.errors import JobFailedError
 
 __all__ = [
     "MAV_FRAME_LOCAL_NED",
     "TYPE_MASK_FULL",
     "Setpoint",
+    "SetpointLimits",
     "SmoothMove",
     "TickSchedule",
+    "UnsafeSetpoint",
     "hold",
     "trajectory_setpoint",
 ]
@@ -87,6 +98,79 @@ class Setpoint:
                 "afx": a[0], "afy": a[1], "afz": a[2],
                 "yaw": float(yaw_enu_to_ned(self.yaw)),
                 "yaw_rate": float(yaw_rate_enu_to_ned(self.yaw_rate))}
+
+
+class UnsafeSetpoint(JobFailedError):
+    """A setpoint outside the box or beyond the limits was about to be sent (it was not)."""
+
+
+@dataclass(frozen=True)
+class SetpointLimits:
+    """What a setpoint may ask of the vehicle (world ENU, SI).
+
+    Attributes
+    ----------
+    box : tuple of 6 float
+        The operator's box [x_min, y_min, z_min, x_max, y_max, z_max], m.
+    floor : float
+        Lowest z a setpoint may have, m: the streamer's own climb from the ground and
+        descent run below the box, in the column under it.
+    speed_max : float
+        ‖v‖, m/s.
+    thrust_acceleration_min, thrust_acceleration_max : float
+        ‖a − g‖ = collective thrust / mass, m/s².
+    jerk_max : float
+        ‖j‖, m/s³ (trajectories only: a setpoint carries no jerk).
+    yaw_rate_max, yaw_acceleration_max : float
+        |ψ̇|, rad/s; |ψ̈|, rad/s² (trajectories only).
+    tolerance : float
+        Slack for rounding: m on the box, relative on the other limits.
+    """
+
+    box: tuple[float, ...]
+    floor: float
+    speed_max: float
+    thrust_acceleration_min: float
+    thrust_acceleration_max: float
+    jerk_max: float
+    yaw_rate_max: float
+    yaw_acceleration_max: float
+    tolerance: float = 1e-6
+
+    def violation(self, sp: Setpoint) -> str | None:
+        """None if ``sp`` may be sent, else one line naming the quantity, value and limit.
+
+        Written with ``not (x <= limit)`` so that NaN is a violation too.
+        """
+        b, tol = self.box, self.tolerance
+        for i, axis in enumerate("xyz"):
+            lo = self.floor if i == 2 else b[i]
+            if not (lo - tol <= sp.position[i] <= b[i + 3] + tol):
+                return (f"setpoint {axis} = {sp.position[i]:.3f} m outside the box "
+                        f"[{lo:g}, {b[i + 3]:g}] m")
+        vx, vy, vz = sp.velocity
+        ax, ay, az = sp.acceleration
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        thrust = math.sqrt(ax * ax + ay * ay + (az + GRAVITY) ** 2)
+        slack = 1.0 + tol
+        checks = (("speed", speed, self.speed_max, "m/s"),
+                  ("thrust acceleration |a - g|", thrust, self.thrust_acceleration_max,
+                   "m/s²"),
+                  ("yaw rate", abs(sp.yaw_rate), self.yaw_rate_max, "rad/s"))
+        for name, value, limit, unit in checks:
+            if not (value <= limit * slack):
+                return f"setpoint {name} {value:.3g} {unit} beyond the limit {limit:.3g} {unit}"
+        if not (thrust * slack >= self.thrust_acceleration_min) or not math.isfinite(sp.yaw):
+            return (f"setpoint thrust acceleration |a - g| {thrust:.3g} m/s² below the limit "
+                    f"{self.thrust_acceleration_min:.3g} m/s² (or a non-finite yaw)")
+        return None
+
+    def refusal(self, sp: Setpoint) -> str | None:
+        """None if ``sp`` may be sent, else the one-line "unsafe setpoint not sent: …"."""
+        if (why := self.violation(sp)) is None:
+            return None
+        at = f" (trajectory t = {sp.t_traj:.2f} s)" if sp.t_traj >= 0.0 else ""
+        return f"unsafe setpoint not sent: {why}{at}"
 
 
 def hold(position: np.ndarray, yaw: float) -> Setpoint:
@@ -195,8 +279,13 @@ class TickSchedule:
             self.late_tolerance = 0.1 * self.period
 
     def deadline(self, k: int | None = None) -> float:
-        """When tick ``k`` (the next one by default) is due, s."""
-        return self.start + (self.next_tick if k is None else k) * self.period
+        """When tick ``k`` (the next one by default) is due, s.
+
+        A billionth of a period early, as `due` rounds: a clock that reads exactly the due
+        time (lock-step: a frame's time) finds the tick due whichever way the sum rounded.
+        """
+        k = self.next_tick if k is None else k
+        return self.start + (k - 1e-9) * self.period
 
     def due(self, now: float) -> int | None:
         """The tick to send at ``now``, or None if none is due yet; marks it sent."""

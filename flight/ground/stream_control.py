@@ -21,7 +21,12 @@ from typing import Any, TextIO
 
 from mavsysid.flight.autopilot_modes import mode_name
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
-from mavsysid.flight.ground.setpoints import Setpoint, TickSchedule
+from mavsysid.flight.ground.setpoints import (
+    Setpoint,
+    SetpointLimits,
+    TickSchedule,
+    UnsafeSetpoint,
+)
 from mavsysid.flight.ground.telemetry_recorder import SetpointHistory, TelemetryRecorder
 
 from mavsysid.errors import JobFailedError
@@ -56,6 +61,8 @@ class SetpointStream:
         self.schedule: TickSchedule | None = None
         self._source: SetpointSource | None = None
         self.last: Setpoint | None = None
+        # The last line of defence: each setpoint is checked before it is sent.
+        self.limits: SetpointLimits | None = None
 
     def start(self, source: SetpointSource) -> TickSchedule:
         """Stream ``source(t)``, t = s since now on the schedule (first tick now).
@@ -91,6 +98,9 @@ class SetpointStream:
         if k is None:
             return
         setpoint = self._source(k * self.period)
+        if self.limits is not None and (why := self.limits.refusal(setpoint)) is not None:
+            self.stop()
+            raise UnsafeSetpoint(why)
         fields = setpoint.message_fields()
         v = self.link.vehicle
         self.link.send(self.link.mav.set_position_target_local_ned_encode(

@@ -2,11 +2,15 @@
 
 `open_session` checks the plan (`mavsysid.flight.ground.preflight.check_plan`) before anything is
 created, then makes ``<log_dir>/<UTC time>_<name>/`` with ``flight.tlog`` (both
-directions, `MavlinkLink`), ``pose.csv`` (`TelemetryRecorder`) and ``meta.json``, which
-is written at once with status ``recording`` and rewritten at each milestone (vehicle
-identified, telemetry rates, trajectory start and end) and at the end with ``complete``
-or ``aborted`` and the reason. A killed streamer leaves a ``recording`` meta.json and
-both logs up to its last message.
+directions, `MavlinkLink`), ``pose.csv`` (`TelemetryRecorder`) and ``meta.json``.
+``meta.json`` is live: while the flight runs it says ``"running": true`` with status
+``aborted`` (and a reason saying the streamer never finished), rewritten about once a
+second (sample count, ``updated``) and at each milestone (vehicle identified, telemetry
+rates, trajectory start and end), from a thread of its own (`MetaWriter`: an ``fsync``
+never delays a setpoint). The final write, at the end, says ``"running": false`` with
+``complete`` or ``aborted`` and the real reason. So a killed streamer (kill -9) leaves a
+meta.json that reads as aborted, with the samples of pose.csv up to about a second before
+the kill, and both logs up to its last message: no clean-up needed.
 
 While a session is open (on the main thread), SIGINT and SIGTERM do not strike at once:
 the link raises `KeyboardInterrupt` from its next wait, so the flight can stop the stream
@@ -16,7 +20,6 @@ and act safely; a second signal interrupts immediately.
 from __future__ import annotations
 
 import datetime as _dt
-import re
 import signal
 import tempfile
 import threading
@@ -25,20 +28,29 @@ from pathlib import Path
 from typing import Any
 
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
+from mavsysid.flight.ground.meta_writer import MetaWriter, stream_flight_dir
+from mavsysid.flight.ground.parameter_session import ParameterSession
+from mavsysid.flight.ground.prearm import PrearmMonitor
 from mavsysid.flight.ground.preflight import check_plan
+from mavsysid.flight.ground.realtime import raise_priority, restore_scheduling
 from mavsysid.flight.ground.stream_control import FlightGuards, SetpointStream
 from mavsysid.flight.ground.telemetry_recorder import STAMPING, SetpointHistory, TelemetryRecorder
 from mavsysid.flight.ground.tlog_writer import LinkClock
+from mavsysid.flight.ground.trajectory_safety import flight_limits, operator_box
 from mavsysid.flight.ground.vehicle_commands import VehicleCommands
 from mavsysid.flight.mavlink_setup import parse_connect
-from mavsysid.formats.flight_dir import new_flight_dir, write_meta
 from mavsysid.formats.flight_log import software_version
 from mavsysid.formats.trajectory_file import TrajectoryFile, read_trajectory
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle, vehicle_to_toml
 
-from mavsysid.errors import InputError
+__all__ = ["KILLED_REASON", "META_PERIOD", "StreamSession", "StreamSettings", "load_plan",
+           "open_session"]
 
-__all__ = ["StreamSession", "StreamSettings", "load_plan", "open_session"]
+#: The reason meta.json gives while the flight runs: what a reader sees after a kill -9.
+KILLED_REASON = ("the streamer stopped without its final write (killed or crashed); "
+                 "samples as of 'updated'")
+#: Streamer seconds between the live rewrites of meta.json.
+META_PERIOD = 1.0
 
 
 @dataclass(frozen=True)
@@ -80,6 +92,20 @@ class StreamSettings:
         (s); give up waiting after settle_timeout (s).
     land_timeout : float
         How long to wait for the touchdown, s.
+    link_loss : float
+        The vehicle is lost after this long without any message once its telemetry
+        streams, s (`mavsysid.flight.ground.link_state`).
+    prearm_timeout : float
+        How long to wait for the vehicle's pre-arm checks to pass, s.
+    realtime : bool
+        Run the flight's threads with real-time scheduling when permitted
+        (`mavsysid.flight.ground.realtime`).
+    fence, fence_margin : bool, float or None
+        Geofence before arming, this far outside the box, m (None: `geofence.FENCE_MARGIN`).
+    set_limits : bool
+        Raise the autopilot limits the plan needs (`autopilot_limits`), not refuse.
+    lockstep : bool
+        Take the time from ``mavsysid sim --lockstep``'s frames (`LinkClock`; tests).
     """
 
     connect: str
@@ -100,6 +126,13 @@ class StreamSettings:
     settle_time: float = 1.0
     settle_timeout: float = 15.0
     land_timeout: float = 60.0
+    link_loss: float = 1.0
+    prearm_timeout: float = 60.0
+    realtime: bool = True
+    fence: bool = True
+    fence_margin: float | None = None
+    set_limits: bool = False
+    lockstep: bool = False
 
 
 def _embedded_config(plan: TrajectoryFile, source: str) -> VehicleConfig:
@@ -124,38 +157,23 @@ def load_plan(path: str | Path, vehicle: str | Path | None,
     vehicle : str, Path or None
         Shipped vehicle name or TOML path; None: the configuration stored in the file.
     box : tuple of 6 float or None
-        Flight box, m; None: the file's.
+        Flight box, m; None: the vehicle's ``[flight] box``, else the file's.
 
     Raises
     ------
     InputError
         An unreadable file or vehicle, or no box at all.
     JobFailedError
-        "flight refused: …": another vehicle's trajectory, or a sample outside the box.
+        "flight refused: …": another vehicle's trajectory, a sample outside the box, or
+        the vehicle's limits exceeded (`mavsysid.flight.ground.trajectory_safety`).
     """
     plan = read_trajectory(path)
     config = load_vehicle(vehicle) if vehicle is not None else _embedded_config(plan, str(path))
-    box = box if box is not None else plan.box
-    if box is None:
-        raise InputError(f"{path}: the trajectory has no flight box; give one with "
-                         "--box x_min,y_min,z_min,x_max,y_max,z_max")
-    if len(box) != 6 or any(lo >= hi for lo, hi in zip(box[:3], box[3:], strict=True)):
-        raise InputError(f"--box {','.join(f'{b:g}' for b in box)}: expected "
-                         "x_min,y_min,z_min,x_max,y_max,z_max with each min below its max")
-    check_plan(plan.trajectory, plan.vehicle_name, config, box).raise_if_refused()
+    # The operator's box (--box, else the vehicle's); the file's only if neither is given.
+    box, source = operator_box(box, None if vehicle is None else config.box, plan.box,
+                               str(path))
+    check_plan(plan.trajectory, plan.vehicle_name, config, box, source).raise_if_refused()
     return plan, config, tuple(float(b) for b in box)
-
-
-def _flight_dir(root: Path, stem: str) -> Path:
-    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    name = f"{stamp}_{re.sub(r'[^A-Za-z0-9._-]+', '-', stem) or 'flight'}"
-    for i in range(1, 1000):
-        try:
-            return new_flight_dir(root, name if i == 1 else f"{name}-{i}")
-        except InputError:
-            if not (root / (name if i == 1 else f"{name}-{i}")).exists():
-                raise
-    raise InputError(f"too many flight directories named {name}-* in {root}")
 
 
 class StreamSession:
@@ -175,54 +193,65 @@ class StreamSession:
                  box: tuple[float, ...], settings: StreamSettings) -> None:
         self.plan, self.config, self.box, self.settings = plan, config, box, settings
         self.trajectory = plan.trajectory
-        self.directory = _flight_dir(Path(settings.log_dir), Path(path).stem)
+        self.directory = stream_flight_dir(Path(settings.log_dir), Path(path).stem)
         self.history = SetpointHistory()
         self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history)
         self.meta: dict[str, Any] = self._initial_meta(path)
-        write_meta(self.directory / "meta.json", self.meta)
-        clock = LinkClock(settings.speedup)
+        self._outcome: tuple[str, str | None] | None = None
+        # Before any thread starts: they inherit the policy (see realtime's docstring).
+        self.meta["stream"]["scheduling"] = raise_priority() if settings.realtime else "normal"
+        self._meta_writer = MetaWriter(self.directory / "meta.json")
+        self._next_meta = 0.0
+        self._write()
+        clock = LinkClock(settings.speedup, settings.lockstep)
         self.meta["tlog_epoch_unix_s"] = clock.epoch_us(0.0) * 1e-6
         try:
             # Spin the last 2 ms before each setpoint (at most a tenth of the period).
             spin = min(0.002, 0.1 / (settings.rate * settings.speedup))
             self.link = MavlinkLink(settings.connect, self.directory / "flight.tlog", clock,
-                                    settings.signing_key, settings.heartbeat_loss, spin)
+                                    settings.signing_key, settings.heartbeat_loss, spin,
+                                    settings.link_loss)
         except BaseException as error:
             self.recorder.close()
             self.note_failure(str(error))
             self._write_final()
+            restore_scheduling()
             raise
         self.commands = VehicleCommands(self.link, say=None)
+        self.parameters = ParameterSession(self.link)  # restored by the streamer
         self.stream = SetpointStream(self.link, self.history, settings.rate)
+        self.stream.limits = flight_limits(config, box)
         self.guards = FlightGuards(self.link, self.stream, self.recorder)
+        self.prearm = PrearmMonitor(self.link)
         self.last_sys_status: Any = None
         # Order matters: the guards read the row the recorder has just written.
         self.link.add_listener(self.recorder.on_message)
         self.link.add_listener(self._on_message)
+        self.link.add_listener(self.prearm.on_message)
         self.link.add_listener(self.guards.on_message)
         self._trajectory_start: float | None = None
         self._old_handlers: dict[int, Any] = {}
 
-    def _on_message(self, msg: Any, _t: float) -> None:
+    def _on_message(self, msg: Any, t: float) -> None:
         if msg.get_type() == "SYS_STATUS":
             self.last_sys_status = msg
+        if t >= self._next_meta:  # the live meta.json, about once a second
+            self._write()
 
     # --- metadata --------------------------------------------------------------------------
 
     def _initial_meta(self, path: Path) -> dict[str, Any]:
         s, plan = self.settings, self.plan
         return {
-            "format": "mavsysid-flight",
-            "format_version": 1,
+            "format": "mavsysid-flight", "format_version": 1,
             "software": {"name": "mavsysid", "version": software_version()},
             "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            "source": "mavlink-stream",
-            "simulated": False,
+            "source": "mavlink-stream", "simulated": False,
             "vehicle": {"name": self.config.name, "source": self.config.source,
                         "config_toml": vehicle_to_toml(self.config)},
             "files": {"pose": "pose.csv", "tlog": "flight.tlog"},
-            "connection": s.connect,
-            "speedup": s.speedup,
+            "connection": s.connect, "speedup": s.speedup,
+            "lockstep": s.lockstep,
             "signing": s.signing_key is not None,
             "trajectory": {"file": str(path), "kind": plan.kind,
                            "duration": self.trajectory.duration,
@@ -234,13 +263,19 @@ class StreamSession:
             "stamping": STAMPING,
             "tlog_time": "tlog_epoch_unix_s + streamer time (wall time x speedup since the "
                          "streamer started), us",
-            "status": "recording",
+            "status": "aborted",
+            "reason": KILLED_REASON,
+            "running": True,
             "samples": 0,
         }
 
     def _write(self) -> None:
+        """Queue a live rewrite of meta.json (off this thread)."""
         self.meta["samples"] = self.recorder.rows
-        write_meta(self.directory / "meta.json", self.meta)
+        self.meta["updated"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
+        self._meta_writer.submit(self.meta)
+        link = getattr(self, "link", None)
+        self._next_meta = (0.0 if link is None else link.clock.now()) + META_PERIOD
 
     @property
     def type_name(self) -> str:
@@ -289,20 +324,27 @@ class StreamSession:
         self._write()
 
     def note_failure(self, reason: str) -> None:
-        """The flight failed, was refused or interrupted: status ``aborted``, ``reason``."""
-        if self.meta.get("status") == "recording":
-            self.meta["status"] = "aborted"
-            self.meta["reason"] = reason
+        """The flight failed, was refused or interrupted: final status ``aborted``, ``reason``."""
+        if self._outcome is None:
+            self._outcome = ("aborted", reason)
+
+    def note(self, key: str, value: Any) -> None:
+        """Record ``value`` under ``key`` in meta.json now (the fence, changed parameters)."""
+        self.meta[key] = value
+        self._write()
 
     def note_complete(self) -> None:
-        """The flight went as planned."""
-        if self.meta.get("status") == "recording":
-            self.meta["status"] = "complete"
+        """The flight went as planned (final status ``complete``)."""
+        if self._outcome is None:
+            self._outcome = ("complete", None)
 
     def _write_final(self) -> None:
-        if self.meta.get("status") == "recording":
-            self.meta["status"] = "aborted"
-            self.meta.setdefault("reason", "stopped before the end")
+        status, reason = self._outcome or ("aborted", "stopped before the end")
+        self.meta["status"], self.meta["running"] = status, False
+        if reason is None:
+            self.meta.pop("reason", None)
+        else:
+            self.meta["reason"] = reason
         self.meta["tracking"] = self.recorder.tracking_summary()
         self.meta.setdefault("telemetry_rates_hz", {})["flight"] = {
             k: round(v, 3) for k, v in sorted(self.recorder.rates().items())}
@@ -312,7 +354,9 @@ class StreamSession:
         if link is not None and (link.rejected_signed or link.rejected_unsigned):
             self.meta["signing_rejects"] = {"wrong_signature": link.rejected_signed,
                                             "unsigned": link.rejected_unsigned}
-        self._write()
+        self.meta["samples"] = self.recorder.rows
+        self.meta["updated"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
+        self._meta_writer.close(final=self.meta)
 
     # --- lifetime --------------------------------------------------------------------------
 
@@ -337,7 +381,10 @@ class StreamSession:
         self.stream.stop()
         self.link.close()
         self.recorder.close()
-        self._write_final()
+        try:
+            self._write_final()
+        finally:
+            restore_scheduling()
 
 
 def open_session(path: str | Path, settings: StreamSettings,

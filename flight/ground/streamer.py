@@ -27,8 +27,11 @@ from typing import Any
 import numpy as np
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.gc_freeze import frozen_collector
+from mavsysid.flight.ground.autopilot_limits import check_session_limits
+from mavsysid.flight.ground.flight_safety import install_safety, restore_parameters
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
 from mavsysid.flight.ground.preflight import check_vehicle
+from mavsysid.flight.ground.rotor_watch import RotorWatch
 from mavsysid.flight.ground.setpoints import SmoothMove, hold, trajectory_setpoint
 from mavsysid.flight.ground.stream_control import ModeTaken, ProgressLine
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings
@@ -74,6 +77,7 @@ class _Flight:
         self.settings: StreamSettings = s.settings
         self.link, self.commands, self.stream, self.guards = s.link, s.commands, s.stream, s.guards
         self.recorder = s.recorder
+        self.link.add_listener(RotorWatch(self.link.vehicle, say).on_message)
 
     def run(self) -> None:
         try:
@@ -94,6 +98,8 @@ class _Flight:
             if not isinstance(error, HeartbeatLost | ModeTaken) and self.link.vehicle.armed:
                 self._hold_after_abort()
             raise
+        finally:
+            restore_parameters(self.s, self.say)
 
     # --- steps ---------------------------------------------------------------------------
 
@@ -122,6 +128,8 @@ class _Flight:
         for name in names:
             if (why := self.commands.set_message_interval(name, rate)) is not None:
                 self.say(f"warning: the vehicle did not accept {name} at {rate:g} Hz: {why}")
+        # Motor outputs for the log, a fallback for missing ESC rpm; a refusal is no matter.
+        self.commands.set_message_interval("SERVO_OUTPUT_RAW", rate)
         self.commands.wait_position(self.settings.position_timeout)
         achieved = self._measure_rates(2.0)
         shown = ", ".join(f"{n} {achieved.get(n, 0.0):.1f} Hz" for n in names)
@@ -130,12 +138,16 @@ class _Flight:
         if self.s.last_sys_status is None:
             self.commands.request_message("SYS_STATUS")
             self.link.poll(1.0)
+        self.s.prearm.wait_ready(self.settings.prearm_timeout, self.say)
         report = check_vehicle(self.s.config, self.link.vehicle, self.s.type_name,
                                self.s.last_sys_status, self.s.sensor_names, achieved, rate,
                                self._pose().position, self.s.box)
         for warning in report.warnings:
             self.say(f"warning: {warning}")
         report.raise_if_refused()
+        check_session_limits(self.s, self.say)  # before anything is changed
+        install_safety(self.s, self._pose().position, self.say)
+        self.link.watch_silence = True  # telemetry streams: a second of silence is a loss
 
     def _measure_rates(self, seconds: float) -> dict[str, float]:
         before, t0 = dict(self.recorder.counts), self.link.clock.now()
@@ -161,7 +173,7 @@ class _Flight:
         ground = self._pose()
         if self.link.vehicle.autopilot is Autopilot.ARDUPILOT:
             self._set_mode("GUIDED")
-            self.commands.arm()
+            self.commands.arm(explain=self.s.prearm.reason)
             self.guards.expect_armed = True
             self.say("armed")
             altitude = max(0.3, float(start_z - ground.position[2]))
@@ -173,7 +185,7 @@ class _Flight:
             self.stream.start(lambda _t: here)
             self.link.poll(1.5)  # PX4 wants setpoints for > 1 s before OFFBOARD
             self._set_mode("OFFBOARD")
-            self.commands.arm()
+            self.commands.arm(explain=self.s.prearm.reason)
             self.guards.expect_armed = True
             self.say("armed")
             top = np.array([*ground.position[:2], max(start_z, ground.position[2] + 0.3)])

@@ -2,7 +2,8 @@
 
 Real autopilots answer every COMMAND_LONG with a COMMAND_ACK, but a packet can be lost
 and a command can be refused for now (TEMPORARILY_REJECTED: a mode that needs a position
-while the EKF is still converging, say). `VehicleCommands.command` resends a command that
+while the EKF is still converging, say; an arm refused FAILED by a pre-arm check that is
+not ready yet). `VehicleCommands.command` resends a command that
 got no answer (confirmation counting up, as MAVLink asks) and retries one rejected for
 now, a few times each, and reports any other refusal with the MAV_RESULT name. Mode
 changes and arming also wait for the HEARTBEAT showing them.
@@ -32,7 +33,7 @@ MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_REQUEST_MESSAGE = 512
-_ACCEPTED, _TEMPORARILY_REJECTED, _IN_PROGRESS = 0, 1, 5
+_ACCEPTED, _TEMPORARILY_REJECTED, _FAILED, _IN_PROGRESS = 0, 1, 4, 5
 _CUSTOM_MODE_ENABLED = 1
 #: ArduPilot EKF_STATUS_REPORT flags a usable local position needs: attitude, horizontal
 #: and vertical velocity, relative and absolute horizontal position, vertical position.
@@ -185,9 +186,40 @@ class VehicleCommands:
             raise JobFailedError(f"mode {name} was accepted but the vehicle still reports "
                                  f"{self.link.vehicle.mode}")
 
-    def arm(self) -> None:
-        """Arm the motors and wait for the HEARTBEAT to show it."""
-        self.command(MAV_CMD_COMPONENT_ARM_DISARM, (1,), what="arm")
+    def arm(self, attempts: int = 3, retry_delay: float = 2.0,
+            explain: Callable[[], str] | None = None) -> None:
+        """Arm the motors and wait for the HEARTBEAT to show it.
+
+        ArduPilot answers an arm whose pre-arm checks fail with MAV_RESULT_FAILED (PX4:
+        TEMPORARILY_REJECTED, retried by `command`): a check that is only not ready yet
+        (EKF, GPS after a boot) passes seconds later, so FAILED is tried again, up to
+        ``attempts`` arms ``retry_delay`` streamer s apart. DENIED is final.
+
+        Parameters
+        ----------
+        explain : callable, optional
+            Returns the autopilot's reason (its last "PreArm:" text), added to the
+            one-line message of a refusal.
+
+        Raises
+        ------
+        CommandRejected
+            Still refused: names the MAV_RESULT and, with ``explain``, the reason.
+        """
+        for attempt in range(1, attempts + 1):
+            try:
+                self.command(MAV_CMD_COMPONENT_ARM_DISARM, (1,), what="arm")
+                break
+            except CommandRejected as error:
+                self.link.poll(0.3)  # the autopilot's STATUSTEXT may trail its ACK
+                why = "" if explain is None else f" ({explain()})"
+                if error.result == _FAILED and attempt < attempts:
+                    self.say(f"arm: {error.result_name}{why}, retrying ({attempt} of "
+                             f"{attempts - 1})")
+                    self.link.poll(retry_delay)
+                    continue
+                raise CommandRejected(f"{error}{why}", error.command, error.result,
+                                      error.result_name) from None
         if not self._wait_heartbeat(lambda: self.link.vehicle.armed):
             raise JobFailedError("arming was accepted but the vehicle does not report armed")
 

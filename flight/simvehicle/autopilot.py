@@ -7,7 +7,9 @@ one drops the velocity/acceleration feed-forward and holds the position target; 
 takeoff (NAV_TAKEOFF) only in GUIDED, armed and landed; disarms itself DISARM_DELAY s
 after arming without taking off, and on touchdown in LAND. PX4: starts in Hold;
 OFFBOARD needs setpoints streaming at > 2 Hz for > 1 s, and falls back to Hold when
-none came for COM_OF_LOSS_T; NAV_TAKEOFF switches to Takeoff and then Hold.
+none came for COM_OF_LOSS_T (to COM_OBL_RC_ACT's mode); NAV_TAKEOFF switches to Takeoff
+and then Hold. Both check their geofence and act on a breach as the real ones do
+(`mavsysid.flight.simvehicle.fence`).
 
 Modes that need a position estimate are refused (TEMPORARILY_REJECTED) until the
 simulated EKF has one (``--ekf-delay``). STABILIZE/ALT_HOLD/MANUAL/POSCTL have no pilot
@@ -23,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.flight.autopilot_modes import ARDUCOPTER_MODES, PX4_MODES, Autopilot, px4_custom_mode
+from mavsysid.flight.simvehicle.fence import FenceMonitor, guided_timeout, offboard_loss_modes
 from mavsysid.flight.simvehicle.link import mavlink
 from mavsysid.flight.simvehicle.params import ParameterTable
 from mavsysid.flight.simvehicle.physics import ORIGIN, SimVehicle
@@ -42,6 +45,8 @@ _INFO = mavlink.MAV_SEVERITY_INFO
 _TOUCHDOWN_S = 0.1      # ground contact while landing before "landed"
 _REST_S = 0.5           # ground contact with the target below ground before "landed"
 _ARRIVED_M = 0.1        # takeoff height reached within this
+_BRAKE_DECEL = 7.5      # m/s², ArduCopter's BRAKE_MODE_DECEL_RATE (mode_brake.cpp)
+_STOPS_MOTORS = ("DISARM", "TERMINATE")
 
 
 @dataclass(frozen=True)
@@ -122,6 +127,7 @@ class SimAutopilot:
         self._takeoff_height: float | None = None
         self._landing = False
         self.home = vehicle.position.copy()
+        self.fence = FenceMonitor(params, self.ardupilot)
         params.add_listener(lambda name, value: self._apply_limits())
         self._apply_limits()
 
@@ -161,6 +167,8 @@ class SimAutopilot:
             lim[3] = p.get("WPNAV_SPEED_UP", 250.0) / 100.0
             lim[4] = p.get("WPNAV_SPEED_DN", 150.0) / 100.0
             lim[5] = lim[6] = p.get("WPNAV_ACCEL", 250.0) / 100.0
+            if self.mode == ARDUCOPTER_MODES["BRAKE"]:
+                lim[5] = lim[6] = _BRAKE_DECEL
         else:
             lim[2] = p.get("MPC_XY_VEL_MAX", 12.0)
             lim[3] = p.get("MPC_Z_VEL_MAX_UP", 3.0)
@@ -197,6 +205,7 @@ class SimAutopilot:
     def _enter(self, custom_mode: int) -> None:
         self.mode = custom_mode
         self.changed = True
+        self._apply_limits()
         self._landing = False
         self._takeoff_height = None
         kind = self.spec.kind
@@ -239,6 +248,10 @@ class SimAutopilot:
             if self.spec.needs_position and not self.position_ok():
                 self._say("PreArm: Need Position Estimate")
                 return TEMPORARILY_REJECTED
+            fence = self.fence.prearm_failure(v.position, self.home)
+            if fence is not None:
+                self._say(("PreArm: " if self.ardupilot else "Arming denied: ") + fence)
+                return DENIED
             if (self.spec.kind == "guided" and not self.ardupilot
                     and not self.setpoints.streaming(self.t)):
                 self._say("Arming denied: offboard setpoints not streaming")
@@ -290,12 +303,19 @@ class SimAutopilot:
         kind = self.spec.kind
         if kind == "guided":
             if self.ardupilot:
-                self.setpoints.check_timeout(t, self.params.get("GUID_TIMEOUT", 3.0))
+                self.setpoints.check_timeout(t, guided_timeout(self.params))
             elif self.setpoints.age(t) > self.params.get("COM_OF_LOSS_T", 1.0):
-                self._say("Failsafe: offboard control lost, switching to Hold")
-                self._enter(PX4_MODES["HOLD"])
+                modes = offboard_loss_modes(self.params)
+                name = "Return" if modes[0] == "RTL" else modes[0].title()
+                self._say(f"Failsafe: offboard control lost, switching to {name}")
+                self._failsafe(modes)
             elif self.armed and v.landed and self.setpoints.climbs():
                 v.lift_off()
+        response = self.fence.check(t, v.position, self.home, self.armed, v.landed)
+        if response is not None:
+            for severity, text in response.texts:
+                self._say(text, severity)
+            self._failsafe(response.modes)
         if self._takeoff_height is not None and abs(v.height() - self._takeoff_height) < _ARRIVED_M:
             self._takeoff_height = None
             if not self.ardupilot:
@@ -334,6 +354,23 @@ class SimAutopilot:
         self.changed = True
         self._takeoff_height = None
         self._say(text, _INFO)
+
+    def _failsafe(self, modes: tuple[str, ...]) -> None:
+        """Switch to the first of ``modes`` (names) that can run; DISARM/TERMINATE stop the
+        motors."""
+        for name in modes:
+            if name in _STOPS_MOTORS:
+                self._disarm("Flight termination" if name == "TERMINATE" else "Disarming")
+                return
+            custom = self.modes_by_name.get(name)
+            if custom is None:
+                continue
+            if custom == self.mode:
+                return
+            if self.modes[custom].needs_position and not self.position_ok():
+                continue
+            self._enter(custom)
+            return
 
     def _begin_takeoff(self, height: float) -> None:
         v = self.vehicle

@@ -4,7 +4,12 @@ One thread does everything, in sim-time ticks of 2 ms paced by `mavsysid.flight.
 drain the link without blocking and act on what came (commands → COMMAND_ACK,
 setpoints, parameters, stream requests), run the autopilot's timeouts and failsafes,
 send the telemetry that is due, and advance the physics by one tick. Falling behind
-runs ticks back to back until caught up, so sim time stays wall time × speedup.
+runs ticks back to back until caught up, so sim time stays wall time × speedup. With
+``lockstep`` the loop also sends lock-step frames and reads the link only while a frame
+waits for the ground station's acknowledgement, into an inbox that the tick after the
+acknowledgement handles: what the ground station sends between two acknowledgements takes
+effect at the same tick on an idle or a busy machine, whenever it was sent (see
+`mavsysid.flight.simvehicle.clock`).
 
 With a signing key, everything sent is signed, and unsigned or wrongly signed incoming
 messages are dropped by pymavlink's signature check and counted here (by message type).
@@ -13,10 +18,8 @@ messages are dropped by pymavlink's signature check and counted here (by message
 from __future__ import annotations
 
 import threading
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,15 +32,20 @@ from mavsysid.flight.offline.effects import (
     motor_time_constant,
 )
 from mavsysid.flight.simvehicle.autopilot import SimAutopilot
-from mavsysid.flight.simvehicle.clock import ClockStats, SimClock
+from mavsysid.flight.simvehicle.clock import SimClock, is_lockstep_stamp
 from mavsysid.flight.simvehicle.commands import CommandHandler
 from mavsysid.flight.simvehicle.link import COMPONENT_ID, SYSTEM_ID, mavlink, open_link
 from mavsysid.flight.simvehicle.params import ParameterProtocol, default_parameters
 from mavsysid.flight.simvehicle.physics import CONTROL_DT_US, SimVehicle, TruthLog
-from mavsysid.flight.simvehicle.services import ftp_refusal, mission_count, timesync_reply
+from mavsysid.flight.simvehicle.services import (
+    MISSION_MESSAGES,
+    MissionProtocol,
+    ftp_refusal,
+    timesync_reply,
+)
+from mavsysid.flight.simvehicle.sim_session import SimSettings, SimSummary
 from mavsysid.flight.simvehicle.telemetry import MessageScheduler, TelemetryBuilder, default_rates
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
-from mavsysid.vehicle.model_effects import ModelEffect
 
 __all__ = ["SimEndpoint", "SimSettings", "SimSummary"]
 
@@ -48,83 +56,6 @@ _SETPOINT_IDS = frozenset((M.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED,
                            M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT,
                            M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET))
 _MAX_MESSAGES_PER_TICK = 200
-
-
-@dataclass(frozen=True)
-class SimSettings:
-    """How to simulate.
-
-    Attributes
-    ----------
-    autopilot : Autopilot
-        Personality: ArduPilot Copter or PX4.
-    speedup : float
-        Sim seconds per wall second.
-    ekf_delay : float
-        Sim seconds before the EKF has a position.
-    start : tuple of 3 float
-        Start position on the ground, m, world ENU.
-    seed : int
-        Seed of the published and logged noise.
-    theta_scale : tuple of 6 float
-        True θ = nominal θ × these factors (c_T, c_D, c_M, j_x, j_y, j_z).
-    sensor_noise : bool
-    duration : float or None
-        Stop after this many sim seconds.
-    signing_key : bytes or None
-        32-byte MAVLink 2 secret key.
-    truth_log : Path or None
-        Directory for ``truth.csv``, ``pose.csv`` and ``meta.json``.
-    deny_arm : bool
-        Refuse every arming request.
-    pilot_mode : (str, float) or None
-        At this sim time switch to this mode, as a pilot's switch would.
-    silent_after : float or None
-        At this sim time stop sending anything (a lost link).
-    hidden_effects : tuple of ModelEffect
-        Catalogue effects acting on the truth that the model does not know.
-    """
-
-    autopilot: Autopilot = Autopilot.ARDUPILOT
-    speedup: float = 1.0
-    ekf_delay: float = 2.0
-    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    seed: int = 0
-    theta_scale: tuple[float, ...] = (1.0,) * 6
-    sensor_noise: bool = True
-    duration: float | None = None
-    signing_key: bytes | None = None
-    truth_log: Path | None = None
-    deny_arm: bool = False
-    pilot_mode: tuple[str, float] | None = None
-    silent_after: float | None = None
-    hidden_effects: tuple[ModelEffect, ...] = ()
-
-
-@dataclass(frozen=True)
-class SimSummary:
-    """What a session did: timing, traffic and rejected signatures."""
-
-    clock: ClockStats
-    received: int
-    sent: int
-    setpoints_received: int
-    setpoints_applied: int
-    rejected: dict[str, Any] = field(default_factory=dict)
-    truth_log: Path | None = None
-
-    def line(self) -> str:
-        """One line for the console."""
-        c, r = self.clock, self.rejected
-        text = (f"stopped after {c.sim_time:.3f} s sim time ({c.wall_time:.2f} s wall, "
-                f"{c.mean_tick_rate:.1f} Hz control, max tick lag {1000 * c.max_lag:.1f} ms); "
-                f"{self.received} messages in, {self.sent} out, "
-                f"{self.setpoints_received} setpoints; rejected signatures {r['total']} "
-                f"({r['unsigned']} unsigned, {r['bad_signature']} bad; {r['commands']} "
-                f"commands, {r['setpoints']} setpoints)")
-        if self.truth_log is not None:
-            text += f"; truth log {self.truth_log}"
-        return text
 
 
 class SimEndpoint:
@@ -165,7 +96,9 @@ class SimEndpoint:
         self.commands = CommandHandler(self.autopilot, self.scheduler, self.builder)
         self.param_protocol = ParameterProtocol(self.params,
                                                 bytewise=s.autopilot is Autopilot.PX4)
-        self.clock = SimClock(CONTROL_DT_US * 1e-6, s.speedup)
+        self.missions = MissionProtocol(self.autopilot.fence)
+        self.clock = SimClock(CONTROL_DT_US * 1e-6, s.speedup, lockstep=s.lockstep)
+        self._inbox: deque[Any] = deque()  # read while held for a lock-step ack
         self.received = self.sent = 0
         self.gcs_heartbeat_time: float | None = None
         self._stop = threading.Event()
@@ -179,9 +112,9 @@ class SimEndpoint:
             "SET_MODE": self._on_set_mode, "SET_POSITION_TARGET_LOCAL_NED": self._on_setpoint,
             "PARAM_REQUEST_LIST": self._on_param, "PARAM_REQUEST_READ": self._on_param,
             "PARAM_SET": self._on_param, "REQUEST_DATA_STREAM": self._on_stream,
-            "HEARTBEAT": self._on_heartbeat,
+            "HEARTBEAT": self._on_heartbeat, "SYSTEM_TIME": self._on_system_time,
             "TIMESYNC": lambda m: self._send(timesync_reply(m, self.vehicle.time_us * 1000)),
-            "MISSION_REQUEST_LIST": lambda m: self._send(mission_count(m)),
+            **dict.fromkeys(MISSION_MESSAGES, self._on_mission),
             "FILE_TRANSFER_PROTOCOL": lambda m: self._send(ftp_refusal(m)),
         }
 
@@ -213,7 +146,10 @@ class SimEndpoint:
                             self._stop.set()
                         if self._stop.is_set():
                             break
-                    clock.sleep_until_due()
+                    if clock.held:
+                        self._read_while_held()
+                    else:
+                        clock.sleep_until_due()
                 status = "complete"
             finally:
                 summary = self.close(status)
@@ -251,6 +187,10 @@ class SimEndpoint:
             self._send(M.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
         for msg_id in self.scheduler.due(t_us):
             self._send(self.builder.build(msg_id))
+        if self.clock.frame_due(t_us) and not self._silent:
+            # Last of the tick: the frame says "everything up to t_us has been sent".
+            self._send(M.MAVLink_system_time_message(t_us, t_us // 1000))
+            self.clock.frame_sent(t_us)
         v.step(ap.armed)
 
     def _faults(self, t: float) -> None:
@@ -270,14 +210,42 @@ class SimEndpoint:
         except OSError:
             pass  # no peer yet (TCP) or it went away: like a radio, keep going
 
-    def _poll(self) -> None:
-        for _ in range(_MAX_MESSAGES_PER_TICK):
+    def _read_while_held(self) -> None:
+        """Queue what arrives until the frame's acknowledgement (the next tick handles it)."""
+        while True:
             try:
                 msg = self.link.recv_msg()
             except OSError:
-                return
+                msg = None
             if msg is None:
+                if (t_us := self.clock.resend_due()) is not None and not self._silent:
+                    # Lost if sent before the peer listened (the held start): again.
+                    self._send(M.MAVLink_system_time_message(t_us, t_us // 1000))
+                self.link.select(0.005)
                 return
+            self.clock.heard_peer()
+            self._inbox.append(msg)
+            if is_lockstep_stamp(msg):
+                self.clock.acknowledge(msg.time_boot_ms * 1000)
+                return
+
+    def _poll(self) -> None:
+        # Lock-stepped, the link is read only while held (`_read_while_held`), so that a
+        # message takes effect at the tick after the acknowledgement that follows it.
+        gated = self.clock.engaged and not self._silent
+        for _ in range(_MAX_MESSAGES_PER_TICK):
+            if self._inbox:
+                msg = self._inbox.popleft()
+            elif gated:
+                return
+            else:
+                try:
+                    msg = self.link.recv_msg()
+                except OSError:
+                    return
+                if msg is None:
+                    return
+                self.clock.heard_peer()
             kind = msg.get_type()
             if kind == "BAD_DATA":
                 continue
@@ -314,9 +282,17 @@ class SimEndpoint:
         for reply in self.param_protocol.handle(msg):
             self._send(reply)
 
+    def _on_mission(self, msg) -> None:
+        for reply in self.missions.handle(msg):
+            self._send(reply)
+
     def _on_stream(self, msg) -> None:
         self.commands.request_data_stream(msg.req_stream_id, msg.req_message_rate,
                                           bool(msg.start_stop))
+
+    def _on_system_time(self, msg) -> None:
+        if is_lockstep_stamp(msg):
+            self.clock.acknowledge(msg.time_boot_ms * 1000)
 
     def _on_heartbeat(self, msg) -> None:
         if msg.type == M.MAV_TYPE_GCS:
@@ -356,7 +332,8 @@ class SimEndpoint:
                    *(hidden_effect(e) for e in s.hidden_effects)]
         return {
             "source": "mavsysid sim", "connect": connect, "autopilot": s.autopilot.name.lower(),
-            "seed": s.seed, "speedup": s.speedup, "ekf_delay_s": s.ekf_delay,
+            "seed": s.seed, "speedup": s.speedup, "lockstep": s.lockstep,
+            "ekf_delay_s": s.ekf_delay,
             "start_enu_m": list(s.start), "sensor_noise": s.sensor_noise,
             "signing": s.signing_key is not None,
             "rates_hz": {"physics": 1000.0, "control": 500.0, "log": 200.0},
@@ -376,7 +353,8 @@ class SimEndpoint:
         c = summary.clock
         return {"sim_time_s": c.sim_time, "wall_time_s": c.wall_time, "ticks": c.ticks,
                 "mean_tick_rate_hz": c.mean_tick_rate, "max_tick_lag_s": c.max_lag,
-                "late_ticks": c.late_ticks, "messages_received": summary.received,
+                "late_ticks": c.late_ticks, "lockstep_frames": c.lockstep_frames,
+                "lockstep_timeouts": c.lockstep_timeouts, "messages_received": summary.received,
                 "messages_sent": summary.sent,
                 "setpoints_received": summary.setpoints_received,
                 "setpoints_applied": summary.setpoints_applied,

@@ -2,10 +2,13 @@
 
 A handful of real-looking parameters per autopilot, some of which act on the
 simulation (GUID_TIMEOUT, WPNAV_SPEED, DISARM_DELAY, SR0_* stream rates, COM_OF_LOSS_T,
-…). The protocol follows the parameter microservice: PARAM_REQUEST_LIST answers every
-parameter with PARAM_VALUE (``param_count``, ``param_index``), PARAM_REQUEST_READ one of
-them (by name, or by index when ``param_index`` ≥ 0), and PARAM_SET of a known name
-stores the value and echoes it; an unknown name gets no answer, as on ArduPilot.
+COM_OBL_RC_ACT, the fence's FENCE_* and GF_*, …). As on the real autopilots, a PARAM_SET
+is stored whatever its documented range; the code that reads a value bounds it where the
+autopilot does (GUID_TIMEOUT below 0.1 s acts as 0.1 s). The protocol follows the
+parameter microservice: PARAM_REQUEST_LIST answers every parameter with PARAM_VALUE
+(``param_count``, ``param_index``), PARAM_REQUEST_READ one of them (by name, or by index
+when ``param_index`` ≥ 0), and PARAM_SET of a known name stores the value and echoes it;
+an unknown name gets no answer, as on ArduPilot.
 ArduPilot sends integer parameters as their numeric value in the float field (C cast);
 PX4 copies their bytes into it (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE).
 """
@@ -112,7 +115,17 @@ def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> Parameter
             ("GUID_TIMEOUT", 3.0, _REAL32), ("WPNAV_SPEED", 500.0, _REAL32),
             ("WPNAV_SPEED_UP", 250.0, _REAL32), ("WPNAV_SPEED_DN", 150.0, _REAL32),
             ("WPNAV_ACCEL", 250.0, _REAL32), ("LAND_SPEED", 50, i16),
-            ("ANGLE_MAX", 3000, i16), ("DISARM_DELAY", 10, i8), ("FENCE_ENABLE", 0, i8),
+            # Position-controller limits (mavsysid.flight.ground.autopilot_limits): the
+            # simulated controller follows feed-forward without jerk, lean or yaw-rate
+            # limits, so they say so (range maxima; 0 = none) and sim flights pass.
+            ("ANGLE_MAX", 8000, i16), ("PSC_JERK_XY", 1000.0, _REAL32),
+            ("PSC_JERK_Z", 1000.0, _REAL32), ("ATC_SLEW_YAW", 100000.0, _REAL32),
+            ("ATC_RATE_Y_MAX", 0.0, _REAL32), ("ATC_ACCEL_Y_MAX", 0.0, _REAL32),
+            ("DISARM_DELAY", 10, i8),
+            # AC_Fence's parameters and defaults (mavsysid.flight.simvehicle.fence).
+            ("FENCE_ENABLE", 0, i8), ("FENCE_TYPE", 7, i8), ("FENCE_ACTION", 1, i8),
+            ("FENCE_ALT_MAX", 100.0, _REAL32), ("FENCE_RADIUS", 300.0, _REAL32),
+            ("FENCE_MARGIN", 2.0, _REAL32),
             # All pre-arm checks on (Copter's default; the sim does check before arming):
             # ground stations such as MAVProxy warn "Arming checks disabled" without it.
             ("ARMING_CHECK", 1, i32),
@@ -128,6 +141,9 @@ def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> Parameter
         ("MIS_TAKEOFF_ALT", 2.5, _REAL32), ("NAV_DLL_ACT", 0, i32),
         ("CA_ROTOR_COUNT", config.rotor_count, i32), ("SYS_AUTOSTART", 4001, i32),
         ("SDLOG_MODE", 0, i32), ("BAT1_CAPACITY", 5000.0, _REAL32), ("COM_ARM_WO_GPS", 1, u8),
+        # The geofence's parameters and defaults (navigator/geofence_params.c).
+        ("GF_ACTION", 2, i32), ("GF_MAX_HOR_DIST", 0.0, _REAL32),
+        ("GF_MAX_VER_DIST", 0.0, _REAL32),
     ])
 
 

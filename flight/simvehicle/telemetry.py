@@ -22,6 +22,8 @@ import time
 
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.simvehicle.autopilot import SimAutopilot
+from mavsysid.flight.simvehicle.fence import ALT_MAX, CIRCLE, POLYGON
+from mavsysid.flight.simvehicle.geodesy import enu_to_lat_lon
 from mavsysid.flight.simvehicle.link import mavlink
 from mavsysid.flight.simvehicle.physics import ORIGIN
 from mavsysid.vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ned, yaw_enu_to_ned
@@ -35,7 +37,6 @@ __all__ = [
 ]
 
 M = mavlink
-_EARTH_RADIUS = 6378137.0
 MIN_INTERVAL_US = 4000  # 250 Hz
 _ESC_IDS = (M.MAVLINK_MSG_ID_ESC_TELEMETRY_1_TO_4, M.MAVLINK_MSG_ID_ESC_TELEMETRY_5_TO_8,
             M.MAVLINK_MSG_ID_ESC_TELEMETRY_9_TO_12)
@@ -44,10 +45,12 @@ _ESC_CLASSES = (M.MAVLink_esc_telemetry_1_to_4_message, M.MAVLink_esc_telemetry_
 #: Send order within a tick.
 _ORDER = (M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_SYSTEM_TIME,
           M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+          M.MAVLINK_MSG_ID_FENCE_STATUS,
           M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, *_ESC_IDS,
           M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
 _POSITION_IDS = frozenset((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
-                           M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_HOME_POSITION))
+                           M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_HOME_POSITION,
+                           M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN))
 _EKF_GOOD = (M.EKF_ATTITUDE | M.EKF_VELOCITY_HORIZ | M.EKF_VELOCITY_VERT | M.EKF_POS_HORIZ_REL
              | M.EKF_POS_HORIZ_ABS | M.EKF_POS_VERT_ABS | M.EKF_PRED_POS_HORIZ_REL
              | M.EKF_PRED_POS_HORIZ_ABS)
@@ -68,7 +71,8 @@ def ardupilot_streams() -> dict[int, tuple[int, ...]]:
     """ArduPilot's stream groups (MAV_DATA_STREAM_*) over the simulated messages."""
     return {
         M.MAV_DATA_STREAM_EXTENDED_STATUS: (M.MAVLINK_MSG_ID_SYS_STATUS,
-                                            M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE),
+                                            M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                                            M.MAVLINK_MSG_ID_FENCE_STATUS),
         M.MAV_DATA_STREAM_POSITION: (M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
                                      M.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
         M.MAV_DATA_STREAM_EXTRA1: (M.MAVLINK_MSG_ID_ATTITUDE,),
@@ -160,6 +164,7 @@ def default_rates(autopilot: Autopilot, rotor_count: int) -> dict[int, float]:
         rates[_ESC_IDS[block]] = 1.0
     if autopilot is Autopilot.ARDUPILOT:
         rates[M.MAVLINK_MSG_ID_EKF_STATUS_REPORT] = 1.0
+        rates[M.MAVLINK_MSG_ID_FENCE_STATUS] = 1.0  # sent only while the fence is enabled
     return rates
 
 
@@ -188,12 +193,14 @@ class TelemetryBuilder:
             M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self.local_position_ned,
             M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self.global_position_int,
             M.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
+            M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self.gps_global_origin,
             M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
         }
         for block in range(min(3, -(-k // 4))):
             self._builders[_ESC_IDS[block]] = self._esc_builder(block)
         if autopilot.ardupilot:
             self._builders[M.MAVLINK_MSG_ID_EKF_STATUS_REPORT] = self.ekf_status_report
+            self._builders[M.MAVLINK_MSG_ID_FENCE_STATUS] = self.fence_status
 
     def can_build(self, msg_id: int) -> bool:
         """Whether this vehicle has such a message at all."""
@@ -220,10 +227,8 @@ class TelemetryBuilder:
         return tuple(flu_to_frd(self.vehicle.body_rates).tolist())
 
     def _global(self, p_ned) -> tuple[int, int, int]:
-        lat0, lon0, alt0 = ORIGIN
-        lat = lat0 + math.degrees(p_ned[0] / _EARTH_RADIUS)
-        lon = lon0 + math.degrees(p_ned[1] / (_EARTH_RADIUS * math.cos(math.radians(lat0))))
-        return round(lat * 1e7), round(lon * 1e7), round((alt0 - p_ned[2]) * 1000.0)
+        lat, lon = enu_to_lat_lon(p_ned[1], p_ned[0])
+        return round(lat * 1e7), round(lon * 1e7), round((ORIGIN[2] - p_ned[2]) * 1000.0)
 
     # --- messages -----------------------------------------------------------------------
     def heartbeat(self):
@@ -238,13 +243,17 @@ class TelemetryBuilder:
                                            status, 3)
 
     def sys_status(self):
-        # The geofence bit is healthy (not breached) though no fence is enabled, as on
-        # ArduPilot; ground stations read a missing bit as a breach.
-        health = (_SENSORS | M.MAV_SYS_STATUS_GEOFENCE
+        # The geofence bit as AC_Fence::sys_status_*: present with a fence, enabled when
+        # also switched on with an action, healthy unless breached (also with no fence:
+        # ground stations read a missing health bit as a breach).
+        fence_present, fence_enabled, fence_healthy = self.ap.fence.sys_status()
+        geofence = M.MAV_SYS_STATUS_GEOFENCE
+        health = (_SENSORS | (geofence if fence_healthy else 0)
                   | (_POSITION_SENSORS if self.ap.position_ok() else 0))
-        present = _SENSORS | _POSITION_SENSORS
+        present = _SENSORS | _POSITION_SENSORS | (geofence if fence_present else 0)
+        enabled = (present & ~geofence) | (geofence if fence_enabled else 0)
         current = (1500 if not self.vehicle.landed else 100) if self.ap.armed else 0
-        return M.MAVLink_sys_status_message(present, present, health, 150, 16200, current, 95,
+        return M.MAVLink_sys_status_message(present, enabled, health, 150, 16200, current, 95,
                                             0, 0, 0, 0, 0, 0)
 
     def system_time(self):
@@ -262,6 +271,17 @@ class TelemetryBuilder:
         else:
             state = M.MAV_LANDED_STATE_IN_AIR
         return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, state)
+
+    def fence_status(self):
+        """FENCE_STATUS as Copter's fence_send_mavlink_status: only while the fence is
+        enabled; a boundary (circle, polygon) breach outranks an altitude one."""
+        fence = self.ap.fence
+        if not fence.enabled():
+            return None
+        kind = (M.FENCE_BREACH_BOUNDARY if fence.breaches & (CIRCLE | POLYGON) else
+                M.FENCE_BREACH_MAXALT if fence.breaches & ALT_MAX else M.FENCE_BREACH_NONE)
+        return M.MAVLink_fence_status_message(int(fence.breaches != 0), fence.breach_count,
+                                              kind, round(fence.breach_time * 1000.0))
 
     def ekf_status_report(self):
         flags = _EKF_GOOD if self.ap.position_ok() else _EKF_NO_POSITION
@@ -299,6 +319,11 @@ class TelemetryBuilder:
         lat, lon, alt = self._global(ned)
         return M.MAVLink_home_position_message(lat, lon, alt, *ned, [1.0, 0.0, 0.0, 0.0],
                                                0.0, 0.0, 0.0, self.vehicle.time_us)
+
+    def gps_global_origin(self):
+        """The local frame's origin (the world origin), as the EKF origin."""
+        lat, lon, alt = self._global([0.0, 0.0, 0.0])
+        return M.MAVLink_gps_global_origin_message(lat, lon, alt, self.vehicle.time_us)
 
     def autopilot_version(self):
         caps = (M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT

@@ -96,6 +96,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fraction of the rotor n² range left free at each end, for the "
                         "autopilot and for a vehicle whose θ differs from the prior's "
                         f"(default: {PlannerSettings.rotor_headroom:g})")
+    parser.add_argument("--autopilot-limits", type=Path, metavar="FILE",
+                        help="plan within the position-controller limits of the autopilot "
+                        "that will fly it: a parameter dump of 'NAME VALUE' lines (ArduPilot "
+                        ".parm / MAVProxy 'param save', Mission Planner 'NAME,VALUE', "
+                        "QGroundControl .params; # comments), in the parameters' own units; "
+                        "ArduPilot WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, ATC_SLEW_YAW, "
+                        "ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, absent ones "
+                        "limit nothing; the plan then passes `stream`'s limit check against "
+                        "the same values")
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -117,9 +126,18 @@ def _settings(args: argparse.Namespace) -> PlannerSettings:
         time = math.inf if args.samples is not None else _DEFAULT_TIME
     elif time == 0.0 and args.samples is not None:
         time = math.inf
+    limits = None
+    if args.autopilot_limits is not None:
+        # The ground station's limit tables (and the MAVLink set-up they import) only here.
+        from mavsysid.flight.ground.autopilot_limits import limits_from_parameters
+        from mavsysid.formats.parameter_file import read_parameter_file
+
+        values = read_parameter_file(args.autopilot_limits)
+        limits = limits_from_parameters(values, str(args.autopilot_limits))[1]
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
-                           refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom)
+                           refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom,
+                           autopilot_limits=limits)
 
 
 def main(args: argparse.Namespace) -> int:

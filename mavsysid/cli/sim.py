@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, metavar="S",
                         help="stop after S sim seconds (default: run until interrupted)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default: 0)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="test/bench tool: lock-step with `mavsysid stream --lockstep` "
+                        "(--speedup is then the fastest pace); others: the wall clock")
     parser.add_argument("--theta-scale", metavar="F[,F,F,F,F,F]",
                         help="true θ = nominal θ × F (one factor, or six for c_T,c_D,c_M,"
                         "j_x,j_y,j_z); the controller keeps the nominal θ (default: 1)")
@@ -112,7 +115,7 @@ def settings_from_args(args: argparse.Namespace) -> SimSettings:
     return SimSettings(autopilot=autopilot, speedup=args.speedup, ekf_delay=args.ekf_delay,
                        start=start, seed=args.seed, theta_scale=scale,  # type: ignore[arg-type]
                        sensor_noise=not args.no_noise, duration=args.duration, signing_key=key,
-                       truth_log=args.truth_log, hidden_effects=hidden,
+                       truth_log=args.truth_log, hidden_effects=hidden, lockstep=args.lockstep,
                        **_fault_settings(args.fault, autopilot))
 
 

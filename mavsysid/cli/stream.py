@@ -71,12 +71,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-land", action="store_true",
                         help="keep hovering at the end instead of landing")
     parser.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
-                        help="flight box in m, world ENU (default: the trajectory's)")
+                        help="flight box in m, world ENU (default: the vehicle file's [flight] "
+                        "box, else the trajectory's; a box stored in the trajectory never "
+                        "widens the operator's)")
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
                         help="MAVLink 2 signing: a file holding the passphrase")
     parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
                         help="run the clock K times faster (only against `mavsysid sim "
                         "--speedup K`; default: 1)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="test/bench tool: share one simulated clock with `mavsysid sim "
+                        "--lockstep` (same flight idle or overloaded); other vehicles: the "
+                        "wall clock")
     parser.add_argument("--max-tracking-error", type=float, default=1.0, metavar="M",
                         help="abort to hold beyond this distance from the setpoint "
                         "(default: 1.0 m)")
@@ -88,11 +94,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(default: 3 s)")
     parser.add_argument("--position-timeout", type=float, default=90.0, metavar="S",
                         help="how long to wait for a usable local position (default: 90 s)")
+    parser.add_argument("--link-loss", type=float, default=1.0, metavar="S",
+                        help="stop streaming after this long without any message from the "
+                        "vehicle once its telemetry streams (default: 1 s)")
+    parser.add_argument("--prearm-timeout", type=float, default=60.0, metavar="S",
+                        help="how long to wait for the vehicle's pre-arm checks to pass "
+                        "(default: 60 s)")
+    parser.add_argument("--no-fence", action="store_true",
+                        help="fly without the autopilot's geofence around the box (by default "
+                        "a vehicle without a working fence is refused)")
+    parser.add_argument("--set-limits", action="store_true",
+                        help="raise the autopilot's position-controller limits (ArduPilot "
+                        "PSC_JERK_*, ANGLE_MAX, WPNAV_*, ATC_SLEW_YAW; PX4 MPC_*) that the "
+                        "plan needs for the flight, and restore them afterwards (by default "
+                        "a plan beyond them is refused)")
 
 
 def _settings(args: argparse.Namespace) -> StreamSettings:
     for option in ("rate", "telemetry_rate", "speedup", "max_tracking_error",
-                   "heartbeat_timeout", "heartbeat_loss", "position_timeout"):
+                   "heartbeat_timeout", "heartbeat_loss", "position_timeout", "link_loss",
+                   "prearm_timeout"):
         value = getattr(args, option)
         if not (value > 0.0 and value < float("inf")):
             raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
@@ -108,7 +129,9 @@ def _settings(args: argparse.Namespace) -> StreamSettings:
         land=not args.no_land, box=box, signing_key=key, speedup=args.speedup,
         heartbeat_timeout=args.heartbeat_timeout, heartbeat_loss=args.heartbeat_loss,
         position_timeout=args.position_timeout, max_tracking_error=args.max_tracking_error,
-        log_dir=args.log_dir)
+        link_loss=args.link_loss, prearm_timeout=args.prearm_timeout,
+        log_dir=args.log_dir, lockstep=args.lockstep, fence=not args.no_fence,
+        set_limits=args.set_limits)
 
 
 def main(args: argparse.Namespace) -> int:

@@ -5,6 +5,12 @@ ground station binds a free port first and the sim sends to it; TCP: the sim lis
 a free port and the ground station connects) and yields a `Gcs` talking to it. The
 `Gcs` measures time in the vehicle's sim time (time_boot_ms), so tests do not depend on
 the speedup except through wall-clock timeouts.
+
+By default the sim runs in lock-step (``SimSettings.lockstep``) and the `Gcs` acknowledges
+its frames whenever it is about to wait for the next message, so the vehicle never runs
+ahead of what the test has read; it holds at its first frame (10 ms) until the first
+acknowledgement, and what the `Gcs` sends takes effect at the tick after its next
+acknowledgement (``lockstep=False``: the wall clock).
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from mavsysid.flight.loopback_ports import free_tcp_port
+from mavsysid.flight.simvehicle.clock import is_lockstep_stamp
 from mavsysid.flight.simvehicle.endpoint import SimEndpoint, SimSettings
 from mavsysid.flight.simvehicle.link import mavlink, mavutil
 from mavsysid.vehicle.config import load_vehicle
@@ -41,6 +48,7 @@ class Gcs:
         self.speedup = speedup
         self.sim_time = 0.0
         self.seen: list[Any] = []
+        self._ack_ms: int | None = None
 
     def wall(self, sim_seconds: float) -> float:
         """A wall-clock timeout for ``sim_seconds`` of sim time, with slack."""
@@ -55,8 +63,17 @@ class Gcs:
             left = end - time.monotonic()
             if left <= 0:
                 return None
-            msg = self.link.recv_match(blocking=True, timeout=min(left, 0.2))
+            msg = self.link.recv_match(blocking=False)
+            if msg is None:
+                if self._ack_ms is not None:  # lock-step: all read, about to wait
+                    self.link.mav.system_time_send(self._ack_ms * 1000, self._ack_ms)
+                    self._ack_ms = None
+                msg = self.link.recv_match(blocking=True, timeout=min(left, 0.2))
             if msg is None or msg.get_type() == "BAD_DATA":
+                continue
+            if is_lockstep_stamp(msg):
+                self._ack_ms = msg.time_boot_ms
+                self.sim_time = max(self.sim_time, msg.time_boot_ms / 1000.0)
                 continue
             self.seen.append(msg)
             if hasattr(msg, "time_boot_ms") and msg.get_srcSystem() == 1:
@@ -115,6 +132,7 @@ def running_sim(vehicle: str = "firefly", transport: str = "udp",
                 **settings: Any) -> Iterator[tuple[SimEndpoint, Gcs]]:
     """A simulated vehicle in a background thread and a ground station connected to it."""
     settings.setdefault("speedup", 5.0)
+    settings.setdefault("lockstep", True)
     sim_settings = SimSettings(**settings)
     config = load_vehicle(vehicle)
     if transport == "udp":

@@ -16,10 +16,14 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
+from mavsysid.flight.mavlink_setup import load_mavutil
 
-__all__ = ["SITL_DIR", "SitlInstance", "require_sitl", "running_sitl"]
+from tests.support.stream_flights import wait_for
+
+__all__ = ["SITL_DIR", "Observer", "SitlInstance", "require_sitl", "running_sitl"]
 
 #: Where the shared SITL build lives, beside the checkout.
 SITL_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "sitl"
@@ -88,7 +92,7 @@ def _listening(port: int) -> bool:
 
 @contextmanager
 def running_sitl(scratch: Path, defaults: Sequence[Path] = (), model: str = "quad",
-                 timeout: float = 30.0) -> Iterator[SitlInstance]:
+                 timeout: float = 30.0, speedup: float = 1.0) -> Iterator[SitlInstance]:
     """Run ArduCopter SITL for the ``with`` block.
 
     Parameters
@@ -101,6 +105,9 @@ def running_sitl(scratch: Path, defaults: Sequence[Path] = (), model: str = "qua
         SITL's physics frame (``quad`` is "+", ``x`` is X).
     timeout : float
         How long to wait for its TCP server, s (wall time).
+    speedup : float
+        SITL's ``--speedup`` (simulated time per wall second; the streamer then needs the
+        same ``--speedup``).
 
     Yields
     ------
@@ -114,8 +121,8 @@ def running_sitl(scratch: Path, defaults: Sequence[Path] = (), model: str = "qua
     parms = ",".join(str(p.resolve()) for p in [SITL_DIR / "copter.parm", *defaults])
     with open(scratch / "sitl.out", "wb") as out:
         process = subprocess.Popen(
-            [str(binary), "-w", "--model", model, "--speedup", "1", "--defaults", parms,
-             f"-I{instance}", "--home", _HOME, "--sim-address=127.0.0.1"],
+            [str(binary), "-w", "--model", model, "--speedup", f"{speedup:g}", "--defaults",
+             parms, f"-I{instance}", "--home", _HOME, "--sim-address=127.0.0.1"],
             cwd=scratch, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + timeout
@@ -132,3 +139,42 @@ def running_sitl(scratch: Path, defaults: Sequence[Path] = (), model: str = "qua
         if process.poll() is None:
             process.kill()
         process.wait(timeout=10)
+
+
+class Observer:
+    """A second ground station on SITL's SERIAL1 (system 254)."""
+
+    def __init__(self, port: int) -> None:
+        # SITL opens SERIAL1 once its SERIAL0 client (the streamer) has connected.
+        self.conn = wait_for(lambda: self._connect(port), 60.0, "SITL's second port")
+        if self.conn.wait_heartbeat(timeout=30) is None:
+            raise AssertionError("no heartbeat on SITL's second port")
+        self.conn.mav.command_long_send(1, 1, 511, 0, 32, 1e5, 0, 0, 0, 0, 0)  # LPN 10 Hz
+
+    @staticmethod
+    def _connect(port: int) -> Any:
+        try:
+            return load_mavutil().mavlink_connection(
+                f"tcp:127.0.0.1:{port}", source_system=254, source_component=190, retries=1)
+        except OSError:
+            return None
+
+    def params(self, names: tuple[str, ...], timeout: float = 10.0) -> dict[str, float]:
+        got: dict[str, float] = {}
+        deadline = time.monotonic() + timeout
+        while len(got) < len(names) and time.monotonic() < deadline:
+            for name in names:
+                if name not in got:
+                    self.conn.mav.param_request_read_send(1, 1, name.encode(), -1)
+            end = time.monotonic() + 1.0
+            while time.monotonic() < end:
+                m = self.conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.2)
+                if m is not None and m.param_id in names:
+                    got[m.param_id] = m.param_value
+        return got
+
+    def position(self, timeout: float = 5.0) -> Any:
+        return self.conn.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=timeout)
+
+    def close(self) -> None:
+        self.conn.close()

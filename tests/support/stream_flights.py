@@ -3,6 +3,11 @@
 Helpers for the end-to-end and fault tests: export a built-in excitation figure as a
 trajectory file, start the simulated vehicle, run or start the streamer, find the flight
 directory, and read a tlog back with pymavlink.
+
+Both sides run in **lock-step** by default (``mavsysid sim --lockstep``, ``mavsysid stream
+--lockstep``): they share the vehicle's sim time, so a flight gives the same samples and
+tracking on an idle or an overloaded machine. ``lockstep=False`` keeps the wall clock,
+for the few tests of the real-time path.
 """
 
 from __future__ import annotations
@@ -51,9 +56,15 @@ def export_excitation(path: Path, duration: float, box: Sequence[float] | None =
 
 
 class SimProcess:
-    """``mavsysid sim ARGS`` in its own process; its output goes to files in ``directory``."""
+    """``mavsysid sim ARGS`` in its own process; its output goes to files in ``directory``.
 
-    def __init__(self, directory: Path, *args: str) -> None:
+    ``lockstep`` (default) adds ``--lockstep``: the sim holds at its first frame until a
+    lock-step streamer acknowledges it (however late that connects), and runs on the wall
+    clock 2 s after a peer that acknowledges nothing (MAVProxy, MAVSDK) first spoke.
+    """
+
+    def __init__(self, directory: Path, *args: str, lockstep: bool = True) -> None:
+        args = (*args, "--lockstep") if lockstep else args
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.stdout_path = self.directory / "sim.out"
@@ -94,15 +105,18 @@ class SimProcess:
         self.stop()
 
 
-def run_stream(trajectory: Path, *args: str, cwd: Path, timeout: float = 180.0
-               ) -> subprocess.CompletedProcess[str]:
-    """``mavsysid stream TRAJECTORY ARGS`` to completion, output captured."""
+def run_stream(trajectory: Path, *args: str, cwd: Path, timeout: float = 180.0,
+               lockstep: bool = True) -> subprocess.CompletedProcess[str]:
+    """``mavsysid stream TRAJECTORY ARGS`` to completion, output captured (lock-step)."""
+    args = (*args, "--lockstep") if lockstep else args
     return subprocess.run(_mavsysid("stream", str(trajectory), *args), capture_output=True,
                           text=True, env=_ENV, cwd=cwd, timeout=timeout, check=False)
 
 
-def start_stream(trajectory: Path, *args: str, cwd: Path) -> subprocess.Popen[str]:
-    """``mavsysid stream TRAJECTORY ARGS`` started; stderr to ``cwd/stream.err``."""
+def start_stream(trajectory: Path, *args: str, cwd: Path,
+                 lockstep: bool = True) -> subprocess.Popen[str]:
+    """``mavsysid stream TRAJECTORY ARGS`` started (lock-step); stderr to ``cwd/stream.err``."""
+    args = (*args, "--lockstep") if lockstep else args
     err = open(cwd / "stream.err", "w")  # noqa: SIM115 - the child keeps it open
     return subprocess.Popen(_mavsysid("stream", str(trajectory), *args), stdout=subprocess.PIPE,
                             stderr=err, text=True, env=_ENV, cwd=cwd)

@@ -69,7 +69,8 @@ def test_estimate_reads_the_tlog_streamed_to_arducopter_sitl(tmp_path: Path) -> 
     logs = tmp_path / "logs"
     with running_sitl(tmp_path / "sitl", defaults=[SITL_PARMS], model="x") as sitl:
         stream = run_stream(trajectory, "--connect", sitl.connect, "--vehicle", "quad_x",
-                            "--log-dir", str(logs), cwd=tmp_path, timeout=240.0)
+                            "--log-dir", str(logs), cwd=tmp_path, timeout=240.0,
+                            lockstep=False)  # a real autopilot: wall clock
     assert stream.returncode == 0, stream.stderr[-3000:]
     tlog = flight_dir(logs) / "flight.tlog"
 

@@ -83,7 +83,11 @@ def test_killed_streamer_keeps_its_logs(tmp_path, trajectory):
                  if m.get_type() == "LOCAL_POSITION_NED"]
     assert positions[-1].time_boot_ms * 1e-3 > kill_time - 1.0
     assert len(positions) >= len(log)
-    assert read_meta(directory / "meta.json")["status"] == "recording"
+    # The live meta.json reads as aborted with no clean-up, the count ~1 s behind at most.
+    meta = read_meta(directory / "meta.json")
+    assert meta["status"] == "aborted" and meta["running"] is True
+    assert "killed" in meta["reason"]
+    assert len(log) - 75 <= meta["samples"] <= len(log)  # 1 s at 50 Hz, plus slack
 
 
 def test_vehicle_heartbeat_loss_stops_the_stream(tmp_path, trajectory):
@@ -108,6 +112,38 @@ def test_vehicle_heartbeat_loss_stops_the_stream(tmp_path, trajectory):
     assert reaction < 3.0
     meta = read_meta(flight_dir(logs) / "meta.json")
     assert meta["status"] == "aborted" and "heartbeat lost" in meta["reason"]
+
+
+def test_link_loss_is_seen_within_1_5_s_in_real_time(tmp_path, trajectory):
+    """WALL CLOCK on purpose, no speedup (the real-time path): the sim is killed
+    mid-trajectory; the streamer sees the loss
+    within 1.5 s of the vehicle's last message (the tlog's clock) and sends no setpoint
+    after it: only those of the ~1 s link-loss limit follow the last vehicle message."""
+    port = free_udp_port()
+    logs = tmp_path / "logs"
+    sim = SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}",
+                     lockstep=False)
+    try:
+        stream = start_stream(trajectory, "--connect", f"udp:127.0.0.1:{port}", "--log-dir",
+                              str(logs), cwd=tmp_path, lockstep=False)
+        wait_for(lambda: _in_trajectory(logs, 1.0), 120, "1 s of trajectory")
+        sim.kill()
+        code = _finished(stream, 20)
+    finally:
+        sim.stop()
+    assert code == 3
+    assert "no message at all from the vehicle" in (tmp_path / "stream.err").read_text()
+    records = read_tlog(flight_dir(logs) / "flight.tlog")
+    assert any(m.get_type() == "COMMAND_LONG" and m.command == 511 and m.param1 == 36
+               for _, m in records)  # SERVO_OUTPUT_RAW asked for, for the motor outputs
+    last_heard = max(t for t, m in records if m.get_srcSystem() == 1)
+    after = [t for t, m in records
+             if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and t > last_heard]
+    assert after and after[-1] - last_heard <= 1.0 + 0.03  # stopped at the limit
+    assert len(after) <= 52  # 1 s at 50 Hz
+    meta = read_meta(flight_dir(logs) / "meta.json")
+    seen_after = float(meta["reason"].split(" for ")[1].split(" s")[0])
+    assert seen_after <= 1.5 and meta["running"] is False
 
 
 def test_pilot_mode_change_stops_the_stream_at_once(tmp_path, trajectory):
@@ -197,15 +233,20 @@ def test_vehicle_beside_the_box_is_refused_before_arming(tmp_path, trajectory):
 
 
 def test_wrong_signing_key_is_rejected(tmp_path, trajectory):
-    """A signing sim ignores a streamer with another key; the streamer names the cause."""
+    """A signing sim ignores a streamer with another key; the streamer names the cause.
+
+    WALL CLOCK (``lockstep=False``): a lock-step streamer that can read nothing, not even
+    a frame, waits `START_GRACE` for one before its clock (and the heartbeat wait) runs."""
     port = free_udp_port()
     (tmp_path / "vehicle.key").write_text("vehicle passphrase\n")
     (tmp_path / "other.key").write_text("some other passphrase\n")
     with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
-                    SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key")) as sim:
+                    SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key"),
+                    lockstep=False) as sim:
         result = run_stream(trajectory, *_stream_args(port, tmp_path / "logs"),
                             "--signing-key", str(tmp_path / "other.key"),
-                            "--heartbeat-timeout", "4", cwd=tmp_path, timeout=60)
+                            "--heartbeat-timeout", "4", cwd=tmp_path, timeout=60,
+                            lockstep=False)
         sim_output = sim.stop()
     assert result.returncode == 3
     assert "no vehicle heartbeat" in result.stderr and "wrong signature" in result.stderr
@@ -214,14 +255,18 @@ def test_wrong_signing_key_is_rejected(tmp_path, trajectory):
 
 
 def test_signed_flight_with_the_right_key(tmp_path, trajectory):
-    """With the vehicle's key the flight goes through, every message signed both ways."""
+    """With the vehicle's key the flight goes through, every message signed both ways.
+
+    WALL CLOCK on purpose (``lockstep=False``): a real-time flight, as with a real vehicle."""
     port = free_udp_port()
     (tmp_path / "vehicle.key").write_text("vehicle passphrase\n")
     logs = tmp_path / "logs"
     with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
-                    SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key")) as sim:
+                    SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key"),
+                    lockstep=False) as sim:
         result = run_stream(trajectory, *_stream_args(port, logs), "--signing-key",
-                            str(tmp_path / "vehicle.key"), cwd=tmp_path, timeout=90)
+                            str(tmp_path / "vehicle.key"), cwd=tmp_path, timeout=90,
+                            lockstep=False)
         sim_output = sim.stop()
     assert result.returncode == 0, result.stderr
     assert "rejected signatures 0 " in sim_output
@@ -230,12 +275,15 @@ def test_signed_flight_with_the_right_key(tmp_path, trajectory):
 
 
 def test_interrupt_brakes_then_lands(tmp_path, trajectory):
-    """Ctrl-C mid-flight: BRAKE, then LAND, then exit 130."""
+    """Ctrl-C mid-flight: BRAKE, then LAND, then exit 130.
+
+    WALL CLOCK on purpose (``lockstep=False``): the real-time path."""
     port = free_udp_port()
     logs = tmp_path / "logs"
     with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
-                    SPEEDUP):
-        stream = start_stream(trajectory, *_stream_args(port, logs), cwd=tmp_path)
+                    SPEEDUP, lockstep=False):
+        stream = start_stream(trajectory, *_stream_args(port, logs), cwd=tmp_path,
+                              lockstep=False)
         wait_for(lambda: _in_trajectory(logs, 2.0), 60, "2 s of trajectory")
         stream.send_signal(signal.SIGINT)
         code = _finished(stream, 30)

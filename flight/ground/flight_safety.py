@@ -1,0 +1,81 @@
+"""The streamer's two safety steps: install the fence before arming, restore parameters after.
+
+`install_safety` runs once the vehicle has a position and passed its checks: the fence of
+`mavsysid.flight.ground.geofence` (unless the operator said ``--no-fence``), recorded in
+``meta.json`` (``fence``, and ``parameters`` with each changed name's original and flight
+value, written at once so that a killed streamer leaves the originals on disk).
+
+`restore_parameters` runs when the flight ends, fails or is interrupted: every parameter
+the session's `ParameterSession` changed goes back, newest first. One exception: while
+the vehicle is still armed (hovering with ``--no-land``, held in BRAKE/HOLD after an
+abort, landing after Ctrl-C) the fence and timeout parameters stay in force, since
+switching a fence off under a flying vehicle is the wrong way round; the line printed
+and ``meta.json`` say which ones and their original values.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from mavsysid.flight.ground.geofence import FENCE_MARGIN, SAFETY_PARAMETERS, install_fence
+from mavsysid.flight.ground.mavlink_link import HeartbeatLost
+
+__all__ = ["install_safety", "restore_parameters"]
+
+
+def _record(session: Any) -> dict[str, Any]:
+    p = session.parameters
+    out = {name: {"original": o, "flight": f, "restored": False}
+           for name, (o, f) in p.changed.items()}
+    out.update({name: {"original": o, "flight": f, "restored": True}
+                for name, (o, f) in p.restored.items()})
+    return out
+
+
+def install_safety(session: Any, home: Sequence[float], say: Callable[[str], None]) -> None:
+    """Install the fence for ``session``'s box (``home``: position on the ground, m ENU).
+
+    Raises
+    ------
+    JobFailedError
+        The vehicle has no working fence (unless ``settings.fence`` is off).
+    """
+    settings = session.settings
+    if not settings.fence:
+        say("warning: --no-fence: the box is enforced by the streamer only; if it dies, "
+            "the vehicle flies on its last command until its own failsafe")
+        session.note("fence", None)
+        return
+    try:
+        record = install_fence(session.link, session.commands, session.parameters,
+                               session.box, home, settings.fence_margin or FENCE_MARGIN, say)
+    finally:
+        session.note("parameters", _record(session))
+    session.note("fence", record)
+
+
+def restore_parameters(session: Any, say: Callable[[str], None]) -> None:
+    """Put back what the flight changed (see the module docstring); never raises."""
+    params = getattr(session, "parameters", None)
+    if params is None or not params.changed:
+        return
+    link = session.link
+    keep = [n for n in params.changed if n in SAFETY_PARAMETERS] if link.vehicle.armed else []
+    try:
+        problems = params.restore(keep=keep)
+    except HeartbeatLost as error:  # a link gone while restoring: report, never raise
+        problems = [f"could not restore the parameters: {error}"]
+    if len(problems) > 1 and not params.restored:  # one cause (a lost link): one line
+        problems = [f"{problems[-1]} (nor {', '.join(n for n in params.changed)})"]
+    for line in problems:
+        say(f"warning: {line}")
+    if keep:
+        say("warning: the vehicle still flies: fence and timeouts left in force ("
+            + ", ".join(f"{n} was {params.changed[n][0]:g}" for n in keep)
+            + "); restore them once it has landed")
+    restored = params.restored
+    if restored:
+        say("parameters restored: " + ", ".join(f"{n} {o:g}" for n, (o, _f) in
+                                                  restored.items()))
+    session.note("parameters", _record(session))

@@ -1,0 +1,237 @@
+"""Is a trajectory file safe to fly? Checked before connecting, against the vehicle and the box.
+
+The box is the operator's: ``--box``, else the vehicle file's ``[flight] box``, else (only
+when neither is given) the trajectory file's own. A box stored in the file never widens
+the operator's: the trajectory itself must lie inside the box chosen (`operator_box`).
+
+The limits are the vehicle's (`flight_limits`, from the vehicle config the operator chose,
+never from the file's ``limits`` block):
+
+- speed ‖v‖ ≤ ``speed_max``;
+- thrust acceleration ‖a − g‖ (collective thrust / mass) within
+  [T_min/m, T_max/m], T_max = min(``thrust_max_ratio`` m g, k c_T n_max²) and
+  T_min = max(``thrust_min_ratio`` m g, k c_T n_min²): the planner's thrust constraint
+  and the rotors' (k rotors, n the rotor speed limits);
+- jerk ‖j‖ ≤ ``body_rate_max`` · T_max/m: the thrust axis turns at
+  ‖j⊥‖/‖a − g‖ ≤ the body-rate limit, and ‖a − g‖ ≤ T_max/m; the same bound is put on
+  the whole jerk (the thrust-rate part is far smaller on any flyable trajectory);
+- yaw rate |ψ̇| ≤ ``body_rate_max`` (it is a body rate), |ψ̈| ≤ ``yaw_acceleration_max``;
+- continuity: position, velocity, acceleration, yaw and yaw rate equal on both sides of
+  every segment join (a jump would be sent as one setpoint far away);
+- finite values everywhere.
+
+Nothing escapes between samples: each segment is a polynomial, so every quantity's
+extreme over the segment is found exactly, at the segment ends or at a real root of its
+derivative (squared norms are polynomials too), plus a grid of samples in case a root
+is lost to rounding. The refusal is one line naming the quantity, its value, the limit
+and the time in the file (`check_trajectory`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from mavsysid.flight.ground.setpoints import SetpointLimits
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
+
+from mavsysid.errors import InputError
+
+__all__ = [
+    "GROUND_MARGIN",
+    "JOIN_TOLERANCE",
+    "check_trajectory",
+    "flight_limits",
+    "operator_box",
+]
+
+#: The streamer's own climb from the ground may go this far below min(z_min, 0), m.
+GROUND_MARGIN = 0.5
+#: Largest mismatch at a segment join: m, m/s, m/s², rad, rad/s.
+JOIN_TOLERANCE = (1e-3, 1e-3, 1e-2, 1e-3, 1e-3)
+# Samples per segment besides the exact extremes (a safety net against lost roots).
+_GRID = 33
+_P = np.polynomial.polynomial
+
+
+def operator_box(cli_box: Sequence[float] | None, vehicle_box: Sequence[float] | None,
+                 file_box: Sequence[float] | None, path: str) -> tuple[tuple[float, ...], str]:
+    """The box to fly in, m, and where it came from ("--box", the vehicle, the file).
+
+    ``vehicle_box`` is the ``[flight] box`` of the vehicle file the operator chose (not of
+    the configuration embedded in the trajectory file, which is the file's).
+
+    Raises
+    ------
+    InputError
+        No box anywhere, or a box that is not six numbers with each min below its max.
+    """
+    for box, source in ((cli_box, "--box"), (vehicle_box, "the vehicle's [flight] box"),
+                        (file_box, "the trajectory file's box")):
+        if box is None:
+            continue
+        b = tuple(float(v) for v in box)
+        if len(b) != 6 or not all(np.isfinite(b)) or any(
+                lo >= hi for lo, hi in zip(b[:3], b[3:], strict=True)):
+            raise InputError(f"{source} {','.join(f'{v:g}' for v in b)}: expected "
+                             "x_min,y_min,z_min,x_max,y_max,z_max with each min below its max")
+        return b, source
+    raise InputError(f"{path}: the trajectory has no flight box; give one with --box "
+                     "x_min,y_min,z_min,x_max,y_max,z_max (or [flight] box in the vehicle "
+                     "file)")
+
+
+def flight_limits(config: VehicleConfig, box: Sequence[float]) -> SetpointLimits:
+    """The vehicle's limits on a trajectory and on every setpoint (module docstring)."""
+    lim, m = config.limits, config.mass
+    k, c_t = config.rotor_count, config.parameters.c_T
+    thrust_max = min(lim.thrust_max_ratio * m * GRAVITY, k * c_t * lim.rotor_speed_max**2)
+    thrust_min = max(lim.thrust_min_ratio * m * GRAVITY, k * c_t * lim.rotor_speed_min**2)
+    b = tuple(float(v) for v in box)
+    return SetpointLimits(
+        box=b, floor=min(b[2], 0.0) - GROUND_MARGIN, speed_max=lim.speed_max,
+        thrust_acceleration_min=thrust_min / m, thrust_acceleration_max=thrust_max / m,
+        jerk_max=lim.body_rate_max * thrust_max / m, yaw_rate_max=lim.body_rate_max,
+        yaw_acceleration_max=lim.yaw_acceleration_max)
+
+
+def _extremes(value: Callable[[np.ndarray], np.ndarray], coeffs: np.ndarray, duration: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Where in [0, duration] and what ``value`` is at the candidates of ``coeffs``' extremes.
+
+    ``coeffs`` are the polynomial whose stationary points are sought (increasing powers).
+    """
+    grid = np.linspace(0.0, duration, _GRID)
+    trimmed = _P.polytrim(_P.polyder(coeffs), 0.0)
+    roots = np.empty(0)
+    if trimmed.size > 1 and np.all(np.isfinite(trimmed)) and trimmed[-1] != 0.0:
+        r = _P.polyroots(trimmed)
+        r = r.real[np.abs(r.imag) <= 1e-9 * max(1.0, duration)]
+        roots = r[(r >= 0.0) & (r <= duration)]
+    tau = np.concatenate([grid, roots])
+    return tau, value(tau)
+
+
+def _segment_quantities(pc: np.ndarray, yc: np.ndarray, duration: float
+                        ) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(name, τ, values) of each checked quantity on one segment, at its extreme candidates."""
+    v = _P.polyder(pc, 1, axis=1)
+    a = _P.polyder(pc, 2, axis=1)
+    j = _P.polyder(pc, 3, axis=1)
+
+    def norm2(rows: Sequence[np.ndarray], offset: float = 0.0) -> np.ndarray:
+        total = np.zeros(1)
+        for i, c in enumerate(rows):
+            c = _P.polyadd(c, [offset]) if i == 2 else c
+            total = _P.polyadd(total, _P.polymul(c, c))
+        return total
+
+    out = []
+    for i, axis in enumerate("xyz"):
+        out.append((axis, *_extremes(lambda t, c=pc[i]: _P.polyval(t, c), pc[i], duration)))
+    for name, sq in (("speed", norm2(v)), ("thrust acceleration |a - g|", norm2(a, GRAVITY)),
+                     ("jerk", norm2(j))):
+        out.append((name, *_extremes(lambda t, c=sq: np.sqrt(np.abs(_P.polyval(t, c))), sq,
+                                     duration)))
+    yd1, yd2 = _P.polyder(yc, 1), _P.polyder(yc, 2)
+    out.append(("yaw", *_extremes(lambda t: _P.polyval(t, yc), yc, duration)))
+    for name, c in (("yaw rate", yd1), ("yaw acceleration", yd2)):
+        sq = _P.polymul(c, c)
+        out.append((name, *_extremes(lambda t, c=c: np.abs(_P.polyval(t, c)), sq, duration)))
+    return out
+
+
+def _bounds(limits: SetpointLimits) -> dict[str, tuple[float, float, str, str]]:
+    """Quantity → (lowest, highest, unit, name of the limit)."""
+    b = limits.box
+    inf = float("inf")
+    return {
+        "x": (b[0], b[3], "m", "the box"), "y": (b[1], b[4], "m", "the box"),
+        "z": (b[2], b[5], "m", "the box"),
+        "speed": (-inf, limits.speed_max, "m/s", "speed_max"),
+        "thrust acceleration |a - g|": (limits.thrust_acceleration_min,
+                                        limits.thrust_acceleration_max, "m/s²",
+                                        "thrust ratios and rotor speeds"),
+        "jerk": (-inf, limits.jerk_max, "m/s³", "body_rate_max x thrust"),
+        "yaw": (-inf, inf, "rad", ""),
+        "yaw rate": (-inf, limits.yaw_rate_max, "rad/s", "body_rate_max"),
+        "yaw acceleration": (-inf, limits.yaw_acceleration_max, "rad/s²",
+                             "yaw_acceleration_max"),
+    }
+
+
+def _join_problem(trajectory: PiecewisePolynomial) -> str | None:
+    """One line for the first segment join where the flight jumps, or None."""
+    ends = np.cumsum(trajectory.durations)[:-1]
+    if ends.size == 0:
+        return None
+    names = ("position", "velocity", "acceleration", "yaw", "yaw rate")
+    units = ("m", "m/s", "m/s²", "rad", "rad/s")
+    for i, t in enumerate(ends):
+        left, right = _evaluate(trajectory, i, float(trajectory.durations[i])), \
+            _evaluate(trajectory, i + 1, 0.0)
+        for name, unit, tol, lv, rv in zip(names, units, JOIN_TOLERANCE, left, right,
+                                           strict=True):
+            jump = float(np.max(np.abs(np.asarray(lv) - np.asarray(rv))))
+            if not jump <= tol:
+                return (f"{name} jumps by {jump:.3g} {unit} at the join of segments {i} and "
+                        f"{i + 1} (t = {t:.3f} s); at most {tol:g} {unit} is allowed")
+    return None
+
+
+def _evaluate(trajectory: PiecewisePolynomial, i: int, tau: float) -> list[np.ndarray]:
+    """Position, velocity, acceleration, yaw, yaw rate of segment ``i`` at local ``tau``."""
+    pc, yc = trajectory.position_coeffs[i], trajectory.yaw_coeffs[i]
+    out = [np.array([_P.polyval(tau, _P.polyder(c, d)) for c in pc]) for d in range(3)]
+    return out + [np.array([_P.polyval(tau, _P.polyder(yc, d))]) for d in range(2)]
+
+
+def check_trajectory(trajectory: PiecewisePolynomial, limits: SetpointLimits,
+                     box_source: str = "the box") -> list[str]:
+    """Refusals (one line each; empty: safe) of a trajectory against ``limits``.
+
+    Checks finite values, continuity at the joins, then the box, speed, thrust
+    acceleration, jerk, yaw rate and yaw acceleration at their exact extremes over every
+    segment. Reports the first problem found, at its worst time in the file.
+    """
+    with np.errstate(all="ignore"):
+        if not (np.all(np.isfinite(trajectory.position_coeffs))
+                and np.all(np.isfinite(trajectory.yaw_coeffs))):
+            return ["the trajectory has non-finite coefficients"]
+        if (problem := _join_problem(trajectory)) is not None:
+            return [problem]
+        return _limit_problems(trajectory, limits, box_source)
+
+
+def _limit_problems(trajectory: PiecewisePolynomial, limits: SetpointLimits,
+                    box_source: str) -> list[str]:
+    bounds = _bounds(limits)
+    worst: dict[str, tuple[float, float, float]] = {}  # name → (excess, value, t)
+    starts = trajectory.segment_starts
+    for i, duration in enumerate(trajectory.durations):
+        quantities = _segment_quantities(trajectory.position_coeffs[i],
+                                         trajectory.yaw_coeffs[i], float(duration))
+        for name, tau, values in quantities:
+            lo, hi = bounds[name][:2]
+            if not np.all(np.isfinite(values)):
+                k = int(np.argmax(~np.isfinite(values)))
+                return [f"{name} is not finite at t = {starts[i] + tau[k]:.3f} s"]
+            excess = np.maximum(lo - values, values - hi)
+            k = int(np.argmax(excess))
+            if excess[k] > 1e-9 * max(1.0, abs(hi) if np.isfinite(hi) else 1.0) and (
+                    name not in worst or excess[k] > worst[name][0]):
+                worst[name] = (float(excess[k]), float(values[k]), float(starts[i] + tau[k]))
+    for name, (lo, hi, unit, what) in bounds.items():
+        if name not in worst:
+            continue
+        _, value, t = worst[name]
+        if what == "the box":
+            side, limit = ("min", lo) if value < lo else ("max", hi)
+            return [f"{name} = {value:.3f} m at t = {t:.3f} s is outside {box_source} "
+                    f"({name}_{side} {limit:g} m)"]
+        limit, word = (lo, "below") if value < lo else (hi, "above")
+        return [f"{name} {value:.4g} {unit} at t = {t:.3f} s is {word} the vehicle's limit "
+                f"{limit:.4g} {unit} ({what})"]
+    return []
