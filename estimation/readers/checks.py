@@ -8,7 +8,8 @@ far from unit quaternions (slow sampling is not refused). A gap longer than `MAX
 shorter than `MIN_DURATION` are dropped, with a note. Problems that can be repaired
 are repaired and reported with counts as warnings: rows with NaN dropped, out-of-order
 timestamps sorted, duplicate timestamps dropped, short gaps, slightly non-unit
-quaternions normalised, a pose frozen in flight (`frozen_samples`) left out as a gap.
+quaternions normalised, a pose frozen in flight or a stuck or dead rotor
+(`mavsysid.estimation.readers.frozen`) left out as a gap.
 """
 
 from __future__ import annotations
@@ -17,6 +18,12 @@ import dataclasses
 
 import numpy as np
 from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
+from mavsysid.estimation.readers.frozen import (
+    FLYING_THRUST,
+    attitude_jumps,
+    drop_unphysical_samples,
+    frozen_samples,
+)
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.mav_model import collective_thrust
@@ -43,8 +50,6 @@ __all__ = [
 MAX_GAP = 0.2
 #: Hover thrust Σ c_T n² off from m g by more than this factor means a unit error.
 HOVER_FACTOR = 5.0
-#: Σ c_T n² at or above this fraction of m g (nominal c_T) is flying, for `frozen_samples`.
-FLYING_THRUST = 0.8
 #: Quaternion norms off by more than this are reported when normalised.
 QUATERNION_WARNING = 1e-3
 #: Quaternion norms off by more than this are not attitudes: a wrong column or unit.
@@ -112,57 +117,6 @@ def repair_samples(t: np.ndarray, values: np.ndarray, source: str,
                      "stamped within 5 % of a sample period after the previous one")
         t, values = t[~close], values[~close]
     return t, values, notes
-
-
-def frozen_samples(t: np.ndarray, values: np.ndarray, airborne: np.ndarray) -> np.ndarray:
-    """Samples repeating the previous one exactly, in airborne runs longer than `MAX_GAP`.
-
-    A measured position or attitude never repeats to the last bit while the vehicle
-    flies: a run of identical samples is a frozen source (a stalled estimator, a lost
-    motion-capture body), and the filter would take it for a vehicle that stopped dead.
-    On the ground (a noise-free simulation, a pre-arm estimator) a pose may well stand
-    still, so only runs mostly at flying thrust count.
-
-    Parameters
-    ----------
-    t : ndarray, shape (N,)
-        Strictly increasing sample times, s.
-    values : ndarray, shape (N, m)
-        The signal.
-    airborne : ndarray of bool, shape (N,)
-        Samples at flying thrust (`FLYING_THRUST`).
-
-    Returns
-    -------
-    ndarray of bool, shape (N,)
-        True for the repeats (not the first sample of a run).
-    """
-    same = np.concatenate([[False], (np.diff(values, axis=0) == 0.0).all(axis=1)])
-    edges = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
-    frozen = np.zeros(t.shape[0], dtype=bool)
-    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
-        if t[b - 1] - t[a - 1] > MAX_GAP and airborne[a - 1:b].mean() > 0.5:
-            frozen[a:b] = True
-    return frozen
-
-
-def _drop_frozen_pose(t: np.ndarray, stacked: np.ndarray, source: str, vehicle: VehicleConfig
-                      ) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Leave out frozen position or attitude samples (`frozen_samples`): a gap, not data."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        thrust = collective_thrust(vehicle.parameters.c_T, stacked[:, 7:])
-    airborne = thrust >= FLYING_THRUST * vehicle.mass * GRAVITY
-    frozen = (frozen_samples(t, stacked[:, :3], airborne)
-              | frozen_samples(t, stacked[:, 3:7], airborne))
-    if not frozen.any():
-        return t, stacked, []
-    count = _plural(int(frozen.sum()), "sample")
-    note = (f"{source}: the pose repeats one value exactly in {count}"
-            f" (first at t = {t[int(np.argmax(frozen))]:.3f} s), in runs longer than "
-            f"{MAX_GAP:g} s: a frozen pose source; those samples are left out as gaps")
-    if (~frozen).sum() < 2 or np.ptp(t[~frozen]) < MIN_DURATION:
-        raise LogFormatError(f"{note}, and too little is left ({MIN_DURATION:g} s needed)")
-    return t[~frozen], stacked[~frozen], [note]
 
 
 def normalise_quaternions(q: np.ndarray, t: np.ndarray, source: str,
@@ -368,7 +322,7 @@ def validate_flight(data: FlightData, vehicle: VehicleConfig,
     if t.shape[0] < 2:
         raise LogFormatError(f"{source}: {_plural(t.shape[0], 'usable sample')}; need at least "
                              f"{MIN_DURATION:g} s of pose and rotor speeds")
-    t, stacked, more = _drop_frozen_pose(t, stacked, source, vehicle)
+    t, stacked, more = drop_unphysical_samples(t, stacked, source, vehicle, MAX_GAP)
     notes += more
     q, more = normalise_quaternions(stacked[:, 3:7], t, source, "pose")
     notes += more
@@ -377,7 +331,9 @@ def validate_flight(data: FlightData, vehicle: VehicleConfig,
         raise LogFormatError(f"{source}: only {duration:.3g} s of pose and rotor speeds (t = "
                              f"{t[0]:.3f} to {t[-1]:.3f} s); need at least {MIN_DURATION:g} s")
     notes += check_sampling(t, source, "pose")
-    gaps = long_gaps(t) if gaps is None else np.vstack([long_gaps(t), gaps])
+    jumps, more = attitude_jumps(t, q, source)
+    notes += more
+    gaps = np.vstack([long_gaps(t), jumps, *(() if gaps is None else (gaps,))])
     keep, starts, more = split_segments(t, gaps, source)
     notes += more
     if not keep.any():

@@ -126,6 +126,7 @@ def stub_estimation(monkeypatch: pytest.MonkeyPatch) -> Callable[[np.ndarray], N
     def use(theta: np.ndarray) -> None:
         monkeypatch.setattr(estimate_job, "load_flight",
                             lambda log, config, **kw: SimpleNamespace(source=str(log)))
+        monkeypatch.setattr(estimate_job, "check_kinematics", lambda flight: None)
         monkeypatch.setattr(estimate_job, "estimate_parameters",
                             lambda flight, config, settings=None: _stub_result(theta))
 

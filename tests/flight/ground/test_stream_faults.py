@@ -255,18 +255,15 @@ def test_wrong_signing_key_is_rejected(tmp_path, trajectory):
 
 
 def test_signed_flight_with_the_right_key(tmp_path, trajectory):
-    """With the vehicle's key the flight goes through, every message signed both ways.
-
-    WALL CLOCK on purpose (``lockstep=False``): a real-time flight, as with a real vehicle."""
+    """With the vehicle's key the flight goes through, every message signed both ways
+    (lock-step frames and their acknowledgements included)."""
     port = free_udp_port()
     (tmp_path / "vehicle.key").write_text("vehicle passphrase\n")
     logs = tmp_path / "logs"
     with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
-                    SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key"),
-                    lockstep=False) as sim:
+                    SPEEDUP, "--signing-key", str(tmp_path / "vehicle.key")) as sim:
         result = run_stream(trajectory, *_stream_args(port, logs), "--signing-key",
-                            str(tmp_path / "vehicle.key"), cwd=tmp_path, timeout=90,
-                            lockstep=False)
+                            str(tmp_path / "vehicle.key"), cwd=tmp_path, timeout=90)
         sim_output = sim.stop()
     assert result.returncode == 0, result.stderr
     assert "rejected signatures 0 " in sim_output
