@@ -22,6 +22,7 @@ from mavsysid.discrepancy.diagnosis import (
     reestimate,
 )
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.kinematics_check import check_kinematics
 from mavsysid.estimation.plausibility import check_plausible
 from mavsysid.estimation.readers import load_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
@@ -101,6 +102,7 @@ def run_diagnose(
         # The config's own θ is the prior, checked (and warned about) when loaded.
         check_plausible(str(estimate), theta, None, config.theta, what="identified θ")
     flight = load_flight(log, config, start=start, end=end)
+    check_kinematics(flight)  # a clock or position unit the attitude denies
     diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
     for what, refit in (("θ refitted without effects", diagnosis.theta_before),
                         ("θ refitted with the named effects", diagnosis.theta_after)):

@@ -39,8 +39,8 @@ __all__ = ["MIN_TILT_ACCELERATION", "TIME_SCALE_FACTOR", "check_kinematics", "ti
 #: λ beyond this factor above or below 1 is refused. Why 1.6: a clock 1.27 × off already
 #: scales the accelerations (and the inertia estimate) by 1.6 (more than the 50 % an
 #: estimate may be off); unmodelled drag, an attitude lagging the position by a few
-#: samples and noise move a consistent log's λ by far less (0.9 to 1.1 on the simulated,
-#: SITL and real logs of the test suite).
+#: samples and noise move a consistent log's λ by far less (0.96 on the simulated flights
+#: of ``bench/fuzz_logs.py``; the ArduCopter SITL and real-log tests are not refused).
 TIME_SCALE_FACTOR = 1.6
 
 #: The tilt-predicted horizontal acceleration must vary by at least this RMS, m/s², for λ

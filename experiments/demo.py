@@ -146,7 +146,7 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
         plan_file = directory / f"plan-{iteration}.json"
         write_trajectory(plan_file, plan)
         say(f"{tag} flying the {plan.trajectory.duration:.1f} s plan over MAVLink "
-            f"(simulated vehicle, {settings.speedup:g}x real time)")
+            f"(simulated vehicle, lock-step, up to {settings.speedup:g}x real time)")
         flight_dir, rms = fly_over_mavlink(plan_file, directory / f"round-{iteration}",
                                            settings.vehicle, scale, settings.speedup,
                                            settings.seed + iteration - 1,

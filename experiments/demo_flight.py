@@ -102,7 +102,7 @@ class SimVehicleProcess:
         directory.mkdir(parents=True, exist_ok=True)
         self._out = open(directory / "sim.out", "wb")  # noqa: SIM115 - the child writes it
         args = ["sim", "--connect", f"udpout:127.0.0.1:{port}", "--vehicle", vehicle,
-                "--speedup", f"{speedup:g}", "--seed", str(seed), "--truth-log",
+                "--speedup", f"{speedup:g}", "--lockstep", "--seed", str(seed), "--truth-log",
                 str(directory / "truth"), "--theta-scale", ",".join(f"{v:.12g}" for v in scale)]
         for text in hidden:
             args += ["--hidden-effect", text]
@@ -174,8 +174,11 @@ def fly_over_mavlink(plan_file: Path, directory: Path, vehicle: str, scale: np.n
         time.sleep(0.2)
         if sim.process.poll() is not None:
             raise JobFailedError(f"the simulated vehicle did not start; see {sim.directory}")
+        # Both ends are ours: lock-step, so the demo flies the same flight on a slow or
+        # busy machine as on an idle one (`mavsysid.flight.simvehicle.clock`).
         stream = StreamSettings(connect=f"udp:127.0.0.1:{port}", speedup=speedup,
-                                telemetry_rate=TELEMETRY_RATE, log_dir=directory)
+                                telemetry_rate=TELEMETRY_RATE, log_dir=directory,
+                                lockstep=True)
         outcome = run_stream(plan_file, stream, say=say, progress=progress)
     finally:
         sim.stop()

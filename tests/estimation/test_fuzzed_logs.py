@@ -11,6 +11,7 @@ exit 0 within 50 % of the truth (the clean log estimates within 1 %) or refuse. 
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import time
@@ -18,10 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.kinematics_check import check_kinematics, tilt_gain
 from mavsysid.estimation.readers import guard, load_flight
+from mavsysid.estimation.readers.checks import MAX_GAP
+from mavsysid.estimation.readers.frozen import attitude_jumps, drop_unphysical_samples
 from mavsysid.vehicle.config import load_vehicle
 
-from mavsysid.errors import InputError, LogFormatError
+from mavsysid.errors import InputError, JobFailedError, LogFormatError
 from tests.support.fuzz_run import estimate_outcome, fuzz_plan
 from tests.support.log_fuzz import FORMATS, CleanFlight, clean_flight, fuzz_case
 
@@ -139,3 +144,99 @@ def test_cli_on_fuzzed_logs_exits_in_one_line(flight: CleanFlight, tmp_path: Pat
         if done.returncode:
             assert done.stderr.count("\n") == 1 and ": error: " in done.stderr, done.stderr
     assert np.all([c.path.is_file() for c in cases])
+
+
+# -- the classes of wrong exit-0 results the 1000-log bench found (issue 19) --------------
+# Each (format, value mutation, seed) gave exit 0 with a parameter 51 % to 782 % off before
+# the kinematics check, the stuck/dead rotor checks and the attitude-jump split existed.
+_BENCH_VIOLATIONS = [
+    (".ulg", "clock_stretch", 1688764040),
+    (".tlog", "clock_stretch", 1618142690),
+    (".tlog", "clock_reverse", 914442262),
+    (".ulg", "clock_jump", 1605072030),
+    (".tlog", "rotor_stuck", 251106141),
+    (".ulg", "rotor_stuck", 2118947726),
+    (".ulg", "rotor_zero", 649464057),
+    (".csv", "rotor_zero", 1089395762),
+    (".csv", "position_scale", 942962511),
+]
+
+
+@pytest.mark.parametrize(("suffix", "value", "seed"), _BENCH_VIOLATIONS)
+def test_bench_violation_is_refused_or_right(flight: CleanFlight, tmp_path: Path, suffix: str,
+                                             value: str, seed: int) -> None:
+    case = fuzz_case(tmp_path, flight, suffix, value, "none", seed)
+    outcome = estimate_outcome(case.path, "firefly", load_vehicle("firefly").theta)
+    assert outcome.kind != "traceback", outcome.message
+    assert outcome.kind != "exit0" or outcome.error <= 0.5, (case, outcome)
+
+
+def _flight_data(flight: CleanFlight, tmp_path: Path, **changes: np.ndarray) -> FlightData:
+    mutated = dataclasses.replace(flight, **changes)
+    return load_flight(fuzz_case(tmp_path, mutated, ".csv", "none", "none", 0).path,
+                       load_vehicle("firefly"))
+
+
+@pytest.mark.parametrize("scale", [0.7, 1.5, 4.0])
+def test_stretched_clock_contradicts_the_tilt(flight: CleanFlight, tmp_path: Path,
+                                              scale: float) -> None:
+    """λ ≈ 1 on the clean log and ≈ 1/s² on a clock s × slow: refused in one line."""
+    clean = tilt_gain(_flight_data(flight, tmp_path / "clean"))
+    assert clean is not None and abs(clean - 1.0) < 0.1
+    stretched = _flight_data(flight, tmp_path / "s", t=flight.t * scale)
+    assert tilt_gain(stretched) == pytest.approx(clean / scale**2, rel=0.2)
+    with pytest.raises(JobFailedError, match=r"pose\.csv: the horizontal acceleration of the "
+                       r"logged position is .* × what the logged tilt demands"):
+        check_kinematics(stretched)
+
+
+def test_position_in_millimetres_read_as_metres_is_refused(flight: CleanFlight,
+                                                           tmp_path: Path) -> None:
+    data = _flight_data(flight, tmp_path, position=flight.position * 1e-3)
+    with pytest.raises(JobFailedError, match=r"0\.000\d+ × what the logged tilt demands"):
+        check_kinematics(data)
+
+
+def test_hover_is_not_judged(flight: CleanFlight, tmp_path: Path) -> None:
+    """No tilt, no verdict: a level pose says nothing about the clock this way."""
+    yaw = 0.1 * flight.t  # turning slowly about the vertical, never tilting
+    zero = np.zeros_like(yaw)
+    level = np.column_stack([np.cos(yaw / 2), zero, zero, np.sin(yaw / 2)])
+    assert tilt_gain(_flight_data(flight, tmp_path, quaternion=level)) is None
+
+
+def test_clean_simulated_rotor_dips_are_kept(flight: CleanFlight) -> None:
+    """The clean flight drives rotors to < 1 % of the others for 0.24 s: not a dead rotor,
+    and rotors saturated together at full speed are not a stuck reading."""
+    stacked = np.column_stack([flight.position, flight.quaternion, flight.rotor_speeds])
+    t, _, notes = drop_unphysical_samples(flight.t, stacked, "x", load_vehicle("firefly"),
+                                          MAX_GAP)
+    assert notes == [] and t.size == flight.t.size
+    n = flight.rotor_speeds
+    assert (n < 0.01 * n.max()).any()  # the premise: the dips exist
+
+
+@pytest.mark.parametrize("kind", ["zero", "stuck"])
+def test_dead_or_stuck_rotor_is_left_out(flight: CleanFlight, kind: str) -> None:
+    n = flight.rotor_speeds.copy()
+    rows = slice(300, 500)  # 2 s in the air
+    if kind == "zero":
+        n[rows, 2] = 0.0
+    else:
+        n[rows] = n[300]
+    stacked = np.column_stack([flight.position, flight.quaternion, n])
+    t, _, notes = drop_unphysical_samples(flight.t, stacked, "x", load_vehicle("firefly"),
+                                          MAX_GAP)
+    assert len(notes) == 1 and ("reads 0" if kind == "zero" else "repeat one value") in notes[0]
+    left_out = np.setdiff1d(flight.t, t)
+    assert left_out.min() >= flight.t[300] and left_out.max() <= flight.t[499]
+    assert left_out.size > 100  # most of the stretch is at flying thrust
+
+
+def test_attitude_jump_splits_the_flight(flight: CleanFlight) -> None:
+    q = flight.quaternion.copy()
+    q[400:] = q[400:, [1, 0, 3, 2]] * [-1.0, 1.0, -1.0, 1.0]  # turned 180° in one step
+    assert attitude_jumps(flight.t, flight.quaternion, "x")[0].shape == (0, 2)
+    gaps, notes = attitude_jumps(flight.t, q, "x")
+    np.testing.assert_array_equal(gaps, [[flight.t[399], flight.t[400]]])
+    assert "faster than 2000 °/s" in notes[0]
