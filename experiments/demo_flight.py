@@ -33,6 +33,7 @@ __all__ = [
     "ENVELOPE",
     "HIDDEN_SPREAD",
     "ROTOR_HEADROOM",
+    "SIM_START_TIMEOUT",
     "TELEMETRY_RATE",
     "SimVehicleProcess",
     "fly_over_mavlink",
@@ -121,6 +122,11 @@ class SimVehicleProcess:
         self._out.close()
 
 
+#: How long the streamer waits for the simulated vehicle's first heartbeat, s: on a cold
+#: cache the vehicle compiles its kernels first, minutes on a busy two-core machine.
+SIM_START_TIMEOUT = 600.0
+
+
 def with_headroom(model: VehicleConfig) -> VehicleConfig:
     """The model the demo plans with: `ROTOR_HEADROOM` off its top rotor speed, and its
     body rate, yaw acceleration and thrust above hover scaled to `ENVELOPE`."""
@@ -178,7 +184,7 @@ def fly_over_mavlink(plan_file: Path, directory: Path, vehicle: str, scale: np.n
         # busy machine as on an idle one (`mavsysid.flight.simvehicle.clock`).
         stream = StreamSettings(connect=f"udp:127.0.0.1:{port}", speedup=speedup,
                                 telemetry_rate=TELEMETRY_RATE, log_dir=directory,
-                                lockstep=True)
+                                lockstep=True, heartbeat_timeout=SIM_START_TIMEOUT)
         outcome = run_stream(plan_file, stream, say=say, progress=progress)
     finally:
         sim.stop()
