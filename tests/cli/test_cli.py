@@ -125,6 +125,8 @@ def test_interrupt_exits_130_and_keeps_the_log(tmp_path):
         [sys.executable, "-m", "mavsysid", "simulate", "--logs", str(tmp_path),
          "--name", "long", "--duration", "3000"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # A shell's background job inherits SIGINT ignored; Ctrl-C is what is tested.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     # A wait, not a bound: a fresh clone compiles the kernels first, slowly on a busy machine.
     deadline = time.monotonic() + 600

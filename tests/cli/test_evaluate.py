@@ -217,8 +217,10 @@ def test_interrupted_evaluation_resumes_with_only_unfinished(tmp_path):
             str(FAST["samples"]), "--budget", str(FAST["budget"]), "--refine-steps",
             str(FAST["refine_steps"]), "--out", str(out), "--no-png"]
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    # A shell's background job inherits SIGINT ignored; Ctrl-C is what is tested.
     proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
+                            start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # A wait, not a bound: on a busy machine the first experiment can take many minutes.
     deadline = time.monotonic() + 1200
     while not (out / "runs" / "0000.json").exists():

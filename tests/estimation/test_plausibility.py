@@ -173,6 +173,7 @@ def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -
     refit = _theta(c_T=PRIOR[0] / 500.0)
     monkeypatch.setattr(diagnose_job, "load_flight",
                         lambda log, config, **kw: SimpleNamespace(source=str(log)))
+    monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
     monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
         theta_before=PRIOR.copy(), theta_after=refit))
     with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted with the named "
