@@ -223,6 +223,21 @@ async def _retry(request, error: type[Exception], attempts: int = 10) -> None:
             await asyncio.sleep(0.5)
 
 
+async def _first_autopilot(mavsdk, timeout: float):
+    """The first connected system with an autopilot, polled from MAVSDK's system list.
+
+    ``Mavsdk.first_autopilot`` missed a system discovered between ``add_any_connection`` and
+    its own subscription once on a busy CI machine (the component was logged as added, the
+    call still timed out), so the list is read directly until ``timeout`` s pass."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for system in await mavsdk.get_systems():
+            if await system.has_autopilot() and await system.is_connected():
+                return system
+        await asyncio.sleep(0.1)
+    return None
+
+
 def _distance(a, b) -> float:
     return sum((p - q) ** 2 for p, q in zip(a, b, strict=True)) ** 0.5
 
@@ -244,7 +259,7 @@ async def _fly_offboard(port: int, truth: Path) -> float:
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     async with Mavsdk(config) as mavsdk:
         await mavsdk.add_any_connection(f"udpin://127.0.0.1:{port}")
-        system = await mavsdk.first_autopilot(timeout_s=15.0)
+        system = await _first_autopilot(mavsdk, timeout=30.0)
         assert system is not None, "MAVSDK found no autopilot"
         assert await system.autopilot_type() == Autopilot.PX4
         telemetry, action, offboard = (TelemetryAsync(system), ActionAsync(system),
