@@ -32,6 +32,7 @@ from mavsysid.estimation.ekf import ParameterEKF
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.report import convergence_time
 from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.experiments.data_efficiency import seconds_to_relative_sigma
 from mavsysid.flight.offline.simulator import SimulationResult, SimulationSettings, Simulator
 from mavsysid.planner.baseline import plan_random
 from mavsysid.planner.results import PlannerSettings, PlanResult
@@ -169,6 +170,10 @@ def fly_plan(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig, k
     return result, sim
 
 
+def _seconds_or_none(value: float) -> float | None:
+    return None if math.isnan(value) else float(value)
+
+
 def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
          prior: ParameterEstimate, kind: str, iteration: int, workdir: Path) -> dict[str, Any]:
     """Plan with ``model``, fly with the truth, filter from ``prior``: one record row."""
@@ -193,6 +198,10 @@ def _fly(spec: ExperimentSpec, truth: VehicleConfig, model: VehicleConfig,
         "relative_error": ((est.value - truth.theta) / truth.theta).tolist(),
         "convergence_time": [None if math.isnan(v) else float(v) for v in
                              convergence_time(h.t - h.t[0], h.theta, truth.theta)],
+        # The data-efficiency endpoint (`mavsysid.experiments.data_efficiency`); None
+        # when some σ_j/θ_j stays above 1 % to the end of the flight.
+        "time_to_relative_sigma": _seconds_or_none(seconds_to_relative_sigma(
+            h.t - h.t[0], h.theta_sigma, truth.theta)),
         "planner": {"samples": result.stats.samples, "vertices": result.stats.vertices,
                     "edges": result.stats.edges},
         "history": estimate_history(h.t, h.theta, h.theta_sigma),

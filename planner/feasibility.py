@@ -3,8 +3,11 @@
 Checked in this order (`mavsysid.vehicle.config.Limits`): position in the flight box; collective
 thrust m‖a − g‖ in [thrust_min_ratio, thrust_max_ratio] · m g; ‖v‖ ≤ speed_max (a
 planner limit in docs/architecture.md); |ψ̈| ≤ yaw_acceleration_max; ‖ω‖ ≤ body_rate_max; rotor
-speeds (n² from the allocation) in [rotor_speed_min, rotor_speed_max]² — the Firefly has
-so little yaw authority that without these the planner would plan yaw it cannot fly.
+speeds in [rotor_speed_min, rotor_speed_max]² — the Firefly has so little yaw authority
+that without these the planner would plan yaw it cannot fly. The vehicle's
+``[limits] allocation`` says how: n² = A⁺ w in the box ("pseudo_inverse", the default), or
+the wrench inside the exact allocation polytope ("exact"), both as slabs of
+`mavsysid.vehicle.allocation_polytope`.
 
 The first four are polynomials in s = τ/T, decided exactly (to rounding) by Bernstein
 subdivision (`mavsysid.planner.bernstein`). ω and n² are sampled on a grid (10 ms by
@@ -31,6 +34,7 @@ from mavsysid.planner.bernstein import (
 )
 from mavsysid.planner.segments import Segment, VertexState
 from mavsysid.vehicle.allocation import allocation_pinv
+from mavsysid.vehicle.allocation_polytope import allocation_slabs
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.flatness import (
     SAMPLE_NORM,
@@ -42,8 +46,8 @@ from mavsysid.vehicle.flatness import (
 
 from mavsysid.errors import InputError
 
-__all__ = ["CONSTRAINTS", "FeasibilityResult", "check_rotor_headroom", "check_segment",
-           "check_vertex_state", "rotor_square_range"]
+__all__ = ["CONSTRAINTS", "UNBOUNDED_SQUARE", "FeasibilityResult", "check_rotor_headroom",
+           "check_segment", "check_vertex_state", "rotor_square_range"]
 
 #: Constraint names in the order they are checked (``FeasibilityResult.reason``).
 CONSTRAINTS = ("box", "thrust", "speed", "yaw_acceleration", "body_rate", "rotor_speed")
@@ -85,13 +89,16 @@ _SQUARE_VEL, _SQUARE_ACC = square_weights(8), square_weights(7)
 
 @numba.njit(cache=True)
 def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
-                       pinv: np.ndarray, v: np.ndarray, out: np.ndarray, row: int) -> None:
-    """Normalised slacks at unit time s into out[row]: ‖ω‖/ω_max − 1, then per rotor.
+                       normals: np.ndarray, bounds: np.ndarray, v: np.ndarray, out: np.ndarray,
+                       row: int) -> None:
+    """Normalised slacks at unit time s into out[row]: ‖ω‖/ω_max − 1, then per slab.
 
-    Rotor slack max(n² − n²_max, n²_min − n²) / n²_max. Positive means violated; NaN or
-    inf (a singular attitude) counts as violated. The flatness is ``flat_to_state``'s own
-    (`mavsysid.vehicle.flatness.flat_sample`). ``v`` (12 + SAMPLE_SIZE,) is scratch space (no
-    allocation per sample).
+    Slab slack max(u·w − upper, lower − u·w) / scale for the wrench w and each slab u of
+    `mavsysid.vehicle.allocation_polytope.AllocationSlabs` (``bounds`` = its lower, upper,
+    scale): with A⁺ rows and the n² range, per rotor max(n² − n²_max, n²_min − n²) / n²_max.
+    Positive means violated; NaN or inf (a singular attitude) counts as violated. The
+    flatness is ``flat_to_state``'s own (`mavsysid.vehicle.flatness.flat_sample`). ``v``
+    (12 + SAMPLE_SIZE,) is scratch space (no allocation per sample).
     """
     # Horner, all 12 derivatives at once: a, jerk, snap (3 each), ψ, ψ̇, ψ̈.
     v[:] = 0.0
@@ -108,9 +115,10 @@ def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
     # Paper Eq. (allocation): [T, J ω̇ + ω × J ω] = A n².
     thrust = lim[0] * sample[SAMPLE_NORM]
     tau = sample[SAMPLE_TORQUE:SAMPLE_TORQUE + 3]
-    for i in range(pinv.shape[0]):
-        n2 = pinv[i, 0] * thrust + pinv[i, 1] * tau[0] + pinv[i, 2] * tau[1] + pinv[i, 3] * tau[2]
-        out[row, 1 + i] = max(n2 - lim[7], lim[6] - n2) / lim[7]
+    for i in range(normals.shape[0]):
+        n2 = (normals[i, 0] * thrust + normals[i, 1] * tau[0] + normals[i, 2] * tau[1]
+              + normals[i, 3] * tau[2])
+        out[row, 1 + i] = max(n2 - bounds[1, i], bounds[0, i] - n2) / bounds[2, i]
     for f in range(out.shape[1]):
         if not out[row, f] <= 1e300:
             out[row, f] = np.inf
@@ -167,13 +175,14 @@ def _undecided(g: np.ndarray, i: int, safety: float) -> int:
 
 @numba.njit(cache=True)
 def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: float,
-                   kernel: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[int, float, int]:
+                   kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+                   ) -> tuple[int, float, int]:
     """Grid check of ω and n², refining undecided intervals: (column, time, evaluations).
 
-    Column -1 when feasible, else the slack (0 body rate, 1+ a rotor) that a sample
+    Column -1 when feasible, else the slack (0 body rate, 1+ a rotor slab) that a sample
     violates or that stayed undecided down to the minimum step, at local ``time``.
     """
-    lim, J, pinv = kernel
+    lim, J, normals, bounds = kernel
     v = np.empty(12 + SAMPLE_SIZE)
     # Level 0 is the whole segment in ``intervals`` parts; deeper levels split each
     # undecided interval of the level above into _REFINE parts.
@@ -183,14 +192,14 @@ def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: floa
         if width <= _MIN_STEP * (1.0 + 1e-9):
             return columns[0], starts[0], evaluations
         step = width / parts
-        g = np.empty((parts + 1, 1 + pinv.shape[0]))
+        g = np.empty((parts + 1, 1 + normals.shape[0]))
         next_starts = np.empty(count * parts)
         next_columns = np.empty(count * parts, dtype=np.int64)
         next_count = 0
         for q in range(count):
             for i in range(parts + 1):
                 t = min(starts[q] + i * step, duration)
-                _constraint_values(dc, t / duration, lim, J, pinv, v, g, i)
+                _constraint_values(dc, t / duration, lim, J, normals, bounds, v, g, i)
                 for f in range(g.shape[1]):
                     if g[i, f] > 0.0:
                         return f, t, evaluations + i + 1
@@ -207,7 +216,8 @@ def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: floa
 
 @numba.njit(cache=True)
 def _check_kernel(dc: np.ndarray, duration: float, box: np.ndarray,
-                  kernel: tuple[np.ndarray, np.ndarray, np.ndarray], intervals: int,
+                  kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                  intervals: int,
                   safety: float) -> tuple[int, float, int]:
     """All checks, cheap exact ones first: (constraint index or -1, time, evaluations)."""
     which, s = _polynomial_scan(dc, box, kernel[0])
@@ -221,7 +231,9 @@ def _check_kernel(dc: np.ndarray, duration: float, box: np.ndarray,
 
 # (config, theta) → kernel inputs; keyed by identity (a config's value hash costs more
 # than a check), holding the config so that its id cannot be reused while cached.
-_KERNEL_CACHE: dict[tuple[int, bytes, float], tuple[VehicleConfig, tuple]] = {}
+_KERNEL_CACHE: dict[tuple[int, bytes, float, bool], tuple[VehicleConfig, tuple]] = {}
+#: n² bound, (rad/s)², of a check without rotor limits: beyond any flatness result.
+UNBOUNDED_SQUARE = 1e300
 
 
 def rotor_square_range(config: VehicleConfig, headroom: float = 0.0) -> tuple[float, float]:
@@ -255,14 +267,20 @@ def check_rotor_headroom(config: VehicleConfig, headroom: float,
             f"rad/s, without the hover speed {np.sqrt(hover.max()):.0f} rad/s")
 
 
-def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: float = 0.0
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(limits, J, A⁺) for the kernels, cached per config, θ and rotor headroom.
+def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: float = 0.0,
+                   rotor_check: bool = True
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(limits, J, slab normals, slab bounds) for the kernels, cached per config, θ,
+    rotor headroom and check.
 
-    limits = [m, (r_min g)², (r_max g)², v_max², ψ̈_max, ω_max, n²_min, n²_max].
+    The slabs are ``config.allocation``'s (`allocation_slabs`): A⁺ rows per rotor, or the
+    exact allocation polytope's facet directions; bounds = [lower, upper, scale], (3, m).
+
+    limits = [m, (r_min g)², (r_max g)², v_max², ψ̈_max, ω_max, n²_min, n²_max]; without
+    ``rotor_check`` the n² range is unbounded (±`UNBOUNDED_SQUARE`), every slack ≈ −1.
     """
     th = config.theta if theta is None else np.asarray(theta, dtype=float).reshape(6)
-    key = (id(config), b"" if theta is None else th.tobytes(), headroom)
+    key = (id(config), b"" if theta is None else th.tobytes(), headroom, rotor_check)
     hit = _KERNEL_CACHE.get(key)
     if hit is not None and hit[0] is config:
         return hit[1]
@@ -270,8 +288,13 @@ def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: fl
     limits = np.array([config.mass, (lim.thrust_min_ratio * GRAVITY) ** 2,
                        (lim.thrust_max_ratio * GRAVITY) ** 2, lim.speed_max**2,
                        lim.yaw_acceleration_max, lim.body_rate_max,
-                       *rotor_square_range(config, headroom)])
-    value = (limits, th[3:6].copy(), np.ascontiguousarray(allocation_pinv(config, th)))
+                       *(rotor_square_range(config, headroom) if rotor_check
+                         else (-UNBOUNDED_SQUARE, UNBOUNDED_SQUARE))])
+    # Without the rotor check the A⁺ slabs over the unbounded range (slacks ≈ −1).
+    slabs = allocation_slabs(config, limits[6], limits[7], th,
+                             None if rotor_check else "pseudo_inverse")
+    value = (limits, th[3:6].copy(), slabs.normals,
+             np.ascontiguousarray([slabs.lower, slabs.upper, slabs.scale]))
     if len(_KERNEL_CACHE) >= 32:
         _KERNEL_CACHE.clear()
     _KERNEL_CACHE[key] = (config, value)
@@ -287,6 +310,7 @@ def check_segment(
     grid_step: float = 0.01,
     safety: float = 2.0,
     rotor_headroom: float = 0.0,
+    rotor_check: bool = True,
 ) -> FeasibilityResult:
     """Check a segment against all limits on the whole of [0, T].
 
@@ -306,6 +330,8 @@ def check_segment(
         Factor (≥ 2) on the local bound that decides whether an interval is refined.
     rotor_headroom : float, optional
         Fraction of the rotor n² range kept free at each end (`rotor_square_range`).
+    rotor_check : bool, optional
+        False leaves out the rotor-speed check (the paper's constraint set).
 
     Returns
     -------
@@ -314,7 +340,8 @@ def check_segment(
     T = segment.duration
     which, time, evaluations = _check_kernel(
         segment.derivative_coeffs, T, np.asarray(box, dtype=float),
-        _kernel_inputs(config, theta, float(rotor_headroom)), max(2, ceil(T / grid_step)),
+        _kernel_inputs(config, theta, float(rotor_headroom), bool(rotor_check)),
+        max(2, ceil(T / grid_step)),
         float(safety))
     if which < 0:
         return FeasibilityResult(True, samples=evaluations)

@@ -140,7 +140,8 @@ class GraphSearch:
     def feasible(self, segment: Segment) -> bool:
         limits = self.settings.autopilot_limits
         return check_segment(segment, self.config, self.box,
-                             rotor_headroom=self.settings.rotor_headroom).feasible and (
+                             rotor_headroom=self.settings.rotor_headroom,
+                             rotor_check=self.settings.rotor_check).feasible and (
             limits is None or not exceeded_limits(segment, limits))
 
     def stop_at(self, state: VertexState, with_transfer: bool = True) -> StopChoice | None:

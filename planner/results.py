@@ -64,6 +64,10 @@ class PlannerSettings:
         The envelope of the autopilot that will fly the plan (``plan --autopilot-limits``):
         every segment keeps its peaks inside it (`mavsysid.planner.kinematic_check`);
         None: the vehicle's own limits only.
+    rotor_check : bool
+        Check rotor speeds (through the allocation at the prior θ). False gives the paper's
+        constraint set (thrust, body rate, yaw acceleration, box, speed; no rotor check),
+        the ablation of `mavsysid.experiments.baselines`.
     """
 
     budget: float = 30.0
@@ -80,6 +84,7 @@ class PlannerSettings:
     refine_split: int = 2
     rotor_headroom: float = 0.0
     autopilot_limits: KinematicLimits | None = None
+    rotor_check: bool = True
 
     @property
     def start_pose(self) -> np.ndarray:

@@ -105,18 +105,21 @@ def _build(values: dict[str, Any], name: str, source: str) -> VehicleConfig:
     force, moment = default_noise_densities(values["mass"], tuple(values["parameters"]["J"]))
     noise.setdefault("force_density", force)
     noise.setdefault("moment_density", moment)
+    limits = dict(values["limits"])
+    allocation = limits.pop("allocation", VehicleConfig.allocation)
     return VehicleConfig(
         name=name,
         mass=values["mass"],
         rotors=rotors,
         parameters=Parameters(**values["parameters"]),
-        limits=Limits(**values["limits"]),
+        limits=Limits(**limits),
         motor=MotorConfig(**values["motor"]),
         noise=NoiseConfig(**noise),
         source=source,
         effects=tuple(effect_from_values(n, v) for n, v in values["effects"]),
         autopilot_frame=values["autopilot_frame"],
         box=values["box"],
+        allocation=allocation,
     )
 
 

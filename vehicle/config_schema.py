@@ -31,7 +31,7 @@ from collections.abc import Mapping
 from typing import Any, NoReturn
 
 from mavsysid.vehicle.config_messages import describe_value, raise_config_error
-from mavsysid.vehicle.config_types import PARAMETER_UNITS
+from mavsysid.vehicle.config_types import ALLOCATION_MODES, PARAMETER_UNITS
 from mavsysid.vehicle.model_effects import EFFECTS
 from mavsysid.vehicle.motor_order import FRAME_NAMES, MotorOrderError, output_to_rotor
 
@@ -57,6 +57,7 @@ _LIMITS: dict[str, tuple[str, str]] = {
     "yaw_acceleration_max": ("rad/s²", "positive"),
     "speed_max": ("m/s", "positive"),
     "segment_time_max": ("s", "positive"),
+    "allocation": (" or ".join(f'"{m}"' for m in ALLOCATION_MODES), "choice"),
 }
 _MOTOR: dict[str, tuple[str, str]] = {
     "time_constant": ("s", "nonnegative"),
@@ -214,6 +215,11 @@ def _table(file: str, doc: Mapping[str, Any], section: str) -> dict[str, Any]:
                 raise_config_error(file, spelled, f"{kind} ({unit})",
                                    "nothing (the key is missing)")
             continue
+        if sign == "choice":  # [limits].allocation, the one string of these tables
+            if raw[key] not in ALLOCATION_MODES:
+                raise_config_error(file, spelled, unit, describe_value(raw[key]))
+            values[key] = raw[key]
+            continue
         check = _vector3 if key in _VECTOR_KEYS else _number
         values[key] = check(file, spelled, raw[key], unit, sign)
     return values
@@ -359,7 +365,8 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
         ``name`` (str or None), ``mass`` (float, kg), ``rotors`` (list of
         (position tuple in m, direction int)), and ``parameters``, ``limits``, ``motor``,
         ``noise``: dicts holding only the keys present in the file, as floats (``J`` a
-        tuple of 3 floats); ``effects``: list of (effect name, {parameter: float}) in
+        tuple of 3 floats; ``[limits].allocation`` a string of `ALLOCATION_MODES`);
+        ``effects``: list of (effect name, {parameter: float}) in
         file order; ``autopilot_frame``: the ``[autopilot] frame`` name or None;
         ``box``: the ``[flight] box`` (6 floats, m) or None.
 

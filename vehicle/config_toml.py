@@ -74,6 +74,8 @@ def vehicle_to_toml(config: VehicleConfig) -> str:
                            ("motor", config.motor), ("noise", config.noise)):
         lines += ["", f"[{table}]"]
         lines += [f"{f.name} = {_toml_value(getattr(section, f.name))}" for f in fields(section)]
+        if table == "limits" and config.allocation != VehicleConfig.allocation:
+            lines.append(f"allocation = {_toml_string(config.allocation)}")
     for effect in config.effects:
         lines += ["", f"[effects.{effect.name}]"]
         lines += [f"{k} = {_toml_float(v)}" for k, v in effect.as_dict().items()]

@@ -21,6 +21,7 @@ from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.effect_base import ModelEffect
 
 __all__ = [
+    "ALLOCATION_MODES",
     "ANGULAR_NOISE_DENSITY",
     "LINEAR_NOISE_DENSITY",
     "PARAMETER_NAMES",
@@ -47,6 +48,12 @@ PARAMETER_UNITS: dict[str, str] = {
     "j_y": "kg·m²",
     "j_z": "kg·m²",
 }
+
+#: ``[limits] allocation``: how rotor limits bound the wrench. "pseudo_inverse": n² = A⁺ w
+#: must lie in the rotor box (the mixers of ArduPilot, PX4, RotorS's Lee controller and
+#: mavsysid's own simulator controller); "exact": any n² in the box with A n² = w (a
+#: controller that allocates over the null space), `mavsysid.vehicle.allocation_polytope`.
+ALLOCATION_MODES: tuple[str, ...] = ("pseudo_inverse", "exact")
 
 #: Default unmodelled linear acceleration noise density, m/s²·√s.
 LINEAR_NOISE_DENSITY = 0.02
@@ -193,6 +200,12 @@ class VehicleConfig:
         ``[flight] box``: the flight box [x_min, y_min, z_min, x_max, y_max, z_max], m,
         world ENU, where this vehicle may be flown (``mavsysid stream`` uses it when no
         ``--box`` is given). None: not set.
+    allocation : str
+        ``[limits] allocation``, one of `ALLOCATION_MODES`: how the rotor limits bound
+        the wrench a plan may ask for. The default, "pseudo_inverse", is what the
+        controllers that fly a plan realise (autopilot mixers, mavsysid's simulators);
+        "exact" only for a vehicle whose controller allocates over the null space. Kept
+        out of `Limits`, whose fields are numbers (the trajectory file copies them).
     """
 
     name: str
@@ -206,6 +219,7 @@ class VehicleConfig:
     effects: tuple[ModelEffect, ...] = ()
     autopilot_frame: str | None = None
     box: tuple[float, ...] | None = None
+    allocation: str = "pseudo_inverse"
 
     @property
     def rotor_count(self) -> int:

@@ -62,6 +62,10 @@ def test_record_holds_both_planners_with_consistent_figures(two_experiments):
             hist = np.array(f["history"]["theta"])
             assert hist.shape == (len(f["history"]["t"]), 6)
             assert np.allclose(hist[0], record["prior"], rtol=0.05), "history starts at prior"
+            # Data efficiency: every σ_j/θ_j ≤ 1 % within the flight, or None.
+            seconds = f["time_to_relative_sigma"]
+            assert (seconds is None) == (max(f["relative_sigma"]) > 0.01)
+            assert seconds is None or 0.0 <= seconds <= f["flight_time"] + 0.1
 
 
 @pytest.mark.slow
