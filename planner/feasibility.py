@@ -32,17 +32,12 @@ from mavsysid.planner.bernstein import (
     square_norm,
     square_weights,
 )
+from mavsysid.planner.sample_slacks import sample_slacks
 from mavsysid.planner.segments import Segment, VertexState
 from mavsysid.vehicle.allocation import allocation_pinv
 from mavsysid.vehicle.allocation_polytope import allocation_slabs
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
-from mavsysid.vehicle.flatness import (
-    SAMPLE_NORM,
-    SAMPLE_RATE,
-    SAMPLE_SIZE,
-    SAMPLE_TORQUE,
-    flat_sample,
-)
+from mavsysid.vehicle.flatness import SAMPLE_SIZE
 
 from mavsysid.errors import InputError
 
@@ -85,43 +80,6 @@ class FeasibilityResult:
 
 _BERN_POS, _BERN_VEL, _BERN_ACC, _BERN_YAW = (bernstein_matrix(n) for n in (9, 8, 7, 3))
 _SQUARE_VEL, _SQUARE_ACC = square_weights(8), square_weights(7)
-
-
-@numba.njit(cache=True)
-def _constraint_values(dc: np.ndarray, s: float, lim: np.ndarray, J: np.ndarray,
-                       normals: np.ndarray, bounds: np.ndarray, v: np.ndarray, out: np.ndarray,
-                       row: int) -> None:
-    """Normalised slacks at unit time s into out[row]: ‖ω‖/ω_max − 1, then per slab.
-
-    Slab slack max(u·w − upper, lower − u·w) / scale for the wrench w and each slab u of
-    `mavsysid.vehicle.allocation_polytope.AllocationSlabs` (``bounds`` = its lower, upper,
-    scale): with A⁺ rows and the n² range, per rotor max(n² − n²_max, n²_min − n²) / n²_max.
-    Positive means violated; NaN or inf (a singular attitude) counts as violated. The
-    flatness is ``flat_to_state``'s own (`mavsysid.vehicle.flatness.flat_sample`). ``v``
-    (12 + SAMPLE_SIZE,) is scratch space (no allocation per sample).
-    """
-    # Horner, all 12 derivatives at once: a, jerk, snap (3 each), ψ, ψ̇, ψ̈.
-    v[:] = 0.0
-    for j in range(dc.shape[0] - 1, -1, -1):
-        for r in range(12):
-            v[r] = v[r] * s + dc[j, 6 + r]
-    sample = v[12:]
-    if not flat_sample(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10],
-                       v[11], J, sample):
-        out[row] = np.inf
-        return
-    wx, wy, wz = sample[SAMPLE_RATE], sample[SAMPLE_RATE + 1], sample[SAMPLE_RATE + 2]
-    out[row, 0] = np.sqrt(wx * wx + wy * wy + wz * wz) / lim[5] - 1.0
-    # Paper Eq. (allocation): [T, J ω̇ + ω × J ω] = A n².
-    thrust = lim[0] * sample[SAMPLE_NORM]
-    tau = sample[SAMPLE_TORQUE:SAMPLE_TORQUE + 3]
-    for i in range(normals.shape[0]):
-        n2 = (normals[i, 0] * thrust + normals[i, 1] * tau[0] + normals[i, 2] * tau[1]
-              + normals[i, 3] * tau[2])
-        out[row, 1 + i] = max(n2 - bounds[1, i], bounds[0, i] - n2) / bounds[2, i]
-    for f in range(out.shape[1]):
-        if not out[row, f] <= 1e300:
-            out[row, f] = np.inf
 
 
 @numba.njit(cache=True)
@@ -175,14 +133,14 @@ def _undecided(g: np.ndarray, i: int, safety: float) -> int:
 
 @numba.njit(cache=True)
 def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: float,
-                   kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+                   kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
                    ) -> tuple[int, float, int]:
     """Grid check of ω and n², refining undecided intervals: (column, time, evaluations).
 
     Column -1 when feasible, else the slack (0 body rate, 1+ a rotor slab) that a sample
     violates or that stayed undecided down to the minimum step, at local ``time``.
     """
-    lim, J, normals, bounds = kernel
+    lim, J, normals, bounds, spread = kernel
     v = np.empty(12 + SAMPLE_SIZE)
     # Level 0 is the whole segment in ``intervals`` parts; deeper levels split each
     # undecided interval of the level above into _REFINE parts.
@@ -199,7 +157,7 @@ def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: floa
         for q in range(count):
             for i in range(parts + 1):
                 t = min(starts[q] + i * step, duration)
-                _constraint_values(dc, t / duration, lim, J, normals, bounds, v, g, i)
+                sample_slacks(dc, t / duration, lim, J, normals, bounds, spread, v, g, i)
                 for f in range(g.shape[1]):
                     if g[i, f] > 0.0:
                         return f, t, evaluations + i + 1
@@ -216,7 +174,7 @@ def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: floa
 
 @numba.njit(cache=True)
 def _check_kernel(dc: np.ndarray, duration: float, box: np.ndarray,
-                  kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                  kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                   intervals: int,
                   safety: float) -> tuple[int, float, int]:
     """All checks, cheap exact ones first: (constraint index or -1, time, evaluations)."""
@@ -267,20 +225,30 @@ def check_rotor_headroom(config: VehicleConfig, headroom: float,
             f"rad/s, without the hover speed {np.sqrt(hover.max()):.0f} rad/s")
 
 
+#: Indices in θ of (c_T, c_M, j_x, j_y, j_z), the parameters the wrench check depends on.
+_WRENCH_THETA = np.array([0, 2, 3, 4, 5])
+
+
 def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: float = 0.0,
-                   rotor_check: bool = True
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(limits, J, slab normals, slab bounds) for the kernels, cached per config, θ,
-    rotor headroom and check.
+                   rotor_check: bool = True, theta_covariance: np.ndarray | None = None,
+                   rotor_confidence: float = 0.0) -> tuple[np.ndarray, ...]:
+    """(limits, J, slab normals, slab bounds, spread) for the kernels, cached per config,
+    θ, rotor headroom, check and spread.
 
     The slabs are ``config.allocation``'s (`allocation_slabs`): A⁺ rows per rotor, or the
     exact allocation polytope's facet directions; bounds = [lower, upper, scale], (3, m).
+    spread = z² Σ of relative (c_T, c_M, j_x, j_y, j_z), (5, 5); zero without a covariance.
 
     limits = [m, (r_min g)², (r_max g)², v_max², ψ̈_max, ω_max, n²_min, n²_max]; without
     ``rotor_check`` the n² range is unbounded (±`UNBOUNDED_SQUARE`), every slack ≈ −1.
     """
     th = config.theta if theta is None else np.asarray(theta, dtype=float).reshape(6)
-    key = (id(config), b"" if theta is None else th.tobytes(), headroom, rotor_check)
+    spread = np.zeros((5, 5))
+    if theta_covariance is not None and rotor_check and rotor_confidence > 0.0:
+        cov = np.asarray(theta_covariance, dtype=float).reshape(6, 6)
+        spread = rotor_confidence**2 * cov[np.ix_(_WRENCH_THETA, _WRENCH_THETA)]
+    key = (id(config), b"" if theta is None else th.tobytes(), headroom, rotor_check,
+           spread.tobytes())
     hit = _KERNEL_CACHE.get(key)
     if hit is not None and hit[0] is config:
         return hit[1]
@@ -294,7 +262,7 @@ def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: fl
     slabs = allocation_slabs(config, limits[6], limits[7], th,
                              None if rotor_check else "pseudo_inverse")
     value = (limits, th[3:6].copy(), slabs.normals,
-             np.ascontiguousarray([slabs.lower, slabs.upper, slabs.scale]))
+             np.ascontiguousarray([slabs.lower, slabs.upper, slabs.scale]), spread)
     if len(_KERNEL_CACHE) >= 32:
         _KERNEL_CACHE.clear()
     _KERNEL_CACHE[key] = (config, value)
@@ -311,6 +279,8 @@ def check_segment(
     safety: float = 2.0,
     rotor_headroom: float = 0.0,
     rotor_check: bool = True,
+    theta_covariance: np.ndarray | None = None,
+    rotor_confidence: float = 0.0,
 ) -> FeasibilityResult:
     """Check a segment against all limits on the whole of [0, T].
 
@@ -332,6 +302,12 @@ def check_segment(
         Fraction of the rotor n² range kept free at each end (`rotor_square_range`).
     rotor_check : bool, optional
         False leaves out the rotor-speed check (the paper's constraint set).
+    theta_covariance : ndarray, shape (6, 6), optional
+        Covariance of θ relative to ``theta`` (δθ_j/θ_j). With ``rotor_confidence`` z > 0
+        the rotor check is a chance constraint: every slab holds at its value ± z times
+        its first-order spread under this covariance (`PlannerSettings.rotor_confidence`).
+    rotor_confidence : float, optional
+        The one-sided normal quantile z (0: checked at ``theta`` only).
 
     Returns
     -------
@@ -340,7 +316,8 @@ def check_segment(
     T = segment.duration
     which, time, evaluations = _check_kernel(
         segment.derivative_coeffs, T, np.asarray(box, dtype=float),
-        _kernel_inputs(config, theta, float(rotor_headroom), bool(rotor_check)),
+        _kernel_inputs(config, theta, float(rotor_headroom), bool(rotor_check),
+                       theta_covariance, float(rotor_confidence)),
         max(2, ceil(T / grid_step)),
         float(safety))
     if which < 0:
@@ -349,7 +326,9 @@ def check_segment(
 
 
 def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarray,
-                       theta: np.ndarray | None = None, rotor_headroom: float = 0.0) -> bool:
+                       theta: np.ndarray | None = None, rotor_headroom: float = 0.0,
+                       theta_covariance: np.ndarray | None = None,
+                       rotor_confidence: float = 0.0) -> bool:
     """Whether one flat state satisfies every instantaneous limit (for sampling).
 
     Parameters
@@ -362,7 +341,7 @@ def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarra
         Flight volume [x_min, y_min, z_min, x_max, y_max, z_max], m.
     theta : ndarray, shape (6,), optional
         Parameters for inertia and allocation; the config's nominal θ by default.
-    rotor_headroom : float, optional
+    rotor_headroom, theta_covariance, rotor_confidence : optional
         As for `check_segment`.
 
     Returns
@@ -374,5 +353,7 @@ def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarra
     dc[0, :15] = state.position.ravel()
     dc[0, 15:] = state.yaw
     which, _, _ = _check_kernel(dc, 1.0, np.asarray(box, dtype=float),
-                                _kernel_inputs(config, theta, float(rotor_headroom)), 1, 2.0)
+                                _kernel_inputs(config, theta, float(rotor_headroom), True,
+                                               theta_covariance, float(rotor_confidence)),
+                                1, 2.0)
     return which < 0

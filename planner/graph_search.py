@@ -80,6 +80,7 @@ class GraphSearch:
         self._last_progress = -np.inf
         self._log_scale = float(np.sum(np.log(self.model.theta_scale)))
         self.sigma0 = initial_covariance(self.model, config, settings)
+        self.theta_covariance = settings.theta_covariance
         refines = objective == "dopt" and settings.refine_steps > 0
         self.search_deadline = settings.planning_time * (
             1.0 - settings.refine_share if refines else 1.0)
@@ -141,7 +142,9 @@ class GraphSearch:
         limits = self.settings.autopilot_limits
         return check_segment(segment, self.config, self.box,
                              rotor_headroom=self.settings.rotor_headroom,
-                             rotor_check=self.settings.rotor_check).feasible and (
+                             rotor_check=self.settings.rotor_check,
+                             theta_covariance=self.theta_covariance,
+                             rotor_confidence=self.settings.rotor_confidence).feasible and (
             limits is None or not exceeded_limits(segment, limits))
 
     def stop_at(self, state: VertexState, with_transfer: bool = True) -> StopChoice | None:

@@ -12,13 +12,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from mavsysid.planner.feasibility import check_rotor_headroom
+from mavsysid.planner.feasibility import check_rotor_headroom, check_vertex_state
 from mavsysid.planner.kinematic_check import check_limits
 from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.segments import VertexState
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.mav_model import rotor_thrust
 
-from mavsysid.errors import ConfigError, InputError
+from mavsysid.errors import ConfigError, InputError, JobFailedError
 
 __all__ = ["MIN_BOX_SIDE", "check_request", "rotor_clearance"]
 
@@ -102,6 +103,41 @@ def _check_numbers(settings: PlannerSettings) -> None:
                          f"and split {settings.refine_split} must be ≥ 1")
     if not (settings.measurement_rate > 0.0 and settings.prior_relative_sigma > 0.0):
         raise InputError("planner settings: measurement rate and prior σ must be positive")
+    if not 0.0 <= settings.rotor_confidence <= 6.0:
+        raise InputError(f"--rotor-confidence {settings.rotor_confidence:g}: expected a "
+                         "normal quantile in [0, 6]")
+    _check_prior_covariance(settings)
+
+
+def _check_prior_covariance(settings: PlannerSettings) -> None:
+    """Refuse a prior covariance that is not a finite, symmetric, positive definite 6 × 6."""
+    if settings.prior_covariance is None:
+        return
+    try:
+        cov = settings.theta_covariance
+    except ValueError:
+        raise InputError("prior covariance: expected 6 × 6 numbers") from None
+    if not (np.all(np.isfinite(cov)) and np.allclose(cov, cov.T, rtol=1e-9, atol=0.0)
+            and np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() > 0.0):
+        raise InputError("prior covariance: expected a finite, symmetric, positive definite "
+                         "6 × 6 matrix of relative θ errors")
+
+
+def _check_hover_chance(config: VehicleConfig, settings: PlannerSettings) -> None:
+    """Refuse a request whose start hover already fails the chance-constrained rotor check:
+    with that prior spread no flight is safe until an opening flight narrows it."""
+    if not settings.rotor_check or settings.rotor_confidence == 0.0:
+        return
+    pose = settings.start_pose
+    if not check_vertex_state(VertexState.hover(pose[:3], float(pose[3])), config,
+                              np.asarray(settings.box, dtype=float),
+                              rotor_headroom=settings.rotor_headroom,
+                              theta_covariance=settings.theta_covariance,
+                              rotor_confidence=settings.rotor_confidence):
+        raise JobFailedError(
+            f"--rotor-confidence {settings.rotor_confidence:g}: with the prior's spread even "
+            "the start hover may need more than the rotors' range; narrow the prior with a "
+            "gentle opening flight (estimate it first) or lower the confidence")
 
 
 def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
@@ -128,5 +164,6 @@ def check_request(config: VehicleConfig, settings: PlannerSettings) -> None:
     _check_box(settings, config)
     _check_hover(config)
     check_rotor_headroom(config, settings.rotor_headroom, "--rotor-headroom")
+    _check_hover_chance(config, settings)
     if settings.autopilot_limits is not None:
         check_limits(settings.autopilot_limits)

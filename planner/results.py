@@ -64,6 +64,19 @@ class PlannerSettings:
         The envelope of the autopilot that will fly the plan (``plan --autopilot-limits``):
         every segment keeps its peaks inside it (`mavsysid.planner.kinematic_check`);
         None: the vehicle's own limits only.
+    prior_covariance : tuple of 6 tuples of 6 float, or None
+        Prior covariance of θ relative to the config's θ (of δθ_j/θ_j, with correlations):
+        the planner's initial θ belief and the spread the rotor check allows for. None:
+        diag(prior_relative_sigma²). A re-planned flight passes the posterior of its
+        opening flight here.
+    rotor_confidence : float
+        One-sided normal quantile z of the chance-constrained rotor check
+        (`mavsysid.planner.feasibility.check_segment`): each rotor slab must hold at
+        v(θ̂) ± z σ_v, σ_v the first-order spread of the slab value under
+        ``prior_covariance``. 0 (the default) checks at the prior θ only; 1.645 is 95 % per
+        slab and sample. With the default ±50 % prior hardly any flight passes at 1.645
+        (a firefly plan found none in 1.5 s of search): a prior that wide is narrowed by
+        an opening flight first (`mavsysid.experiments.replanned_flight`).
     rotor_check : bool
         Check rotor speeds (through the allocation at the prior θ). False gives the paper's
         constraint set (thrust, body rate, yaw acceleration, box, speed; no rotor check),
@@ -85,6 +98,16 @@ class PlannerSettings:
     rotor_headroom: float = 0.0
     autopilot_limits: KinematicLimits | None = None
     rotor_check: bool = True
+    prior_covariance: tuple[tuple[float, ...], ...] | None = None
+    rotor_confidence: float = 0.0
+
+    @property
+    def theta_covariance(self) -> np.ndarray:
+        """The prior covariance of relative θ, shape (6, 6) (``prior_covariance`` or its
+        diagonal default)."""
+        if self.prior_covariance is not None:
+            return np.array(self.prior_covariance, dtype=float).reshape(6, 6)
+        return np.eye(6) * self.prior_relative_sigma**2
 
     @property
     def start_pose(self) -> np.ndarray:

@@ -46,7 +46,7 @@ def initial_covariance(model: ErrorStateModel, config: VehicleConfig,
                             1.0 / settings.measurement_rate)
     diag = np.concatenate([np.full(3, v**2) for v in s] + [np.full(6, 0.0)])
     sigma = np.diag(diag)
-    sigma[E_THETA, E_THETA] = np.eye(6) * settings.prior_relative_sigma**2
+    sigma[E_THETA, E_THETA] = settings.theta_covariance
     assert sigma.shape == (ERROR_DIM, ERROR_DIM)
     return sigma
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mavsysid.flight.ground.continuation import Continuation
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings, open_session
 from mavsysid.flight.ground.streamer import fly
 
@@ -28,8 +29,9 @@ class StreamOutcome:
 def run_stream(trajectory: str | Path, settings: StreamSettings,
                vehicle: str | Path | None = None, say: Callable[[str], None] | None = None,
                progress: bool = True, at_end: Callable[[StreamSession], None] | None = None,
-               ) -> StreamOutcome:
-    """Fly ``trajectory`` with ``settings`` (see `flight.ground.streamer.fly`, also for ``at_end``).
+               continuation: Continuation | None = None) -> StreamOutcome:
+    """Fly ``trajectory`` with ``settings`` (see `flight.ground.streamer.fly`, also for ``at_end``
+    and ``continuation``).
 
     Parameters
     ----------
@@ -45,6 +47,8 @@ def run_stream(trajectory: str | Path, settings: StreamSettings,
         Show a progress bar while streaming.
     at_end : callable, optional
         Called with the session after the flight.
+    continuation : callable, optional
+        Further trajectories flown in the same run (`mavsysid.flight.ground.continuation`).
 
     Raises
     ------
@@ -59,5 +63,5 @@ def run_stream(trajectory: str | Path, settings: StreamSettings,
     with open_session(trajectory, settings, vehicle) as session:
         session.commands.say = say
         say(f"recording into {session.directory}")
-        fly(session, say, progress, at_end)
+        fly(session, say, progress, at_end, continuation)
     return StreamOutcome(session.directory, session.meta)

@@ -303,7 +303,8 @@ class StreamSession:
                                            "preflight": dict(sorted(achieved.items()))}
         self._write()
 
-    def _vehicle_time(self, t: float) -> float | None:
+    def vehicle_time(self, t: float) -> float | None:
+        """Streamer time ``t`` on pose.csv's clock (the vehicle's), s; None before known."""
         offset = self.recorder.offset.value
         return None if offset is None else t - offset
 
@@ -311,7 +312,7 @@ class StreamSession:
         """The trajectory's first setpoint went out at streamer time ``t``."""
         self._trajectory_start = t
         self.meta["trajectory_window"] = {
-            "start": self._vehicle_time(t), "end": None,
+            "start": self.vehicle_time(t), "end": None,
             "clock": "pose.csv t (vehicle time_boot_ms), s",
             "streamer_start": t, "streamer_end": None}
         self._write()
@@ -319,7 +320,7 @@ class StreamSession:
     def note_trajectory_end(self, t: float, statistics: dict[str, Any]) -> None:
         """The trajectory ended (or was cut) at streamer time ``t``; its setpoint stats."""
         window = self.meta.setdefault("trajectory_window", {})
-        window["end"], window["streamer_end"] = self._vehicle_time(t), t
+        window["end"], window["streamer_end"] = self.vehicle_time(t), t
         self.meta["setpoints"] = {**statistics, "clock": "streamer time (wall x speedup)"}
         self._write()
 

@@ -20,20 +20,25 @@ brakes, then lands. Everything is recorded as it arrives (`mavsysid.flight.groun
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from mavsysid.flight.autopilot_modes import Autopilot
-from mavsysid.flight.gc_freeze import frozen_collector
 from mavsysid.flight.ground.autopilot_limits import check_session_limits
+from mavsysid.flight.ground.continuation import (
+    Continuation,
+    ContinuationStopped,
+    SegmentRun,
+    continue_flight,
+    stream_segment,
+)
 from mavsysid.flight.ground.flight_safety import install_safety, restore_parameters
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
 from mavsysid.flight.ground.preflight import check_vehicle
 from mavsysid.flight.ground.rotor_watch import RotorWatch
 from mavsysid.flight.ground.setpoints import SmoothMove, hold, trajectory_setpoint
-from mavsysid.flight.ground.stream_control import ModeTaken, ProgressLine
+from mavsysid.flight.ground.stream_control import ModeTaken
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings
 
 from mavsysid.errors import JobFailedError
@@ -44,7 +49,8 @@ _TELEMETRY = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ESC_TELEMETRY_1_TO_4
 
 
 def fly(session: StreamSession, say: Callable[[str], None], progress: bool = True,
-        at_end: Callable[[StreamSession], None] | None = None) -> None:
+        at_end: Callable[[StreamSession], None] | None = None,
+        continuation: Continuation | None = None) -> None:
     """Fly the session's trajectory (steps 1–4 of the module docstring, after the plan check).
 
     Parameters
@@ -59,6 +65,9 @@ def fly(session: StreamSession, say: Callable[[str], None], progress: bool = Tru
         Called with the session while the vehicle hovers at the trajectory's end, before
         landing (a benchmark's own experiment, say); it may stream other setpoints through
         ``session.stream`` and should leave a hold streaming.
+    continuation : callable, optional
+        Asked for further trajectories after the first, flown in the same run while the
+        vehicle holds in between (`mavsysid.flight.ground.continuation`); a refusal lands.
 
     Raises
     ------
@@ -67,13 +76,16 @@ def fly(session: StreamSession, say: Callable[[str], None], progress: bool = Tru
     KeyboardInterrupt
         After braking and landing.
     """
-    _Flight(session, say, progress, at_end).run()
+    _Flight(session, say, progress, at_end, continuation).run()
 
 
 class _Flight:
     def __init__(self, s: StreamSession, say: Callable[[str], None], progress: bool,
-                 at_end: Callable[[StreamSession], None] | None) -> None:
+                 at_end: Callable[[StreamSession], None] | None,
+                 continuation: Continuation | None) -> None:
         self.s, self.say, self.progress, self.at_end = s, say, progress, at_end
+        self.continuation = continuation
+        self.first: SegmentRun | None = None  # how the session's trajectory streamed
         self.settings: StreamSettings = s.settings
         self.link, self.commands, self.stream, self.guards = s.link, s.commands, s.stream, s.guards
         self.recorder = s.recorder
@@ -95,7 +107,9 @@ class _Flight:
             self.stream.stop()
             self.s.note_failure(str(error))
             # A lost link or a pilot in control: hands off. Anything else in the air: hold.
-            if not isinstance(error, HeartbeatLost | ModeTaken) and self.link.vehicle.armed:
+            # A stopped continuation has landed already: no BRAKE in the middle of a landing.
+            if not isinstance(error, HeartbeatLost | ModeTaken | ContinuationStopped) and \
+                    self.link.vehicle.armed:
                 self._hold_after_abort()
             raise
         finally:
@@ -237,40 +251,23 @@ class _Flight:
                 return
 
     def _trajectory(self) -> None:
-        traj = self.s.trajectory
-        duration = traj.duration
-        st = self.settings
-        self.say(f"streaming the {duration:.1f} s trajectory at {st.rate:g} Hz")
-        line = ProgressLine(duration, enabled=self.progress)
-        # A collection can stall the stream: pause the collector while streaming. What is
-        # alive now is frozen rather than collected: a full collection of a large process
-        # (a caller's planner graph, freshly compiled kernels) took 0.9 s, long enough for
-        # the socket's receive buffer to overflow and lose a third of a second of telemetry.
-        with frozen_collector(pause=True):
-            schedule = self.stream.start(lambda t: trajectory_setpoint(traj, t))
-            self.s.note_trajectory_start(schedule.start)
-            clock = self.link.clock
-            last_sent, last_t = 0, schedule.start
-            try:
-                while (now := clock.now()) < schedule.start + duration:
-                    self.link.poll_until(min(schedule.start + duration, now + 0.1 * st.speedup))
-                    now = clock.now()
-                    rate = (schedule.sent - last_sent) / max(now - last_t, 1e-9)
-                    if now - last_t >= 1.0:
-                        last_sent, last_t = schedule.sent, now
-                    latest = self.recorder.latest
-                    line.update(now - schedule.start, rate,
-                                None if latest is None else latest.tracking_error,
-                                time.monotonic())
-            finally:
-                line.close()
-                self.s.note_trajectory_end(clock.now(), schedule.statistics())
+        self.first = stream_segment(self.s, self.s.trajectory, self.progress, self.say,
+                                    self.s.note_trajectory_start)
+        self.s.note_trajectory_end(self.first.end, self.first.statistics)
 
     def _finish(self) -> None:
         last = trajectory_setpoint(self.s.trajectory, self.s.trajectory.duration)
         end = hold(np.array(last.position), last.yaw)
         self.stream.start(lambda _t: end)
         self.link.poll(self.settings.hold_time)
+        if self.continuation is not None and self.first is not None:
+            try:
+                continue_flight(self.s, end, self.first, self.continuation, self._move,
+                                self.progress, self.say)
+            except ContinuationStopped as error:
+                self.say(str(error))
+                self._land()  # then the flight fails with that reason
+                raise
         if self.at_end is not None:
             self.at_end(self.s)
         self.guards.max_tracking_error = None
@@ -284,6 +281,12 @@ class _Flight:
             self.say("hovering at the trajectory's end (--no-land)")
             self.s.note_complete()
             return
+        self._land()
+        self.s.note_complete()
+
+    def _land(self) -> None:
+        """Stop streaming, LAND, wait for the disarm (a warning after the land timeout)."""
+        self.guards.max_tracking_error = None
         self.stream.stop()
         self.guards.expect_armed = False
         self._set_mode("LAND")
@@ -296,7 +299,6 @@ class _Flight:
             self.link.poll(0.1)
         else:
             self.say("landed and disarmed")
-        self.s.note_complete()
 
     # --- failures --------------------------------------------------------------------------
 

@@ -96,6 +96,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fraction of the rotor n² range left free at each end, for the "
                         "autopilot and for a vehicle whose θ differs from the prior's "
                         f"(default: {PlannerSettings.rotor_headroom:g})")
+    parser.add_argument("--rotor-confidence", type=float, metavar="Z",
+                        default=PlannerSettings.rotor_confidence,
+                        help="chance-constrained rotor check: each rotor limit holds at the "
+                        "prior θ plus Z times its first-order spread under the prior (a normal "
+                        "quantile, e.g. 1.645: 95 %% per rotor and sample; default: "
+                        f"{PlannerSettings.rotor_confidence:g}, at the prior θ only)")
     parser.add_argument("--autopilot-limits", type=Path, metavar="FILE",
                         help="plan within the position-controller limits of the autopilot "
                         "that will fly it: a parameter dump of 'NAME VALUE' lines (ArduPilot "
@@ -137,7 +143,7 @@ def _settings(args: argparse.Namespace) -> PlannerSettings:
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
                            refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom,
-                           autopilot_limits=limits)
+                           autopilot_limits=limits, rotor_confidence=args.rotor_confidence)
 
 
 def main(args: argparse.Namespace) -> int:

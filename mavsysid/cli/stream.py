@@ -3,7 +3,9 @@
 A thin layer over `mavsysid.flight.ground.stream_job.run_stream` (which tests call
 directly): parse the options, open the session (plan checks, flight directory,
 connection), fly, and print where the flight
-was recorded with its tracking and rate figures. Exit codes: 0 flown, 2 bad input, 3
+was recorded with its tracking and rate figures. With ``--replan-budget`` the trajectory is
+an opening and the rest is planned in flight
+(`mavsysid.experiments.replanned_stream.run_replanned_stream`). Exit codes: 0 flown, 2 bad input, 3
 refused or aborted (one line saying why), 130 interrupted after braking and landing.
 """
 
@@ -11,13 +13,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from mavsysid.cli.options import allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
+
+if TYPE_CHECKING:
+    from mavsysid.experiments.replanned_stream import ReplanSettings
 
 __all__ = ["add_arguments", "format_summary", "main"]
 
@@ -103,6 +110,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-fence", action="store_true",
                         help="fly without the autopilot's geofence around the box (by default "
                         "a vehicle without a working fence is refused)")
+    parser.add_argument("--replan-budget", type=float, metavar="S",
+                        help="re-plan in flight: TRAJECTORY is the opening; while the vehicle "
+                        "holds at its end, estimate θ from it and plan the rest of S s of "
+                        "flight (the opening included) from the posterior, then fly it")
+    parser.add_argument("--replan-samples", type=int, metavar="N",
+                        help="with --replan-budget: stop planning after N samples (the plan "
+                        "then depends only on the seed)")
+    parser.add_argument("--replan-time", type=float, default=10.0, metavar="S",
+                        help="with --replan-budget: planning time, hovered (default: 10 s)")
+    parser.add_argument("--replan-refine-steps", type=int, metavar="N",
+                        help="with --replan-budget: most refinement steps (default: the "
+                        "planner's; with --replan-samples keep it small, it is hovered)")
+    parser.add_argument("--replan-seed", type=int, default=0, metavar="N",
+                        help="with --replan-budget: sampler seed (default: 0)")
     parser.add_argument("--set-limits", action="store_true",
                         help="raise the autopilot's position-controller limits (ArduPilot "
                         "PSC_JERK_*, ANGLE_MAX, WPNAV_*, ATC_SLEW_YAW; PX4 MPC_*) that the "
@@ -134,15 +155,61 @@ def _settings(args: argparse.Namespace) -> StreamSettings:
         set_limits=args.set_limits)
 
 
+def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
+    if args.replan_budget is None:
+        return None
+    for option in ("replan_budget", "replan_time"):
+        value = getattr(args, option)
+        if not (value > 0.0 and value < float("inf")):
+            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
+                             "number")
+    for option in ("replan_samples", "replan_refine_steps"):
+        value = getattr(args, option)
+        if value is not None and value < (1 if option == "replan_samples" else 0):
+            raise InputError(f"--{option.replace('_', '-')} {value}: expected a count "
+                             f"(at least {1 if option == 'replan_samples' else 0})")
+    # Only a re-planned flight loads the estimator and the planner.
+    from mavsysid.experiments.replanned_stream import ReplanSettings
+    from mavsysid.planner.results import PlannerSettings
+
+    time = float("inf") if args.replan_samples is not None else args.replan_time
+    planner = PlannerSettings(planning_time=time, max_samples=args.replan_samples,
+                              seed=args.replan_seed)
+    if args.replan_refine_steps is not None:
+        planner = replace(planner, refine_steps=args.replan_refine_steps)
+    return ReplanSettings(budget=args.replan_budget, planner=planner)
+
+
+def _segment_lines(meta: dict[str, Any]) -> list[str]:
+    lines = []
+    for record in meta.get("segments", []):
+        if "duration" not in record:
+            continue
+        extra = "" if "planning_s" not in record else (
+            f" (held {record['hold_s']:.1f} s: estimate {record['estimation_s']:.1f} s, "
+            f"planning {record['planning_s']:.1f} s)")
+        lines.append(f"  segment    {record['kind']} {record['duration']:.1f} s{extra}")
+    return lines
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the command; returns the exit code."""
     settings = _settings(args)
+    replan = _replan_settings(args)
     verbose = args.verbosity >= 0
 
     def say(text: str) -> None:
         if verbose:
             print(f"mavsysid stream: {text}", file=sys.stderr, flush=True)
 
-    outcome = run_stream(args.trajectory, settings, args.vehicle, say, progress=verbose)
-    print(format_summary(outcome, args.verbosity))
+    if replan is None:
+        outcome = run_stream(args.trajectory, settings, args.vehicle, say, progress=verbose)
+        print(format_summary(outcome, args.verbosity))
+        return 0
+    from mavsysid.experiments.replanned_stream import run_replanned_stream
+
+    outcome = run_replanned_stream(args.trajectory, settings, replan, args.vehicle, say,
+                                   progress=verbose)
+    print("\n".join([format_summary(outcome, args.verbosity)]
+                    + ([] if args.verbosity < 0 else _segment_lines(outcome.meta))))
     return 0

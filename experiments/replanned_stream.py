@@ -1,0 +1,192 @@
+"""Re-planning in flight: an opening flight, estimate, plan the rest, fly it, in one stream run.
+
+The paper names re-planning as future work; here it turns ``--iterations`` into one
+continuous flight (issue 20, "robust to the prior"). `run_replanned_stream` streams the
+opening trajectory file (`mavsysid.flight.ground.stream_job.run_stream`) with a
+continuation (`mavsysid.flight.ground.continuation`) that, while the vehicle holds at the
+opening's end:
+
+1. estimates θ̂ and its covariance Σ from the pose recorded so far (the pipeline of
+   ``mavsysid estimate``: `load_flight` from the opening's first setpoint on,
+   `check_kinematics`, `estimate_parameters`, `check_result`), on a snapshot of the
+   complete rows of ``pose.csv``;
+2. plans the rest of the budget (`run_plan`) for ``config.with_parameters(θ̂)`` from the
+   hover where the opening ended, with the posterior as the planner's prior:
+   ``prior_covariance`` = Σ relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the
+   chance-constrained rotor check's spread;
+3. returns the plan; the streamer checks it like the first (box, limits) and flies it.
+
+``meta.json`` records the segments (``opening``, ``replanned``), the estimate used (θ̂, σ,
+Σ), the predicted D-optimality and the estimation and planning times. A failed estimate or
+plan, or a refused plan, lands the vehicle and the run fails (exit 3) with one line.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mavsysid.estimation.estimate_job import check_result
+from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.kinematics_check import check_kinematics
+from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
+from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
+from mavsysid.flight.ground.stream_session import StreamSettings
+from mavsysid.formats.trajectory_file import read_trajectory
+from mavsysid.planner.plan_job import run_plan
+from mavsysid.planner.results import PlannerSettings
+
+from mavsysid.errors import InputError
+
+__all__ = ["ReplanSettings", "relative_covariance", "replanning_continuation",
+           "run_replanned_stream", "snapshot_pose"]
+
+
+@dataclass(frozen=True)
+class ReplanSettings:
+    """How the rest of a flight is planned after its opening.
+
+    Attributes
+    ----------
+    budget : float
+        Whole flight's trajectory time, s, the opening included; the rest is planned.
+    planner : PlannerSettings
+        The re-planning's settings; its budget, box, start and prior_covariance are
+        replaced by the rest, the flight box, the hold and the posterior. Planning time is
+        hover time: keep it short (``max_samples`` for a seed-reproducible plan).
+    estimator : EstimatorSettings or None
+        Settings of the estimate from the opening (None: the defaults of ``estimate``).
+    min_rest : float
+        A rest shorter than this (s) is not planned: the vehicle lands.
+    rounds : int
+        Re-plans at most this many times (1: an opening and one re-planned rest).
+    """
+
+    budget: float
+    planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(
+        planning_time=10.0))
+    estimator: EstimatorSettings | None = None
+    min_rest: float = 2.0
+    rounds: int = 1
+
+
+def relative_covariance(estimate: ParameterEstimate) -> np.ndarray:
+    """Σ of θ relative to θ̂: Σ_jk / (θ̂_j θ̂_k), shape (6, 6).
+
+    Raises
+    ------
+    InputError
+        A θ̂_j that is zero or not finite (no relative spread around it).
+    """
+    theta = np.asarray(estimate.value, dtype=float)
+    if not np.all(np.isfinite(theta) & (theta != 0.0)):
+        raise InputError(f"estimate θ̂ = {theta.tolist()}: a relative covariance needs every "
+                         "parameter finite and non-zero")
+    rel = np.asarray(estimate.covariance, dtype=float) / np.outer(theta, theta)
+    return 0.5 * (rel + rel.T)
+
+
+def snapshot_pose(pose: Path, directory: Path) -> Path:
+    """Copy the complete rows of a pose log being written into ``directory``; the copy.
+
+    The streamer appends rows while the estimator reads; a row cut mid-write is left out.
+    """
+    data = Path(pose).read_bytes()
+    out = Path(directory) / Path(pose).name
+    out.write_bytes(data[: data.rfind(b"\n") + 1])
+    return out
+
+
+def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> ParameterEstimate:
+    """θ̂ and Σ from the flight so far (the ``estimate`` pipeline, from the opening's start)."""
+    with tempfile.TemporaryDirectory(prefix="mavsysid-replan-") as tmp:
+        pose = snapshot_pose(so_far.pose, Path(tmp))
+        flight = load_flight(pose, so_far.config, start=so_far.window_start)
+        check_kinematics(flight)
+        result = estimate_parameters(flight, so_far.config, settings)
+        check_result(str(so_far.pose), result)
+    return result.final
+
+
+def replanning_continuation(settings: ReplanSettings,
+                            say: Callable[[str], None] | None = None) -> Continuation:
+    """The continuation that estimates from the flight so far and plans its rest.
+
+    Returns None (land) after ``settings.rounds`` re-plans, or once less than
+    ``settings.min_rest`` of the budget is left.
+    """
+    say = say or (lambda _text: None)
+
+    def next_segment(so_far: FlightSoFar) -> NextSegment | None:
+        rest = settings.budget - so_far.flown
+        if rest < settings.min_rest or so_far.segments > settings.rounds:
+            return None
+        began = time.monotonic()
+        estimate = _estimate(so_far, settings.estimator)
+        estimated = time.monotonic()
+        sigma = estimate.sigma / np.abs(estimate.value)
+        say("estimate after {:.1f} s: σ/θ {}".format(
+            so_far.flown, ", ".join(f"{100 * s:.1f} %" for s in sigma)))
+        rel = relative_covariance(estimate)
+        planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
+                          start=tuple(so_far.hover),
+                          prior_covariance=tuple(tuple(row) for row in rel.tolist()))
+        plan = run_plan(so_far.config.with_parameters(estimate.value), planner, progress=False)
+        planned = time.monotonic()
+        say(f"re-planned {plan.trajectory.duration:.1f} s in {planned - estimated:.1f} s "
+            f"(estimate {estimated - began:.1f} s), predicted D-opt {plan.predicted_dopt:.3g}")
+        record: dict[str, Any] = {
+            "estimate": {"theta": estimate.value.tolist(), "sigma": estimate.sigma.tolist(),
+                         "covariance": estimate.covariance.tolist(),
+                         "from_flown_s": so_far.flown},
+            "estimation_s": estimated - began, "planning_s": planned - estimated,
+            "planner": {"budget": rest, "max_samples": planner.max_samples,
+                        "planning_time": (planner.planning_time if math.isfinite(
+                            planner.planning_time) else None), "seed": planner.seed,
+                        "rotor_confidence": planner.rotor_confidence,
+                        "start": list(so_far.hover)},
+            "predicted_dopt": plan.predicted_dopt}
+        return NextSegment(plan.trajectory, "replanned", record)
+
+    return next_segment
+
+
+def run_replanned_stream(trajectory: str | Path, stream: StreamSettings, replan: ReplanSettings,
+                         vehicle: str | Path | None = None,
+                         say: Callable[[str], None] | None = None,
+                         progress: bool = True) -> StreamOutcome:
+    """Fly the opening ``trajectory``, then the rest of ``replan.budget`` planned in flight.
+
+    Parameters
+    ----------
+    trajectory : str or Path
+        The opening's trajectory file (``mavsysid plan --budget`` a few seconds).
+    stream : StreamSettings
+    replan : ReplanSettings
+    vehicle : str or Path, optional
+        Shipped vehicle name or TOML path (default: the one stored in the file); its
+        nominal θ is the estimator's prior.
+    say : callable, optional
+    progress : bool
+
+    Raises
+    ------
+    InputError
+        Bad input (`run_stream`'s), or a budget not longer than the opening.
+    JobFailedError
+        Refused or aborted; a failed or refused re-plan after landing.
+    """
+    opening = read_trajectory(trajectory).trajectory.duration
+    if not replan.budget > opening:
+        raise InputError(f"--replan-budget {replan.budget:g}: must exceed the opening's "
+                         f"{opening:.1f} s ({trajectory})")
+    return run_stream(trajectory, stream, vehicle, say, progress,
+                      continuation=replanning_continuation(replan, say))

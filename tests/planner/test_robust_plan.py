@@ -1,0 +1,44 @@
+"""Planning at the most confident rotor check that still admits a flight."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.robust_plan import plan_most_confident
+from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.flatness import flat_to_state
+
+from mavsysid.errors import JobFailedError
+
+
+def settings(**kw) -> PlannerSettings:
+    """A short sample-budgeted request (reproducible)."""
+    return PlannerSettings(budget=6.0, planning_time=np.inf, max_samples=120, seed=4, **kw)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("worst", [0, 2])
+def test_the_flight_keeps_its_rotors_in_range_for_theta_within_the_reported_spread(
+        worst: int) -> None:
+    """At z = 1.645 and σ = 10 %, the flight's rotor speeds (1 ms samples) stay in range with
+    c_T (or c_M) 1.5 σ below the prior, where the unguarded optimum would not need to."""
+    cfg = load_vehicle("quad_x")
+    request = settings(prior_relative_sigma=0.1)
+    got = plan_most_confident(cfg, request, ladder=(1.645,))
+    assert got.rotor_confidence == 1.645
+    theta = cfg.theta.copy()
+    theta[worst] *= 1 - 1.5 * 0.1
+    flight = got.result.trajectory
+    t = np.linspace(0.0, flight.duration, 1 + int(1000 * flight.duration))
+    state = flat_to_state(flight.flat_outputs(t), cfg, theta)
+    lim = cfg.limits
+    assert np.all(np.sqrt(state.rotor_speeds_squared) <= lim.rotor_speed_max * (1 + 1e-9))
+    assert np.all(np.sqrt(state.rotor_speeds_squared) >= lim.rotor_speed_min * (1 - 1e-9))
+
+
+def test_a_ladder_with_no_feasible_rung_fails_in_one_line() -> None:
+    """With a prior spread no hover survives, every rung fails and the error is raised."""
+    cfg = load_vehicle("firefly")
+    with pytest.raises(JobFailedError):
+        plan_most_confident(cfg, settings(prior_relative_sigma=0.5), ladder=(6.0,))
