@@ -10,10 +10,11 @@ opening's end:
    ``mavsysid estimate``: `load_flight` from the opening's first setpoint on,
    `check_kinematics`, `estimate_parameters`, `check_result`), on a snapshot of the
    complete rows of ``pose.csv``;
-2. plans the rest of the budget (`run_plan`) for ``config.with_parameters(θ̂)`` from the
-   hover where the opening ended, with the posterior as the planner's prior:
-   ``prior_covariance`` = Σ relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the
-   chance-constrained rotor check's spread;
+2. plans the rest of the budget for ``config.with_parameters(θ̂)`` from the hover where the
+   opening ended, with the posterior as the planner's prior: ``prior_covariance`` = Σ
+   relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the chance-constrained rotor
+   check's spread, at the most confident rotor check that admits a flight
+   (`plan_most_confident`; the z used goes into meta.json);
 3. returns the plan; the streamer checks it like the first (box, limits) and flies it.
 
 ``meta.json`` records the segments (``opening``, ``replanned``), the estimate used (θ̂, σ,
@@ -41,8 +42,8 @@ from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextS
 from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.formats.trajectory_file import read_trajectory
-from mavsysid.planner.plan_job import run_plan
 from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.robust_plan import plan_most_confident
 
 from mavsysid.errors import InputError
 
@@ -139,9 +140,12 @@ def replanning_continuation(settings: ReplanSettings,
         planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
                           start=tuple(so_far.hover),
                           prior_covariance=tuple(tuple(row) for row in rel.tolist()))
-        plan = run_plan(so_far.config.with_parameters(estimate.value), planner, progress=False)
+        confident = plan_most_confident(so_far.config.with_parameters(estimate.value), planner)
+        plan, planner = confident.result, replace(
+            planner, rotor_confidence=confident.rotor_confidence)
         planned = time.monotonic()
-        say(f"re-planned {plan.trajectory.duration:.1f} s in {planned - estimated:.1f} s "
+        say(f"re-planned {plan.trajectory.duration:.1f} s at rotor confidence "
+            f"z = {planner.rotor_confidence:g} in {planned - estimated:.1f} s "
             f"(estimate {estimated - began:.1f} s), predicted D-opt {plan.predicted_dopt:.3g}")
         record: dict[str, Any] = {
             "estimate": {"theta": estimate.value.tolist(), "sigma": estimate.sigma.tolist(),
