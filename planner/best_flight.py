@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from mavsysid.planner.belief import apply_transfer, identity_transfer
+from mavsysid.planner.gradient_refine import GradientRefiner
 from mavsysid.planner.refine import (
     FlightPricing,
     PathRefiner,
@@ -52,11 +53,13 @@ def best_path(search: GraphSearch) -> RefinablePath | None:
                          search.flight_dopt([*transfers, stop.transfer]))
 
 
-def refine_best(search: GraphSearch) -> RefinablePath | None:
+def refine_best(search: GraphSearch, gradient: bool = False) -> RefinablePath | None:
     """Spend the rest of the planning time refining the search's best flight.
 
-    Records the steps taken and kept on ``search`` (``refined_steps``,
-    ``refined_accepted``) and each improvement in its ``history``.
+    With ``gradient`` the refinement mixes block-gradient steps with the ES
+    (`mavsysid.planner.gradient_refine`); its steps count pricings. Records the steps
+    taken and kept on ``search`` (``refined_steps``, ``refined_accepted``) and each
+    improvement in its ``history``.
     """
     path = best_path(search)
     if path is None or search.refine_steps == 0:
@@ -65,11 +68,11 @@ def refine_best(search: GraphSearch) -> RefinablePath | None:
     pricing = FlightPricing(search.sigma0, search.propagate_segments, search.kept_transfer,
                             apply_transfer, search.dopt, identity_transfer())
     path = split_path(path, settings.refine_split, search.feasible, search.transfer_of)
-    refiner = PathRefiner(path, search.feasible,
-                          lambda state: search.stop_at(state, with_transfer=False), pricing,
-                          search.box, settings.budget,
-                          np.random.default_rng([settings.seed, 1]),
-                          search.config.limits.segment_time_max)
+    es = PathRefiner(path, search.feasible,
+                     lambda state: search.stop_at(state, with_transfer=False), pricing,
+                     search.box, settings.budget, np.random.default_rng([settings.seed, 1]),
+                     search.config.limits.segment_time_max)
+    refiner: PathRefiner | GradientRefiner = GradientRefiner(es) if gradient else es
     while refiner.steps < search.refine_steps and search.elapsed() < settings.planning_time:
         if refiner.step():
             search.history.append((search.elapsed(), refiner.path.dopt))

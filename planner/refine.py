@@ -25,14 +25,15 @@ import numpy as np
 from mavsysid.planner.belief import EdgeTransfer
 from mavsysid.planner.segments import Segment, VertexState, connect_fixed
 
-__all__ = ["FlightPricing", "PathRefiner", "RefinablePath", "StopChoice", "split_path"]
+__all__ = ["DURATION_SCALE", "POSITION_SCALE", "YAW_SCALE", "FlightPricing", "PathRefiner",
+           "RefinablePath", "StopChoice", "split_path"]
 
 #: Perturbation scale of each flat derivative at step size 1: position (m) to snap
 #: (m/s⁴), then yaw (rad) to yaw acceleration (rad/s²).
-_POSITION_SCALE = np.array([0.3, 0.7, 2.0, 5.0, 20.0])
-_YAW_SCALE = np.array([0.5, 0.7, 2.0])
+POSITION_SCALE = np.array([0.3, 0.7, 2.0, 5.0, 20.0])
+YAW_SCALE = np.array([0.5, 0.7, 2.0])
 #: Log-normal σ of a duration change at step size 1.
-_DURATION_SCALE = 0.15
+DURATION_SCALE = 0.15
 #: 1/5 success rule: a success grows the step by exp(4 a), a failure shrinks it by exp(-a).
 _ADAPT = 0.05
 _STEP_RANGE = (0.02, 2.0)
@@ -185,7 +186,7 @@ class PathRefiner:
         candidate = self._candidate()
         better = candidate is not None and candidate[0].dopt < self.path.dopt
         if better:
-            self._accept(*candidate)  # type: ignore[misc]
+            self.accept(*candidate)  # type: ignore[misc]
             self.accepted += 1
             self.step_size *= np.exp(4.0 * _ADAPT)
         else:
@@ -193,7 +194,7 @@ class PathRefiner:
         self.step_size = float(np.clip(self.step_size, *_STEP_RANGE))
         return better
 
-    def _accept(self, path: RefinablePath, changed: list[int]) -> None:
+    def accept(self, path: RefinablePath, changed: list[int]) -> None:
         """Keep ``path``: build the transfers of its changed segments and stop."""
         transfers = list(path.transfers)
         for j in changed:
@@ -217,10 +218,25 @@ class PathRefiner:
             changed = [i - 1, i] if i < k else [i - 1]
         else:
             i = int(self.rng.integers(0, k))
-            durations[i] *= float(np.exp(self.rng.normal(0.0, _DURATION_SCALE * self.step_size)))
+            durations[i] *= float(np.exp(self.rng.normal(0.0, DURATION_SCALE * self.step_size)))
             changed = [i]
-            if durations[i] > self.segment_time_max:
-                return None
+        return self.candidate(vertices, durations, changed)
+
+    def candidate(self, vertices: list[VertexState], durations: list[float],
+                  changed: list[int], check: bool = True
+                  ) -> tuple[RefinablePath, list[int]] | None:
+        """The flight with new ``vertices`` and ``durations``, priced, or None when out of
+        the limits.
+
+        Only the segments ``changed`` (contiguous indices) are re-solved, and the stop
+        only when the last vertex moved. None when a changed segment is longer than
+        `Limits.segment_time_max`, the flight longer than the budget, a changed segment
+        or the stop infeasible (``check`` False skips the feasibility checks: for
+        finite-difference probes of a kept flight).
+        """
+        path, k = self.path, len(self.path.segments)
+        if any(durations[j] > self.segment_time_max for j in changed):
+            return None
         stop = path.stop
         if vertices[k] is not path.vertices[k]:
             stop = self.stop_at(vertices[k])
@@ -231,13 +247,13 @@ class PathRefiner:
         segments = list(path.segments)
         for j in changed:
             segment = connect_fixed(vertices[j], vertices[j + 1], durations[j])
-            if not self.feasible(segment):
+            if check and not self.feasible(segment):
                 return None
             segments[j] = segment
-        dopt = self._price(segments, changed, stop)
+        dopt = self.price(segments, changed, stop)
         return RefinablePath(tuple(vertices), tuple(segments), path.transfers, stop, dopt), changed
 
-    def _price(self, segments: list[Segment], changed: list[int], stop: StopChoice) -> float:
+    def price(self, segments: list[Segment], changed: list[int], stop: StopChoice) -> float:
         """D-opt of the flight with ``changed`` segments (contiguous) and ``stop`` replaced."""
         p = self.pricing
         fly = [segments[j] for j in changed]
@@ -253,7 +269,7 @@ class PathRefiner:
 
     def _perturbed_vertex(self, vertex: VertexState) -> VertexState:
         s = self.step_size
-        position = vertex.position + s * _POSITION_SCALE[:, None] * self.rng.normal(size=(5, 3))
+        position = vertex.position + s * POSITION_SCALE[:, None] * self.rng.normal(size=(5, 3))
         position[0] = np.clip(position[0], self.lo, self.hi)
-        yaw = vertex.yaw + s * _YAW_SCALE * self.rng.normal(size=3)
+        yaw = vertex.yaw + s * YAW_SCALE * self.rng.normal(size=3)
         return VertexState(position, yaw)
