@@ -2,25 +2,23 @@
 
 The position controller that flies the plan follows only so much speed, acceleration,
 jerk, lean angle and yaw rate (`mavsysid.vehicle.kinematic_limits.KinematicLimits`, set
-from the autopilot's parameters). The planner keeps each segment's sampled peaks below
-`PLAN_SHARE` of every limit: the streamer's pre-flight check samples the whole flight at
-other instants (`mavsysid.vehicle.kinematic_limits.kinematic_peaks`), and a sampled
-polynomial peak is within a relative (ω Δt)²/8 of the true one, far below the share left.
+from the autopilot's parameters). The planner keeps each segment's exact peaks below
+`PLAN_SHARE` of every limit; the streamer's pre-flight check finds the same exact peaks over
+the whole flight (`mavsysid.vehicle.kinematic_limits.kinematic_peaks`), so the share left
+is a margin for the autopilot, not for sampling.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from mavsysid.planner.segments import Segment
-from mavsysid.planner.unit_interval import POWERS
 from mavsysid.vehicle.kinematic_limits import (
-    PEAK_STEP,
+    KINEMATIC_FIELDS,
     KinematicLimits,
     KinematicPeaks,
     exceeded,
-    flat_peaks,
+    polynomial_peaks,
 )
-from mavsysid.vehicle.trajectory import FlatOutputs
 
 from mavsysid.errors import InputError
 
@@ -30,22 +28,28 @@ __all__ = ["PLAN_SHARE", "check_limits", "exceeded_limits", "segment_peaks"]
 PLAN_SHARE = 0.98
 
 
-def segment_peaks(segment: Segment, step: float = PEAK_STEP) -> KinematicPeaks:
-    """The kinematic peaks of ``segment``, sampled every ``step`` s and at both ends."""
-    n = max(2, int(np.ceil(segment.duration / step)) + 1)
-    s = np.linspace(0.0, 1.0, n)
-    v = (s[:, None] ** POWERS) @ segment.derivative_coeffs
-    flat = FlatOutputs(position=v[:, 0:3], velocity=v[:, 3:6], acceleration=v[:, 6:9],
-                       jerk=v[:, 9:12], snap=v[:, 12:15], yaw=v[:, 15],
-                       yaw_rate=v[:, 16], yaw_acceleration=v[:, 17])
-    return flat_peaks(flat)
+def segment_peaks(segment: Segment) -> KinematicPeaks:
+    """The exact kinematic peaks of ``segment`` (`kinematic_limits.polynomial_peaks`)."""
+    return polynomial_peaks(segment.position_coeffs[None], segment.yaw_coeffs[None],
+                            np.array([segment.duration]))
 
 
 def exceeded_limits(segment: Segment, limits: KinematicLimits) -> str:
-    """The first quantity of ``limits`` whose `PLAN_SHARE` the segment's peaks exceed, or ""."""
+    """A quantity of ``limits`` whose `PLAN_SHARE` the segment's exact peaks exceed, or "".
+
+    The first such quantity on a grid of samples when there is one, else the first at the
+    exact peaks.
+    """
     share = KinematicLimits(**{name: None if limit is None else PLAN_SHARE * limit
                                for name, limit in vars(limits).items()})
-    over = exceeded(segment_peaks(segment), share)
+    limited = tuple(name for name in KINEMATIC_FIELDS if getattr(share, name) is not None)
+    args = (segment.position_coeffs[None], segment.yaw_coeffs[None],
+            np.array([segment.duration]))
+    # Grid peaks are below the exact ones: one over its share there is over it exactly,
+    # without the roots, which cost most of the time.
+    over = exceeded(polynomial_peaks(*args, limited, exact=False), share)
+    if not over:
+        over = exceeded(polynomial_peaks(*args, limited), share)
     return over[0][0] if over else ""
 
 

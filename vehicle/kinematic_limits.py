@@ -2,28 +2,25 @@
 
 A position controller (ArduPilot's, PX4's) limits what it follows by speed,
 acceleration, jerk, lean angle and yaw rate. `KinematicLimits` is that envelope in SI
-(None: no limit), `kinematic_peaks` the largest values a trajectory asks for, and
+(None: no limit), `kinematic_peaks` the largest values a trajectory asks for (exact: at
+the roots of polynomial derivatives, `mavsysid.vehicle.polynomial_extremes`), and
 `exceeded` compares the two. The lean angle a flat trajectory implies is the angle of its
-thrust direction a + g ẑ from the vertical (ENU, z up), stated once in `tilt_angle`.
+thrust direction a + g ẑ from the vertical (ENU, z up), stated once in
+`mavsysid.vehicle.polynomial_extremes.tilt_angle`.
 The planner keeps its segments inside such an envelope; the streamer checks a plan
 against the limits the autopilot reports.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 
 import numpy as np
-from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.trajectory import FlatOutputs, Trajectory
+from mavsysid.vehicle.polynomial_extremes import segment_extremes
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-__all__ = ["KINEMATIC_FIELDS", "PEAK_STEP", "KinematicLimits", "KinematicPeaks", "exceeded",
-           "flat_peaks", "kinematic_peaks", "tilt_angle"]
-
-#: Sampling step of `kinematic_peaks`, s (polynomial peaks are flat: the sampled maximum
-#: is within a relative (ω Δt)²/8 of the true one).
-PEAK_STEP = 0.005
+__all__ = ["KINEMATIC_FIELDS", "KinematicLimits", "KinematicPeaks", "exceeded",
+           "kinematic_peaks", "polynomial_peaks"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +57,11 @@ class KinematicPeaks:
 
 #: The quantities of `KinematicPeaks` / `KinematicLimits`, in their order.
 KINEMATIC_FIELDS = tuple(f.name for f in fields(KinematicPeaks))
+#: Each peak as (quantity of `segment_extremes`, sign): climb/descent and the vertical
+#: accelerations are the two signs of one signed quantity.
+_EXTREME_OF = {name: (name, 1.0) for name in KINEMATIC_FIELDS} | {
+    "climb": ("vertical_speed", 1.0), "descent": ("vertical_speed", -1.0),
+    "accel_up": ("vertical_accel", 1.0), "accel_down": ("vertical_accel", -1.0)}
 
 
 @dataclass(frozen=True)
@@ -84,45 +86,46 @@ class KinematicLimits:
         return all(getattr(self, name) is None for name in KINEMATIC_FIELDS)
 
 
-def tilt_angle(acceleration: np.ndarray) -> np.ndarray:
-    """Lean angle of the thrust direction a + g ẑ from the vertical, rad.
+def polynomial_peaks(position_coeffs: np.ndarray, yaw_coeffs: np.ndarray,
+                     durations: np.ndarray, fields: tuple[str, ...] = KINEMATIC_FIELDS,
+                     exact: bool = True) -> KinematicPeaks:
+    """The exact largest kinematic values of polynomial segments (see `KinematicPeaks`).
 
     Parameters
     ----------
-    acceleration : ndarray, shape (S, 3)
-        Acceleration, m/s², world ENU (z up).
+    position_coeffs : ndarray, shape (M, 3, N)
+        Per segment and axis (ENU, z up), coefficients of increasing powers of the
+        segment's local time τ, m/s^k.
+    yaw_coeffs : ndarray, shape (M, Ny)
+        Per segment, yaw coefficients of increasing powers of τ, rad/s^k.
+    durations : ndarray, shape (M,)
+        Segment durations, s.
+    fields : tuple of str
+        The peaks wanted (of `KINEMATIC_FIELDS`); the others are left 0.
+    exact : bool
+        False: only the grid of `segment_extremes`, peaks that may be low (a quick
+        rejection test: a grid peak over a limit is over it).
 
     Returns
     -------
-    ndarray, shape (S,)
-        In [0, π]; above π/2 the thrust would have to point down.
+    KinematicPeaks
+        Each the maximum over all segments, at the exact extremes
+        (`mavsysid.vehicle.polynomial_extremes.segment_extremes`).
     """
-    a = np.asarray(acceleration, dtype=float)
-    return np.arctan2(np.linalg.norm(a[:, :2], axis=1), a[:, 2] + GRAVITY)
+    names = tuple(dict.fromkeys(_EXTREME_OF[f][0] for f in fields))
+    top = dict.fromkeys(KINEMATIC_FIELDS, 0.0)
+    for pc, yc, duration in zip(position_coeffs, yaw_coeffs, durations, strict=True):
+        ext = segment_extremes(pc, yc, float(duration), names, exact=exact)
+        for f in fields:
+            name, sign = _EXTREME_OF[f]
+            top[f] = max(top[f], float(np.max(sign * ext[name][1])))
+    return KinematicPeaks(**top)
 
 
-def flat_peaks(flat: FlatOutputs) -> KinematicPeaks:
-    """The largest kinematic values over samples of flat outputs (see `KinematicPeaks`)."""
-    v, a, j = flat.velocity, flat.acceleration, flat.jerk
-
-    def top(x: np.ndarray) -> float:
-        return float(np.max(x)) if x.size else 0.0
-
-    return KinematicPeaks(
-        speed_xy=top(np.linalg.norm(v[:, :2], axis=1)), climb=max(top(v[:, 2]), 0.0),
-        descent=max(top(-v[:, 2]), 0.0), accel_xy=top(np.linalg.norm(a[:, :2], axis=1)),
-        accel_up=max(top(a[:, 2]), 0.0), accel_down=max(top(-a[:, 2]), 0.0),
-        jerk_xy=top(np.linalg.norm(j[:, :2], axis=1)), jerk_z=top(np.abs(j[:, 2])),
-        jerk=top(np.linalg.norm(j, axis=1)), tilt=top(tilt_angle(a)),
-        yaw_rate=top(np.abs(flat.yaw_rate)), yaw_acceleration=top(np.abs(flat.yaw_acceleration)))
-
-
-def kinematic_peaks(trajectory: Trajectory, step: float = PEAK_STEP) -> KinematicPeaks:
-    """The largest kinematic values of ``trajectory``, sampled every ``step`` s (and at
-    its end)."""
-    duration = float(trajectory.duration)
-    n = max(2, math.ceil(duration / step) + 1)
-    return flat_peaks(trajectory.flat_outputs(np.linspace(0.0, duration, n)))
+def kinematic_peaks(trajectory: PiecewisePolynomial) -> KinematicPeaks:
+    """The exact largest kinematic values of ``trajectory`` (`polynomial_peaks`)."""
+    return polynomial_peaks(trajectory.position_coeffs, trajectory.yaw_coeffs,
+                            trajectory.durations)
 
 
 def exceeded(peaks: KinematicPeaks, limits: KinematicLimits

@@ -23,18 +23,20 @@ never from the file's ``limits`` block):
 Nothing escapes between samples: each segment is a polynomial, so every quantity's
 extreme over the segment is found exactly, at the segment ends or at a real root of its
 derivative (squared norms are polynomials too), plus a grid of samples in case a root
-is lost to rounding. The refusal is one line naming the quantity, its value, the limit
-and the time in the file (`check_trajectory`).
+is lost to rounding (`mavsysid.vehicle.polynomial_extremes.segment_extremes`, the same
+function the planner's and the autopilot's kinematic peaks use). The refusal is one line
+naming the quantity, its value, the limit and the time in the file (`check_trajectory`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from mavsysid.flight.ground.setpoints import SetpointLimits
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.polynomial_extremes import segment_extremes
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import InputError
@@ -51,9 +53,11 @@ __all__ = [
 GROUND_MARGIN = 0.5
 #: Largest mismatch at a segment join: m, m/s, m/s², rad, rad/s.
 JOIN_TOLERANCE = (1e-3, 1e-3, 1e-2, 1e-3, 1e-3)
-# Samples per segment besides the exact extremes (a safety net against lost roots).
-_GRID = 33
 _P = np.polynomial.polynomial
+# The quantities checked (`segment_extremes`' names) and how refusals name them.
+_CHECKED = {"x": "x", "y": "y", "z": "z", "speed": "speed",
+            "thrust": "thrust acceleration |a - g|", "jerk": "jerk", "yaw": "yaw",
+            "yaw_rate": "yaw rate", "yaw_acceleration": "yaw acceleration"}
 
 
 def operator_box(cli_box: Sequence[float] | None, vehicle_box: Sequence[float] | None,
@@ -97,50 +101,11 @@ def flight_limits(config: VehicleConfig, box: Sequence[float]) -> SetpointLimits
         yaw_acceleration_max=lim.yaw_acceleration_max)
 
 
-def _extremes(value: Callable[[np.ndarray], np.ndarray], coeffs: np.ndarray, duration: float
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """Where in [0, duration] and what ``value`` is at the candidates of ``coeffs``' extremes.
-
-    ``coeffs`` are the polynomial whose stationary points are sought (increasing powers).
-    """
-    grid = np.linspace(0.0, duration, _GRID)
-    trimmed = _P.polytrim(_P.polyder(coeffs), 0.0)
-    roots = np.empty(0)
-    if trimmed.size > 1 and np.all(np.isfinite(trimmed)) and trimmed[-1] != 0.0:
-        r = _P.polyroots(trimmed)
-        r = r.real[np.abs(r.imag) <= 1e-9 * max(1.0, duration)]
-        roots = r[(r >= 0.0) & (r <= duration)]
-    tau = np.concatenate([grid, roots])
-    return tau, value(tau)
-
-
 def _segment_quantities(pc: np.ndarray, yc: np.ndarray, duration: float
                         ) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(name, τ, values) of each checked quantity on one segment, at its extreme candidates."""
-    v = _P.polyder(pc, 1, axis=1)
-    a = _P.polyder(pc, 2, axis=1)
-    j = _P.polyder(pc, 3, axis=1)
-
-    def norm2(rows: Sequence[np.ndarray], offset: float = 0.0) -> np.ndarray:
-        total = np.zeros(1)
-        for i, c in enumerate(rows):
-            c = _P.polyadd(c, [offset]) if i == 2 else c
-            total = _P.polyadd(total, _P.polymul(c, c))
-        return total
-
-    out = []
-    for i, axis in enumerate("xyz"):
-        out.append((axis, *_extremes(lambda t, c=pc[i]: _P.polyval(t, c), pc[i], duration)))
-    for name, sq in (("speed", norm2(v)), ("thrust acceleration |a - g|", norm2(a, GRAVITY)),
-                     ("jerk", norm2(j))):
-        out.append((name, *_extremes(lambda t, c=sq: np.sqrt(np.abs(_P.polyval(t, c))), sq,
-                                     duration)))
-    yd1, yd2 = _P.polyder(yc, 1), _P.polyder(yc, 2)
-    out.append(("yaw", *_extremes(lambda t: _P.polyval(t, yc), yc, duration)))
-    for name, c in (("yaw rate", yd1), ("yaw acceleration", yd2)):
-        sq = _P.polymul(c, c)
-        out.append((name, *_extremes(lambda t, c=c: np.abs(_P.polyval(t, c)), sq, duration)))
-    return out
+    extremes = segment_extremes(pc, yc, duration, tuple(_CHECKED))
+    return [(label, *extremes[name]) for name, label in _CHECKED.items()]
 
 
 def _bounds(limits: SetpointLimits) -> dict[str, tuple[float, float, str, str]]:

@@ -21,9 +21,10 @@ from typing import Any
 import pytest
 from mavsysid.flight.mavlink_setup import load_mavutil
 
-from tests.support.stream_flights import wait_for
+from tests.support.stream_flights import start_stream, wait_for
 
-__all__ = ["SITL_DIR", "Observer", "SitlInstance", "require_sitl", "running_sitl"]
+__all__ = ["SITL_DIR", "Observer", "SitlInstance", "observing", "require_sitl", "running_sitl",
+           "streaming"]
 
 #: Where the shared SITL build lives, beside the checkout.
 SITL_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "sitl"
@@ -159,7 +160,14 @@ class Observer:
         except OSError:
             return None
 
+    def drain(self) -> None:
+        """Drop what arrived unread (older PARAM_VALUEs would pass for fresh answers)."""
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
     def params(self, names: tuple[str, ...], timeout: float = 10.0) -> dict[str, float]:
+        """The values of ``names`` now (those answered within ``timeout`` s)."""
+        self.drain()
         got: dict[str, float] = {}
         deadline = time.monotonic() + timeout
         while len(got) < len(names) and time.monotonic() < deadline:
@@ -178,3 +186,29 @@ class Observer:
 
     def close(self) -> None:
         self.conn.close()
+
+
+@contextmanager
+def observing(sitl: SitlInstance) -> Iterator[Observer]:
+    """An `Observer` on ``sitl``'s SERIAL1 for the ``with`` block, closed on the way out."""
+    observer = Observer(sitl.port + 2)
+    try:
+        yield observer
+    finally:
+        observer.close()
+
+
+@contextmanager
+def streaming(trajectory: Path, sitl: SitlInstance, *args: str, cwd: Path
+              ) -> Iterator[subprocess.Popen[str]]:
+    """``mavsysid stream`` of ``trajectory`` to ``sitl`` (wall clock: a real autopilot) for
+    the ``with`` block, stderr in ``cwd/stream.err``; killed on the way out if still running."""
+    stream = start_stream(trajectory, "--connect", sitl.connect, *args, cwd=cwd, lockstep=False)
+    try:
+        yield stream
+    finally:
+        if stream.poll() is None:
+            stream.kill()
+        stream.wait(timeout=10)
+        if stream.stdout is not None:
+            stream.stdout.close()

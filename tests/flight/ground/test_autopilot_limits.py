@@ -22,8 +22,8 @@ from mavsysid.vehicle.kinematic_limits import (
     KinematicPeaks,
     exceeded,
     kinematic_peaks,
-    tilt_angle,
 )
+from mavsysid.vehicle.polynomial_extremes import tilt_angle
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import JobFailedError
