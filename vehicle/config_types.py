@@ -50,9 +50,10 @@ PARAMETER_UNITS: dict[str, str] = {
 }
 
 #: ``[limits] allocation``: how rotor limits bound the wrench. "pseudo_inverse": n² = A⁺ w
-#: must lie in the rotor box (the mixers of ArduPilot, PX4, RotorS's Lee controller and
-#: mavsysid's own simulator controller); "exact": any n² in the box with A n² = w (a
-#: controller that allocates over the null space), `mavsysid.vehicle.allocation_polytope`.
+#: must lie in the rotor box (the mixers of ArduPilot, PX4 and RotorS's Lee controller);
+#: "exact": any n² in the box with A n² = w (a controller that allocates over the null
+#: space), `mavsysid.vehicle.allocation_polytope`. mavsysid's simulated controllers mix
+#: as this says (`mavsysid.flight.offline.null_space_mixer`).
 ALLOCATION_MODES: tuple[str, ...] = ("pseudo_inverse", "exact")
 
 #: Default unmodelled linear acceleration noise density, m/s²·√s.

@@ -8,8 +8,10 @@ predicted rotor drag, which the thrust must also overcome). Attitude loop on SO(
 
 with ω_d and ω̇_d from differential flatness of the reference. Gains are natural
 frequencies and damping ratios, so one set works from a 30 g to a 3 kg vehicle. The
-wrench is allocated to rotor speeds with the model's A⁺; at the rotor limits yaw torque
-is given up first, then commands are clipped.
+wrench is mixed as the vehicle file's ``[limits] allocation`` says
+(`mavsysid.flight.offline.null_space_mixer`): with the model's A⁺ ("pseudo_inverse"), or
+over the allocation null space ("exact"); at the rotor limits yaw torque is given up
+first, then commands are clipped.
 """
 
 from __future__ import annotations
@@ -19,7 +21,13 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from mavsysid.vehicle.allocation import allocation_pinv
+from mavsysid.flight.offline.null_space_mixer import (
+    NullSpaceMixer,
+    null_space_mix,
+    null_space_mixer,
+    pseudo_inverse_mix,
+)
+from mavsysid.vehicle.allocation import allocation_matrix, allocation_pinv
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.dynamics import rotation_kernel
 from mavsysid.vehicle.flatness import flat_to_state
@@ -57,8 +65,8 @@ def reference_samples(
 
 
 @numba.njit(cache=True)
-def _control_kernel(x, ref, mass, J, c_D, gains, pinv, n2_min, n2_max, out):
-    """Rotor-speed command into ``out`` (k,); returns True if any rotor was clipped."""
+def _wrench_kernel(x, ref, mass, J, c_D, gains):
+    """Commanded wrench [T, τ_x, τ_y, τ_z] (N, N·m), shape (4,), for state x and reference row."""
     kp, kv, kR, kw, max_tilt, drag_comp = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
     R = rotation_kernel(x[6:10])
     vB = x[3:6]
@@ -103,32 +111,25 @@ def _control_kernel(x, ref, mass, J, c_D, gains, pinv, n2_min, n2_max, out):
     wxwd = np.cross(w, wd)
     M = J * (-kR * eR - kw * (w - wd)) + np.cross(w, Jw) - J * (wxwd - dwd)
 
-    # Allocate thrust, roll and pitch first; give up yaw torque before anything else,
-    # as autopilots do, since the yaw authority of rotor moments is small.
-    k = pinv.shape[0]
-    base = np.empty(k)
-    yaw_part = np.empty(k)
-    for i in range(k):
-        base[i] = pinv[i, 0] * thrust + pinv[i, 1] * M[0] + pinv[i, 2] * M[1]
-        yaw_part[i] = pinv[i, 3] * M[2]
-    scale = 1.0
-    for i in range(k):
-        if yaw_part[i] > 0.0 and base[i] + yaw_part[i] > n2_max:
-            scale = min(scale, (n2_max - base[i]) / yaw_part[i])
-        elif yaw_part[i] < 0.0 and base[i] + yaw_part[i] < n2_min:
-            scale = min(scale, (n2_min - base[i]) / yaw_part[i])
-    scale = max(scale, 0.0)
-    clipped = scale < 1.0
-    for i in range(k):
-        v = base[i] + scale * yaw_part[i]
-        if v < n2_min:
-            v = n2_min
-            clipped = True
-        elif v > n2_max:
-            v = n2_max
-            clipped = True
-        out[i] = np.sqrt(v)
-    return clipped
+    wrench = np.empty(4)
+    wrench[0] = thrust
+    wrench[1:] = M
+    return wrench
+
+
+@numba.njit(cache=True)
+def _control_kernel(x, ref, mass, J, c_D, gains, pinv, n2_min, n2_max, out):
+    """A⁺-mixed rotor-speed command into ``out`` (k,); returns True if any rotor was clipped."""
+    w = _wrench_kernel(x, ref, mass, J, c_D, gains)
+    return pseudo_inverse_mix(w, pinv, n2_min, n2_max, out)
+
+
+@numba.njit(cache=True)
+def _exact_control_kernel(x, ref, mass, J, c_D, gains, pinv, null, normals, lower, upper,
+                          tol, n2_min, n2_max, out):
+    """Null-space-mixed rotor-speed command into ``out`` (k,); True if yaw or a rotor saturated."""
+    w = _wrench_kernel(x, ref, mass, J, c_D, gains)
+    return null_space_mix(w, pinv, null, normals, lower, upper, tol, n2_min, n2_max, out)
 
 
 class GeometricController:
@@ -162,13 +163,25 @@ class GeometricController:
         self._pinv = np.ascontiguousarray(allocation_pinv(config, theta))
         self._n2_min = config.limits.rotor_speed_min**2
         self._n2_max = config.limits.rotor_speed_max**2
+        # "exact": the vehicle's mixer uses the allocation null space (see null_space_mixer).
+        self._mixer: NullSpaceMixer | None = None
+        if config.allocation == "exact":
+            self._mixer = null_space_mixer(allocation_matrix(config, theta), self._pinv,
+                                           self._n2_min, self._n2_max)
 
     def command(self, x: np.ndarray, reference: np.ndarray, out: np.ndarray) -> bool:
         """Write rotor-speed commands (rad/s, shape (k,)) for state x (13,) into ``out``.
 
-        Returns True when a rotor command was clipped at a limit.
+        Returns True when a rotor command was clipped at a limit (or, with the exact
+        mixer, yaw torque was given up).
         """
-        return _control_kernel(
-            x, reference, self._mass, self._J, self._c_D, self._gains, self._pinv,
-            self._n2_min, self._n2_max, out,
+        m = self._mixer
+        if m is None:
+            return _control_kernel(
+                x, reference, self._mass, self._J, self._c_D, self._gains, self._pinv,
+                self._n2_min, self._n2_max, out,
+            )
+        return _exact_control_kernel(
+            x, reference, self._mass, self._J, self._c_D, self._gains, m.pinv, m.null,
+            m.normals, m.lower, m.upper, m.tolerance, m.n2_min, m.n2_max, out,
         )
