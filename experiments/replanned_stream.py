@@ -47,8 +47,14 @@ from mavsysid.planner.robust_plan import plan_most_confident
 
 from mavsysid.errors import InputError
 
-__all__ = ["ReplanSettings", "relative_covariance", "replanning_continuation",
+__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "relative_covariance", "replanning_continuation",
            "run_replanned_stream", "snapshot_pose"]
+
+
+#: Rotor n² share the re-planned rest leaves free at each end for the autopilot's feedback:
+#: with motor lag (25 ms) a plan on the rotor limit saturated 14–25 % of the control ticks
+#: even when planned with the true θ; 0.1 brought that to 0.4–1.6 % (README, issue 20).
+FEEDBACK_HEADROOM = 0.1
 
 
 @dataclass(frozen=True)
@@ -73,7 +79,7 @@ class ReplanSettings:
 
     budget: float
     planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(
-        planning_time=10.0))
+        planning_time=10.0, rotor_headroom=FEEDBACK_HEADROOM))
     estimator: EstimatorSettings | None = None
     min_rest: float = 2.0
     rounds: int = 1

@@ -169,12 +169,12 @@ def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
             raise InputError(f"--{option.replace('_', '-')} {value}: expected a count "
                              f"(at least {1 if option == 'replan_samples' else 0})")
     # Only a re-planned flight loads the estimator and the planner.
-    from mavsysid.experiments.replanned_stream import ReplanSettings
+    from mavsysid.experiments.replanned_stream import FEEDBACK_HEADROOM, ReplanSettings
     from mavsysid.planner.results import PlannerSettings
 
     time = float("inf") if args.replan_samples is not None else args.replan_time
     planner = PlannerSettings(planning_time=time, max_samples=args.replan_samples,
-                              seed=args.replan_seed)
+                              seed=args.replan_seed, rotor_headroom=FEEDBACK_HEADROOM)
     if args.replan_refine_steps is not None:
         planner = replace(planner, refine_steps=args.replan_refine_steps)
     return ReplanSettings(budget=args.replan_budget, planner=planner)
