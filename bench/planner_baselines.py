@@ -3,31 +3,46 @@
 For each seed the unknown θ is drawn ±50 % around the truth (`mavsysid.experiments.
 experiment.draw_prior`); that draw is the planner's model and the filter's prior. Each kind
 gets the same vehicle, budget, box and limits (`mavsysid.experiments.baselines`):
-"dopt" (the planner), "random" (the paper's baseline), "practitioner" (the built-in
+"dopt" (the planner, re-planned in flight: `mavsysid.experiments.replanned_flight`, an
+``--opening`` s opening flown and filtered, the rest planned from the posterior; the whole
+flight flown again from the start with the same seed), "dopt_once" (the planner's single
+plan from the prior), "random" (the paper's baseline), "practitioner" (the built-in
 Lissajous with yaw, scaled once to the limits at the prior), "oracle" (the planner given
 the true θ) and "paper_constraints" (the planner without the rotor check). Every flight is
-flown in the offline simulator with the true θ (controller tuned to the truth) and filtered.
+flown in the offline simulator with the true θ (controller tuned to the truth) and filtered
+from the prior.
 
-Reported, with 95 % paired-bootstrap intervals over seeds:
-- median reached D-opt of each baseline over the planned flight's (> 1: planned better);
-- saturation: flights with a rotor at its limit on > 5 % of control ticks, and flights
-  > 0.5 m RMS off their path;
-- median |error| per parameter;
-- data efficiency: seconds of each baseline (repeated back to back) until its belief,
-  propagated with the true θ along its nominal path, reaches the planned flight's D-opt;
-  and per flight the seconds until every σ_j/θ_j ≤ 1 % (filter σ);
-- the paper's convergence time (median of the estimates within 5 %), as a column only.
+``--mismatch`` hides the physics of issue 18 in the truth: rotor drag linear in rotor speed
+instead of the quadratic law (c_D = 0 and k = c_T c_D n_h, the same drag in hover; errors
+scored against the nominal θ, i.e. c_D's hover equivalent; `bench/mismatch_coverage.py`)
+and a 40 ms motor lag whose log reports commanded speeds.
 
-    nice -n 19 python bench/planner_baselines.py [--seeds 5] [--budget 30] [--time 5]
+Reported (`bench/planner_baselines_summary.py`), with 95 % paired-bootstrap intervals over
+seeds: D-opt ratios against the re-planned flight, flyability (> 5 % saturated ticks,
+> 0.5 m RMS off path), median |error|, the planner's predicted σ at the θ it planned with
+against the filter's σ, seconds to the planned flight's D-opt, seconds to σ/θ ≤ 1 % and the
+paper's convergence column; the issue's targets with pass/fail. ``--json`` writes the
+summary and the per-seed rows; rows are also appended to ``FILE.rows.jsonl`` as seeds end,
+and ``--from-rows FILE.rows.jsonl`` summarises those (a run stopped early included).
+
+    nice -n 10 python bench/planner_baselines.py [--seeds 100] [--budget 30] [--time 5]
+        [--jobs 1] [--mismatch] [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.baselines import BASELINES, baseline_trajectory
 from mavsysid.experiments.data_efficiency import (
@@ -35,162 +50,203 @@ from mavsysid.experiments.data_efficiency import (
     seconds_to_dopt,
     seconds_to_relative_sigma,
 )
-from mavsysid.experiments.evaluation import median_convergence_time
-from mavsysid.experiments.evaluation_intervals import OFF_PATH_RMS, SATURATED_SHARE
 from mavsysid.experiments.experiment import (
     PRIOR_SPREAD,
     draw_prior,
     estimate_history,
     filter_flight,
 )
+from mavsysid.experiments.replanned_flight import OPENING_BUDGET, replan_flight
+from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
-from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
-from scipy.stats import bootstrap
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+from mavsysid.vehicle.model_effects import effect_from_values
 
-KINDS = ("dopt", *BASELINES)
+from bench.mismatch_coverage import CASES, truth_side
+from bench.planner_baselines_summary import format_summary, summarize
+from mavsysid.errors import JobFailedError
+
+KINDS = ("dopt", "dopt_once", *BASELINES)
+#: The hidden truth of ``--mismatch``: the issue-18 effects that change what is fitted.
+MISMATCH = ("rotor_drag_linear", "motor_lag")
 
 
-def parse_args() -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The benchmark's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=100)
+    parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--budget", type=float, default=30.0)
     parser.add_argument("--time", type=float, default=5.0, help="planning time per plan, s")
+    parser.add_argument("--opening", type=float, default=OPENING_BUDGET,
+                        help="budget of the re-planned flight's opening, s")
     parser.add_argument("--vehicle", default="firefly")
     parser.add_argument("--max-passes", type=int, default=10,
                         help="most back-to-back repetitions of a baseline for data efficiency")
-    return parser.parse_args()
+    parser.add_argument("--jobs", type=int, default=1, help="seeds run in parallel")
+    parser.add_argument("--rotor-headroom", type=float, default=0.1,
+                        help="rotor n² fraction every planner kind leaves free at each end, "
+                        "for the controller's feedback on a vehicle with motor lag")
+    parser.add_argument("--mismatch", action="store_true",
+                        help="hide linear rotor drag and motor lag in the truth")
+    parser.add_argument("--json", type=Path, help="write the summary and rows here")
+    parser.add_argument("--from-rows", type=Path,
+                        help="summarise the rows of an earlier (perhaps unfinished) run, "
+                             "FILE.rows.jsonl, instead of running (no paper column)")
+    return parser.parse_args(argv)
 
 
-def fly(truth: VehicleConfig, prior: VehicleConfig, trajectory, directory: Path, seed: int,
-        settings: PlannerSettings) -> dict:
-    """Fly ``trajectory`` with the true θ, filter it from the prior; one result row."""
-    sim = Simulator(truth, true_theta=truth.theta,
-                    settings=SimulationSettings(seed=seed)).run(trajectory, directory)
+def true_simulator(truth: VehicleConfig, mismatch: bool, seed: int) -> Simulator:
+    """The true vehicle (controller tuned to the nominal θ), with the hidden effects."""
+    if not mismatch:
+        return Simulator(truth, true_theta=truth.theta, settings=SimulationSettings(seed=seed))
+    flown, effects = truth_side(truth, MISMATCH[0])
+    effects = [*effects, *(effect_from_values(name, CASES[name]) for name in MISMATCH[1:])]
+    return Simulator(truth, true_theta=flown, settings=SimulationSettings(seed=seed),
+                     effects=[hidden_effect(e) for e in effects])
+
+
+def fly(sim: Simulator, truth: VehicleConfig, prior: VehicleConfig, planned_with: VehicleConfig,
+        trajectory, directory: Path, settings: PlannerSettings) -> dict:
+    """Fly ``trajectory`` on the truth, filter it from the prior; one result row.
+
+    ``planned_with`` is the vehicle the trajectory was planned (or scaled) with: the
+    predicted σ is the planner's recursion at its θ along the flown path.
+    """
+    result = sim.run(trajectory, directory)
     guess = prior.theta
     run = filter_flight(directory, prior,
                         ParameterEstimate(guess, np.diag((PRIOR_SPREAD * np.abs(guess)) ** 2)))
     h = run.history
     t = h.t - h.t[0]
-    return {"trajectory": trajectory, "reached": run.estimate.d_optimality,
+    predicted = belief_history(planned_with, trajectory, settings).sigma[-1]
+    return {"trajectory": trajectory, "duration": float(trajectory.duration),
+            "reached": run.estimate.d_optimality,
             "predicted": float(belief_history(truth, trajectory, settings).dopt[-1]),
+            "predicted_sigma": predicted / planned_with.theta,
+            "reached_sigma": run.estimate.relative_sigma,
             "error": np.abs(run.estimate.value - truth.theta) / truth.theta,
-            "saturated": float(sim.saturated_fraction), "rms": float(sim.position_rms),
+            "saturated": float(result.saturated_fraction), "rms": float(result.position_rms),
             "to_1pct": seconds_to_relative_sigma(t, h.theta_sigma, truth.theta),
             "history": estimate_history(h.t, h.theta, h.theta_sigma)}
 
 
-def run_seed(args: argparse.Namespace, truth: VehicleConfig, seed: int, tmp: Path) -> dict:
-    """Every kind for one seed, with its data-efficiency figure against the planned flight."""
+def planned(kind: str, prior: VehicleConfig, truth: VehicleConfig, settings: PlannerSettings,
+            sim: Simulator, tmp: Path, opening: float) -> tuple:
+    """(trajectory, the vehicle it was planned with, note) of one kind."""
+    if kind == "dopt":
+        flight = replan_flight(prior, settings, sim, tmp / "opening", opening)
+        err = np.abs(flight.posterior.value / truth.theta - 1.0)
+        return flight.trajectory, flight.rest_config, (
+            f"opening {flight.opening.trajectory.duration:.1f} s at z "
+            f"{flight.opening.settings.rotor_confidence:g}, rest at z "
+            f"{flight.rest_settings.rotor_confidence:g}, max |θ̂ err| {err.max():.0%}")
+    if kind == "dopt_once":
+        return plan(prior, settings).trajectory, prior, ""
+    model = truth if kind == "oracle" else prior
+    return baseline_trajectory(kind, prior, truth, settings), model, ""
+
+
+def run_seed(args: argparse.Namespace, seed: int) -> dict:
+    """Every kind for one seed, with its data-efficiency figure against the planned flight.
+
+    A seed where some plan cannot be made is returned as ``{"seed", "failed"}``.
+    """
+    truth = load_vehicle(args.vehicle)
     prior = truth.with_parameters(draw_prior(truth, seed))
-    settings = PlannerSettings(budget=args.budget, planning_time=args.time, seed=seed)
-    row = {}
-    for kind in KINDS:
-        trajectory = (plan(prior, settings).trajectory if kind == "dopt"
-                      else baseline_trajectory(kind, prior, truth, settings))
-        row[kind] = fly(truth, prior, trajectory, tmp / f"{kind}-{seed}", seed, settings)
+    settings = PlannerSettings(budget=args.budget, planning_time=args.time, seed=seed,
+                               rotor_headroom=args.rotor_headroom)
+    sim = true_simulator(truth, args.mismatch, seed)
+    row: dict = {"seed": seed}
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="planner-baselines-") as name:
+        tmp = Path(name)
+        try:
+            for kind in KINDS:
+                trajectory, model, note = planned(kind, prior, truth, settings, sim, tmp,
+                                                  args.opening)
+                row[kind] = fly(sim, truth, prior, model, trajectory, tmp / kind, settings)
+                row[kind]["note"] = note
+        except JobFailedError as exc:
+            print(f"seed {seed}: failed: {kind}: {exc}", flush=True)
+            return {"seed": seed, "failed": f"{kind}: {exc}"}
     target = row["dopt"]["predicted"]
     for kind in KINDS:
-        row[kind]["to_planned"] = seconds_to_dopt(truth, row[kind]["trajectory"], settings,
+        row[kind]["to_planned"] = seconds_to_dopt(truth, row[kind].pop("trajectory"), settings,
                                                   target, args.max_passes)
-    print(f"seed {seed}: " + " | ".join(
-        f"{k} {row[k]['trajectory'].duration:.0f} s {row[k]['reached']:.3g} sat "
-        f"{row[k]['saturated']:.0%} to-planned {row[k]['to_planned']:.1f} s" for k in KINDS),
-        flush=True)
+    row["wall"] = time.perf_counter() - start
+    print(f"seed {seed} ({row['wall']:.0f} s; {row['dopt']['note']}): " + " | ".join(
+        f"{k} {row[k]['duration']:.0f} s {row[k]['reached']:.3g} sat {row[k]['saturated']:.0%}"
+        f" to-planned {row[k]['to_planned']:.1f} s" for k in KINDS), flush=True)
     return row
 
 
-def interval(samples: tuple[np.ndarray, ...], statistic) -> tuple[float, float]:
-    """95 % percentile bootstrap interval over seeds (samples resampled in pairs)."""
-    if samples[0].size < 2:
-        return float("nan"), float("nan")
-    result = bootstrap(samples, statistic, paired=True, vectorized=False, n_resamples=2000,
-                       method="percentile", rng=np.random.default_rng(0))
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+def jsonable(value):
+    """Rows and summaries with numpy arrays and floats made JSON-ready (NaN and inf: null)."""
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
 
 
-def column(rows: list[dict], kind: str, key: str) -> np.ndarray:
-    """One figure of one kind over seeds, shape (seeds,) (or (seeds, 6))."""
-    return np.array([r[kind][key] for r in rows], dtype=float)
+def slim(row: dict) -> dict:
+    """A row without the estimate histories (kept only for the paper's column)."""
+    return {k: ({kk: vv for kk, vv in v.items() if kk != "history"} if isinstance(v, dict)
+                else v) for k, v in row.items()}
 
 
-def report_dopt(rows: list[dict]) -> None:
-    """Ratios of median reached (and predicted) D-opt, baseline over planned."""
-    planned = column(rows, "dopt", "reached")
-    print("median reached D-opt, baseline / planned (> 1: planned better), 95 % paired "
-          "bootstrap interval; predicted with the true θ along the nominal path:")
-    for kind in BASELINES:
-        other = column(rows, kind, "reached")
-        lo, hi = interval((other, planned), lambda a, b: np.median(a) / np.median(b))
-        pred = np.median(column(rows, kind, "predicted")) / np.median(
-            column(rows, "dopt", "predicted"))
-        print(f"  {kind:<18} {np.median(other) / np.median(planned):6.2f} ({lo:.2f}–{hi:.2f})"
-              f"  predicted {pred:.2f}")
-
-
-def report_flyability(rows: list[dict]) -> None:
-    """Saturated and off-path flights, and median |error| per parameter."""
-    print(f"flyability on the true vehicle (flights of {len(rows)}): saturating > "
-          f"{100 * SATURATED_SHARE:g} % of ticks, > {OFF_PATH_RMS:g} m RMS off path, median "
-          "saturated share")
-    for kind in KINDS:
-        sat, rms = column(rows, kind, "saturated"), column(rows, kind, "rms")
-        print(f"  {kind:<18} {int(np.sum(sat > SATURATED_SHARE))}, "
-              f"{int(np.sum(rms > OFF_PATH_RMS))}, {np.median(sat):.1%}")
-    print("median |error| / θ per parameter (%): " + ", ".join(PARAMETER_NAMES))
-    for kind in KINDS:
-        err = np.median(column(rows, kind, "error"), axis=0)
-        print(f"  {kind:<18} " + "  ".join(f"{100 * e:.3f}" for e in err))
-
-
-def report_efficiency(args: argparse.Namespace, rows: list[dict]) -> None:
-    """Seconds to the planned D-opt, seconds to σ/θ ≤ 1 %, the paper's convergence column."""
-    print(f"seconds of flight to reach the planned {args.budget:g} s flight's D-opt (median, "
-          f"95 % bootstrap interval; inf: not within {args.max_passes} repetitions):")
-    for kind in KINDS:
-        sec = column(rows, kind, "to_planned")
-        sec = np.where(np.isnan(sec), np.inf, sec)
-        lo, hi = interval((sec,), np.median)
-        print(f"  {kind:<18} {np.median(sec):7.1f} s ({lo:.1f}–{hi:.1f}), "
-              f"{np.median(sec) / args.budget:.2f}× the budget")
-    print("seconds until every σ_j/θ_j ≤ 1 % (filter σ, per flight; median, flights that "
-          "never get there):")
-    for kind in KINDS:
-        sec = column(rows, kind, "to_1pct")
-        done = sec[~np.isnan(sec)]
-        print(f"  {kind:<18} {np.median(done) if done.size else float('nan'):6.2f} s, "
-              f"{int(np.isnan(sec).sum())} never")
-    print("the paper's column: convergence time of the median estimate within 5 % (s), "
-          + ", ".join(PARAMETER_NAMES))
-    for kind in KINDS:
-        histories = [r[kind]["history"] for r in rows]
-        length = max(len(h["t"]) for h in histories)
-        grid = np.arange(length) / 10.0
-        ratios = np.empty((len(rows), length, 6))
-        for i, (r, h) in enumerate(zip(rows, histories, strict=True)):
-            theta = np.asarray(h["theta"])
-            ratios[i, :len(theta)], ratios[i, len(theta):] = theta, theta[-1]
-            ratios[i] /= r["truth"]
-        conv = median_convergence_time(grid, ratios)
-        print(f"  {kind:<18} " + "  ".join(f"{c:.2f}" for c in conv))
-
-
-def main() -> None:
-    args = parse_args()
-    truth = load_vehicle(args.vehicle)
+def run_all(args: argparse.Namespace) -> list[dict]:
+    """Every seed, in parallel over ``--jobs`` processes; rows in seed order."""
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    stream = None
+    if args.json is not None:
+        stream = args.json.with_name(args.json.name + ".rows.jsonl").open("w")
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(args.seeds):
-            row = run_seed(args, truth, seed, Path(tmp))
-            row["truth"] = truth.theta
+    try:
+        if args.jobs <= 1:
+            results = (run_seed(args, s) for s in seeds)
+            pool = None
+        else:
+            pool = ProcessPoolExecutor(max_workers=args.jobs)
+            results = pool.map(run_seed, [args] * len(seeds), seeds)
+        for row in results:
             rows.append(row)
-    print(f"\n{args.seeds} seeds, budget {args.budget:g} s, planning {args.time:g} s per plan, "
-          f"{args.vehicle}, priors ±50 %")
-    report_dopt(rows)
-    report_flyability(rows)
-    report_efficiency(args, rows)
+            if stream is not None:
+                stream.write(json.dumps(jsonable(slim(row))) + "\n")
+                stream.flush()
+        if pool is not None:
+            pool.shutdown()
+    finally:
+        if stream is not None:
+            stream.close()
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    if args.from_rows is not None:
+        rows = [json.loads(line) for line in args.from_rows.read_text().splitlines() if line]
+        args.seeds = len(rows)
+    else:
+        rows = run_all(args)
+    summary = summarize(rows, KINDS, args.budget, args.max_passes,
+                        load_vehicle(args.vehicle).theta)
+    summary["settings"] = {k: (str(v) if isinstance(v, Path) else v)
+                           for k, v in vars(args).items()}
+    print(f"\n{args.seeds} seeds from {args.first_seed}, budget {args.budget:g} s, planning "
+          f"{args.time:g} s per plan, opening {args.opening:g} s, {args.vehicle}, priors ±50 %"
+          f"{', hidden linear rotor drag and motor lag' if args.mismatch else ''}")
+    print(format_summary(summary))
+    if args.json is not None:
+        args.json.write_text(json.dumps(jsonable({"summary": summary,
+                                                  "rows": [slim(r) for r in rows]}), indent=1))
 
 
 if __name__ == "__main__":

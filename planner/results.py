@@ -92,7 +92,7 @@ class PlannerSettings:
     measurement_rate: float = 100.0
     propagation_rate: float = 25.0
     prior_relative_sigma: float = 0.5
-    refine_share: float = 0.7
+    refine_share: float = 0.9
     refine_steps: int = 100_000
     refine_split: int = 2
     rotor_headroom: float = 0.0

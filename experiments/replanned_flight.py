@@ -1,0 +1,198 @@
+"""Re-planning in flight, offline: an opening flight, an estimate, the rest planned from it.
+
+The design issue 20 chose for a plan robust to the prior (README, "robust to the prior"):
+
+1. plan a short **opening** (budget `OPENING_BUDGET`) from the prior, with the prior's wide
+   belief, so that the planner's chance-constrained rotor check keeps it gentle (in the box
+   inset by the rotor clearance, so that its end is a valid start: `opening_settings`);
+2. fly it (here in the offline simulator, `mavsysid.flight.offline.simulator`) and filter
+   it from the prior (`mavsysid.experiments.experiment.filter_flight`): θ̂ and its
+   covariance Σ;
+3. plan the **rest** of the budget with θ̂ as the config's θ and Σ relative to θ̂
+   (Σ_ij / (θ̂_i θ̂_j)) as ``PlannerSettings.prior_covariance``, starting at the hover where
+   the opening ended;
+4. the opening and the rest, back to back, are one continuous flight (`concatenate`).
+
+Offline, the vehicle does not fly on while the rest is planned: the reported flight is the
+whole trajectory flown again from the start with the same seed, as ``stream`` would fly
+it in one run (the opening's noise realisation is the same, since the seed is).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.experiments.experiment import filter_flight
+from mavsysid.flight.offline.simulator import Simulator
+from mavsysid.planner.plan_request import rotor_clearance
+from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.robust_plan import plan_most_confident
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["CONTINUITY_TOLERANCE", "OPENING_BUDGET", "START_MARGIN", "ReplannedFlight",
+           "concatenate", "end_hover", "opening_settings", "prior_estimate",
+           "relative_covariance", "replan_flight", "rest_settings"]
+
+#: Default budget of the opening flight, s.
+OPENING_BUDGET = 6.0
+#: Largest jump of any flat output (position, yaw and their derivatives, SI) allowed
+#: where two trajectories are joined.
+CONTINUITY_TOLERANCE = 1e-6
+#: How much farther inside the box than the rotor clearance the opening stays, m.
+START_MARGIN = 0.01
+
+
+@dataclass(frozen=True)
+class ReplannedFlight:
+    """A flight planned in two parts, the second from what the first taught.
+
+    Attributes
+    ----------
+    trajectory : PiecewisePolynomial
+        The opening then the rest: one flight, from rest to rest.
+    opening, rest : PlanResult
+        The two plans.
+    posterior : ParameterEstimate
+        θ̂ and Σ (SI) after filtering the opening from the prior.
+    rest_config : VehicleConfig
+        The prior vehicle with θ̂: the model the rest was planned with.
+    rest_settings : PlannerSettings
+        The settings the rest was planned with.
+    """
+
+    trajectory: PiecewisePolynomial
+    opening: PlanResult
+    rest: PlanResult
+    posterior: ParameterEstimate
+    rest_config: VehicleConfig
+    rest_settings: PlannerSettings
+
+
+def prior_estimate(prior: VehicleConfig, settings: PlannerSettings) -> ParameterEstimate:
+    """The planner's θ belief as an estimate (SI): the config's θ and the settings' prior
+    (``PlannerSettings.theta_covariance``, relative to θ)."""
+    theta = prior.theta
+    return ParameterEstimate(theta.copy(), settings.theta_covariance * np.outer(theta, theta))
+
+
+def relative_covariance(estimate: ParameterEstimate) -> tuple[tuple[float, ...], ...]:
+    """Σ relative to the estimate's θ̂: Σ_ij / (θ̂_i θ̂_j), as ``prior_covariance`` takes it.
+
+    Raises
+    ------
+    JobFailedError
+        A θ̂ component is not positive (the opening's filter diverged): no relative belief.
+    """
+    theta = np.asarray(estimate.value, dtype=float)
+    if not np.all(np.isfinite(theta)) or np.any(theta <= 0.0):
+        raise JobFailedError("the opening flight's estimate has a non-positive parameter "
+                             f"({', '.join(f'{v:.3g}' for v in theta)}): cannot re-plan from it")
+    rel = np.asarray(estimate.covariance, dtype=float) / np.outer(theta, theta)
+    rel = 0.5 * (rel + rel.T)
+    return tuple(tuple(float(v) for v in row) for row in rel)
+
+
+def end_hover(trajectory: PiecewisePolynomial) -> tuple[float, float, float, float]:
+    """(x, y, z, yaw) at the end of ``trajectory`` (m, rad), where it hovers."""
+    flat = trajectory.flat_outputs(np.array([trajectory.duration]))
+    x, y, z = (float(v) for v in flat.position[0])
+    return x, y, z, float(flat.yaw[0])
+
+
+def _padded(coeffs: np.ndarray, n: int) -> np.ndarray:
+    """Coefficients (…, m) padded with zero high powers to (…, n): the same polynomial."""
+    pad = [(0, 0)] * (coeffs.ndim - 1) + [(0, n - coeffs.shape[-1])]
+    return np.pad(coeffs, pad)
+
+
+def concatenate(first: PiecewisePolynomial, second: PiecewisePolynomial,
+                tolerance: float = CONTINUITY_TOLERANCE) -> PiecewisePolynomial:
+    """``second`` flown right after ``first``: one trajectory.
+
+    Raises
+    ------
+    ValueError
+        The flat outputs (position to snap, yaw to yaw acceleration) jump by more than
+        ``tolerance`` at the join: ``second`` does not start where ``first`` ends.
+    """
+    end = first.flat_outputs(np.array([first.duration]))
+    start = second.flat_outputs(np.array([0.0]))
+    jump = max(float(np.max(np.abs(np.asarray(getattr(end, name))
+                                   - np.asarray(getattr(start, name)))))
+               for name in ("position", "velocity", "acceleration", "jerk", "snap", "yaw",
+                            "yaw_rate", "yaw_acceleration"))
+    if jump > tolerance:
+        raise ValueError(f"the trajectories do not join: a flat output jumps by {jump:.3g}")
+    n_pos = max(first.position_coeffs.shape[-1], second.position_coeffs.shape[-1])
+    n_yaw = max(first.yaw_coeffs.shape[-1], second.yaw_coeffs.shape[-1])
+    return PiecewisePolynomial(
+        np.concatenate([first.durations, second.durations]),
+        np.concatenate([_padded(first.position_coeffs, n_pos),
+                        _padded(second.position_coeffs, n_pos)]),
+        np.concatenate([_padded(first.yaw_coeffs, n_yaw), _padded(second.yaw_coeffs, n_yaw)]))
+
+
+def opening_settings(settings: PlannerSettings, config: VehicleConfig,
+                     budget: float) -> PlannerSettings:
+    """The opening's settings: ``budget`` long, in the box inset by the rotor clearance.
+
+    The planner keeps the centre of gravity in its box, but a start hover must keep the
+    rotors in it too (`mavsysid.planner.plan_request`); inset, the opening ends where the
+    rest may start.
+    """
+    box = np.asarray(settings.box, dtype=float)
+    inset = rotor_clearance(config) + START_MARGIN
+    inner = np.concatenate([box[:3] + inset, box[3:] - inset])
+    return replace(settings, budget=budget, box=tuple(float(v) for v in inner))
+
+
+def rest_settings(settings: PlannerSettings, posterior: ParameterEstimate,
+                  opening: PiecewisePolynomial) -> PlannerSettings:
+    """The settings for the rest: what is left of the budget, from the opening's end hover,
+    with the posterior's covariance relative to θ̂ as the prior."""
+    return replace(settings, budget=settings.budget - opening.duration,
+                   start=end_hover(opening), prior_covariance=relative_covariance(posterior))
+
+
+def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Simulator,
+                  directory: Path, opening_budget: float = OPENING_BUDGET) -> ReplannedFlight:
+    """Plan an opening, fly and filter it, plan the rest from the posterior; join them.
+
+    Parameters
+    ----------
+    prior : VehicleConfig
+        The vehicle as known before flying (its θ is the prior mean).
+    settings : PlannerSettings
+        The whole flight's settings (budget, box, planning time per plan, seed, prior σ).
+    simulator : Simulator
+        Flies the opening (the true vehicle).
+    directory : Path
+        Flight directory of the opening (pose.csv, truth.csv, meta.json).
+    opening_budget : float
+        Budget of the opening, s; must leave some of ``settings.budget``.
+
+    Raises
+    ------
+    JobFailedError
+        A plan cannot be found, or the opening's estimate cannot seed a re-plan.
+    """
+    if not 0.0 < opening_budget < settings.budget:
+        raise ValueError(f"opening budget {opening_budget:g} s: expected within "
+                         f"(0, {settings.budget:g}) s")
+    # Each part at the most confident chance-constrained rotor check that admits a flight:
+    # with the wide prior that is usually a low z (a gentle opening), after it a high one.
+    opening = plan_most_confident(prior, opening_settings(settings, prior, opening_budget)).result
+    simulator.run(opening.trajectory, directory)
+    posterior = filter_flight(directory, prior, prior_estimate(prior, settings)).estimate
+    later = rest_settings(settings, posterior, opening.trajectory)
+    config = prior.with_parameters(posterior.value)
+    confident = plan_most_confident(config, later)
+    rest, later = confident.result, replace(later, rotor_confidence=confident.rotor_confidence)
+    return ReplannedFlight(concatenate(opening.trajectory, rest.trajectory), opening, rest,
+                           posterior, config, later)
