@@ -145,7 +145,9 @@ def replanning_continuation(settings: ReplanSettings,
         rel = relative_covariance(estimate)
         planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
                           start=tuple(so_far.hover),
-                          prior_covariance=tuple(tuple(row) for row in rel.tolist()))
+                          prior_covariance=tuple(tuple(row) for row in rel.tolist()),
+                          autopilot_limits=(so_far.autopilot_limits
+                                            or settings.planner.autopilot_limits))
         confident = plan_most_confident(so_far.config.with_parameters(estimate.value), planner)
         plan, planner = confident.result, replace(
             planner, rotor_confidence=confident.rotor_confidence)

@@ -36,12 +36,13 @@ from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.parameter_session import ParameterSession
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.kinematic_limits import KinematicLimits, KinematicPeaks, kinematic_peaks
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import InputError, JobFailedError
 
 __all__ = ["ARDUPILOT_LIMITS", "MARGIN", "PX4_LIMITS", "LimitParameter", "Requirement",
-           "apply_autopilot_limits", "check_session_limits", "kinematic_limits", "limit_parameters",
-           "limits_from_parameters",
+           "apply_autopilot_limits", "check_session_limits", "continuation_limit_refusals",
+           "kinematic_limits", "limit_parameters", "limits_from_parameters", "limits_in_effect",
            "parameter_names", "raised_values", "refusal", "requirements"]
 
 #: Raised limits leave this much above the plan's peak (relative).
@@ -360,3 +361,28 @@ def check_session_limits(session: Any, say: Callable[[str], None]) -> None:
     session.note("autopilot_limits", {
         "read": values, "set_limits": bool(session.settings.set_limits),
         "plan_peaks_si": {k: round(v, 6) for k, v in asdict(peaks).items()}})
+
+
+def limits_in_effect(noted: Mapping[str, Any] | None,
+                     changed: Mapping[str, tuple[float, float]]) -> dict[str, float] | None:
+    """The autopilot's position-controller limits now (parameter units): the values read
+    before arming (``noted``, meta.json's ``autopilot_limits``) with the flight values of
+    those ``--set-limits`` raised (``ParameterSession.changed``); None if none were read."""
+    if not noted or not noted.get("read"):
+        return None
+    values = dict(noted["read"])
+    values.update({name: flight for name, (_orig, flight) in changed.items() if name in values})
+    return values
+
+
+def continuation_limit_refusals(autopilot: Autopilot, values: Mapping[str, float],
+                                trajectory: PiecewisePolynomial) -> list[str]:
+    """Why a trajectory planned in flight exceeds the tracking limits ``values`` (one line,
+    or none).
+
+    Mid-flight the limits are never raised: a continuation beyond them is refused (and
+    the vehicle lands) rather than flown off its path.
+    """
+    hard = [r for r in requirements(autopilot, kinematic_peaks(trajectory), values)
+            if r.tracking]
+    return [refusal(hard)] if hard else []

@@ -29,11 +29,17 @@ from typing import Any
 
 import numpy as np
 from mavsysid.flight.gc_freeze import frozen_collector
+from mavsysid.flight.ground.autopilot_limits import (
+    continuation_limit_refusals,
+    kinematic_limits,
+    limits_in_effect,
+)
 from mavsysid.flight.ground.preflight import check_plan
 from mavsysid.flight.ground.setpoints import Setpoint, hold, trajectory_setpoint
 from mavsysid.flight.ground.stream_control import ProgressLine
 from mavsysid.flight.ground.stream_session import StreamSession
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.kinematic_limits import KinematicLimits
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import JobFailedError, MavsysidError
@@ -81,6 +87,10 @@ class FlightSoFar:
         The hold [x, y, z, yaw] (m, rad; ENU, yaw unwrapped as the trajectory had it).
     segments : int
         Segments flown so far.
+    autopilot_limits : KinematicLimits or None
+        The autopilot's position-controller limits in effect (as read before arming, with
+        what ``--set-limits`` raised); a next segment beyond them is refused. None: none
+        were read.
     """
 
     directory: Path
@@ -91,6 +101,7 @@ class FlightSoFar:
     flown: float
     hover: tuple[float, float, float, float]
     segments: int
+    autopilot_limits: KinematicLimits | None = None
 
 
 @dataclass(frozen=True)
@@ -245,7 +256,8 @@ def continue_flight(session: StreamSession, end: Setpoint, first: SegmentRun,
     while True:
         so_far = FlightSoFar(session.directory, session.directory / "pose.csv", session.config,
                              session.box, session.meta.get("trajectory_window", {}).get(
-                                 "start"), flown, (*end.position, end.yaw), len(runs))
+                                 "start"), flown, (*end.position, end.yaw), len(runs),
+                             _limits_now(session))
         say("holding while the next segment is prepared")
         held_from, wall = session.link.clock.now(), time.monotonic()
         try:
@@ -260,8 +272,9 @@ def continue_flight(session: StreamSession, end: Setpoint, first: SegmentRun,
             session.note("segments", records + [{"kind": "end", **hold_record}])
             say(f"no further segment after {flown:.1f} s of flight")
             return end
-        refused = check_plan(nxt.trajectory, session.config.name, session.config,
-                             session.box, "the flight box").refusals
+        refused = [*check_plan(nxt.trajectory, session.config.name, session.config,
+                               session.box, "the flight box").refusals,
+                   *_limit_refusals(session, nxt.trajectory)]
         if refused:
             records.append({"kind": nxt.kind, "refused": list(refused), **hold_record,
                             **dict(nxt.record)})
@@ -282,6 +295,20 @@ def continue_flight(session: StreamSession, end: Setpoint, first: SegmentRun,
         session.note("segments", records)
         session.note_trajectory_end(run.end, combined_statistics([r.statistics for r in runs]))
         session.link.poll(session.settings.hold_time)
+
+
+def _limits_now(session: StreamSession) -> KinematicLimits | None:
+    """The autopilot's tracking limits in effect as SI bounds for the planner (None: none
+    were read)."""
+    values = limits_in_effect(session.meta.get("autopilot_limits"), session.parameters.changed)
+    return None if values is None else kinematic_limits(
+        session.link.vehicle.autopilot, values, tracking_only=True)
+
+
+def _limit_refusals(session: StreamSession, trajectory: PiecewisePolynomial) -> list[str]:
+    values = limits_in_effect(session.meta.get("autopilot_limits"), session.parameters.changed)
+    return [] if values is None else continuation_limit_refusals(
+        session.link.vehicle.autopilot, values, trajectory)
 
 
 def _segment_record(session: StreamSession, kind: str, duration: float,

@@ -12,7 +12,9 @@ from mavsysid.flight.ground.autopilot_limits import (
     ARDUPILOT_LIMITS,
     PX4_LIMITS,
     apply_autopilot_limits,
+    continuation_limit_refusals,
     kinematic_limits,
+    limits_in_effect,
     raised_values,
     requirements,
 )
@@ -168,3 +170,29 @@ def test_a_plan_made_for_stock_arducopter_passes_the_streams_limit_check():
     within = ", ".join(p.name for p in ARDUPILOT_LIMITS)
     assert said == [f"autopilot limits: the plan is within {within}"] and fake.values == STOCK
     assert limited.duration > 5.0
+
+
+def test_limits_in_effect_are_the_values_read_with_the_raised_ones() -> None:
+    """--set-limits' flight values replace the values read; other parameters are ignored."""
+    noted = {"read": dict(STOCK), "set_limits": True}
+    changed = {"PSC_JERK_XY": (5.0, 18.0), "FENCE_TYPE": (0.0, 5.0)}
+    values = limits_in_effect(noted, changed)
+    assert values is not None
+    assert values["PSC_JERK_XY"] == 18.0 and values["ANGLE_MAX"] == STOCK["ANGLE_MAX"]
+    assert "FENCE_TYPE" not in values
+    assert limits_in_effect(None, changed) is None
+    assert limits_in_effect({"read": {}}, changed) is None
+
+
+@pytest.mark.parametrize("duration", [1.0, 8.0])
+def test_a_continuation_beyond_the_limits_in_effect_is_refused_in_one_line(
+        duration: float) -> None:
+    """A re-planned trajectory is refused exactly when a tracking limit is below its peaks."""
+    line = _line(duration, 3.0)
+    refusals = continuation_limit_refusals(Autopilot.ARDUPILOT, STOCK, line)
+    tracking = [r for r in requirements(Autopilot.ARDUPILOT, kinematic_peaks(line), STOCK)
+                if r.tracking]
+    assert bool(refusals) == bool(tracking)
+    assert len(refusals) <= 1 and all("\n" not in r for r in refusals)
+    if tracking:
+        assert all(r.name in refusals[0] for r in tracking)
