@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from mavsysid.planner.belief import apply_transfer, identity_transfer
+from mavsysid.planner.feasibility import segment_slack
 from mavsysid.planner.gradient_refine import GradientRefiner
 from mavsysid.planner.refine import (
     FlightPricing,
@@ -72,7 +73,14 @@ def refine_best(search: GraphSearch, gradient: bool = False) -> RefinablePath | 
                      lambda state: search.stop_at(state, with_transfer=False), pricing,
                      search.box, settings.budget, np.random.default_rng([settings.seed, 1]),
                      search.config.limits.segment_time_max)
-    refiner: PathRefiner | GradientRefiner = GradientRefiner(es) if gradient else es
+    refiner: PathRefiner | GradientRefiner = es
+    if gradient:
+        # The barrier keeps gradient steps off the rotor and body-rate limits, where the
+        # refined flight sits and plain steps mostly fail the feasibility check.
+        spread = search.theta_covariance
+        refiner = GradientRefiner(es, slack=lambda segment: segment_slack(
+            segment, search.config, rotor_headroom=settings.rotor_headroom,
+            theta_covariance=spread, rotor_confidence=settings.rotor_confidence))
     while refiner.steps < search.refine_steps and search.elapsed() < settings.planning_time:
         if refiner.step():
             search.history.append((search.elapsed(), refiner.path.dopt))

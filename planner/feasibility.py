@@ -42,7 +42,7 @@ from mavsysid.vehicle.flatness import SAMPLE_SIZE
 from mavsysid.errors import InputError
 
 __all__ = ["CONSTRAINTS", "UNBOUNDED_SQUARE", "FeasibilityResult", "check_rotor_headroom",
-           "check_segment", "check_vertex_state", "rotor_square_range"]
+           "check_segment", "check_vertex_state", "rotor_square_range", "segment_slack"]
 
 #: Constraint names in the order they are checked (``FeasibilityResult.reason``).
 CONSTRAINTS = ("box", "thrust", "speed", "yaw_acceleration", "body_rate", "rotor_speed")
@@ -170,6 +170,22 @@ def _adaptive_scan(dc: np.ndarray, duration: float, intervals: int, safety: floa
         starts, columns, count = next_starts, next_columns, next_count
         width, parts = step, _REFINE
     return -1, 0.0, evaluations
+
+
+@numba.njit(cache=True)
+def _largest_slack(dc: np.ndarray, duration: float, intervals: int,
+                   kernel: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+                   ) -> float:
+    """The largest sampled slack (body rate and rotor slabs) on a uniform grid."""
+    lim, J, normals, bounds, spread = kernel
+    v = np.empty(12 + SAMPLE_SIZE)
+    g = np.empty((1, 1 + normals.shape[0]))
+    worst = -np.inf
+    for i in range(intervals + 1):
+        sample_slacks(dc, i / intervals, lim, J, normals, bounds, spread, v, g, 0)
+        for f in range(g.shape[1]):
+            worst = max(worst, g[0, f])
+    return worst
 
 
 @numba.njit(cache=True)
@@ -323,6 +339,20 @@ def check_segment(
     if which < 0:
         return FeasibilityResult(True, samples=evaluations)
     return FeasibilityResult(False, CONSTRAINTS[which], time, evaluations)
+
+
+def segment_slack(segment: Segment, config: VehicleConfig, *, grid_step: float = 0.02,
+                  rotor_headroom: float = 0.0, theta_covariance: np.ndarray | None = None,
+                  rotor_confidence: float = 0.0) -> float:
+    """The segment's largest normalised body-rate or rotor slack on a grid (< 0 inside).
+
+    A smooth measure of how close a segment comes to those limits (for a barrier on
+    them), not a feasibility decision: that is `check_segment`'s. Options as there.
+    """
+    return float(_largest_slack(
+        segment.derivative_coeffs, segment.duration, max(2, ceil(segment.duration / grid_step)),
+        _kernel_inputs(config, None, float(rotor_headroom), True, theta_covariance,
+                       float(rotor_confidence))))
 
 
 def check_vertex_state(state: VertexState, config: VehicleConfig, box: np.ndarray,

@@ -19,6 +19,8 @@ from mavsysid.planner.refine import FlightPricing, PathRefiner, split_path
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
+from tests.support.refined_paths import assert_consistent_flight
+
 # The chance constraint at a ±50 % prior leaves little to refine; these tests are about the
 # optimiser, so the rotor check is at the prior θ.
 _SETTINGS = PlannerSettings(budget=15.0, planning_time=np.inf, max_samples=150, seed=4,
@@ -77,12 +79,7 @@ def test_gradient_steps_lower_the_dopt_and_keep_the_flight_feasible(searched):
     kept = [refiner.gradient_step(i) for i in range(1, len(path.segments))]
     final = refiner.path
     assert any(kept) and final.dopt < path.dopt
-    fresh = [search.transfer_of(s) for s in final.segments]
-    stop = identity_transfer() if final.stop.segment is None else search.transfer_of(
-        final.stop.segment)
-    assert search.flight_dopt([*fresh, stop]) == pytest.approx(final.dopt, rel=1e-8)
-    assert all(search.feasible(s) for s in final.segments)
-    assert final.duration <= search.settings.budget + 1e-9
+    assert_consistent_flight(search, final)
 
 
 def test_barrier_refuses_steps_that_reach_the_limit(searched):

@@ -23,6 +23,7 @@ from mavsysid.planner.segments import VertexState, connect_fixed, to_piecewise
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError
+from tests.support.refined_paths import assert_consistent_flight
 
 
 @pytest.fixture(scope="module")
@@ -185,9 +186,4 @@ def test_incremental_pricing_matches_pricing_from_scratch(searched):
     final = refiner.path
     assert refiner.accepted > 5
     assert np.all(np.diff(history) <= 0.0) and final.dopt < path.dopt
-    fresh = [search.transfer_of(s) for s in final.segments]
-    stop = identity_transfer() if final.stop.segment is None else search.transfer_of(
-        final.stop.segment)
-    assert search.flight_dopt([*fresh, stop]) == pytest.approx(final.dopt, rel=1e-8)
-    assert all(search.feasible(s) for s in final.segments)
-    assert final.duration <= search.settings.budget + 1e-9
+    assert_consistent_flight(search, final)

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mavsysid.planner.feasibility import check_segment
+from mavsysid.planner.feasibility import check_segment, segment_slack
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.sample_slacks import slab_spread
 from mavsysid.planner.search_setup import initial_covariance, search_model
@@ -136,3 +136,19 @@ def test_prior_covariance_sets_the_planners_initial_theta_belief() -> None:
     np.testing.assert_array_equal(sigma[E_THETA, E_THETA], cov)
     default = PlannerSettings(prior_relative_sigma=0.3)
     np.testing.assert_allclose(default.theta_covariance, np.eye(6) * 0.09)
+
+
+@pytest.mark.parametrize("name", SHIPPED_VEHICLES)
+def test_segment_slack_is_negative_inside_the_limits_and_positive_beyond(name: str) -> None:
+    """segment_slack < 0 on segments the check accepts, > 0 well past the rotor limit, and
+    rises as the segment is scaled up."""
+    cfg = rotor_config(name)
+    rng = np.random.default_rng(11)
+    weights = np.array([1.0, 3.0, 10.0, 40.0, 150.0])[:, None]
+    shape = (rng.normal(size=(5, 3)) * weights, rng.normal(size=3) * [1.0, 6.0, 40.0],
+             rng.normal(size=(5, 3)) * weights, rng.normal(size=3) * [1.0, 6.0, 40.0])
+    edge = boundary_scale(cfg, shape)
+    slacks = [segment_slack(scaled_segment(shape, f * edge), cfg, grid_step=0.001)
+              for f in (0.3, 0.6, 0.9, 1.5)]
+    assert max(slacks[:3]) < 0.0 < slacks[3]
+    assert slacks[0] < slacks[1] < slacks[2]
