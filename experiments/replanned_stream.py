@@ -32,12 +32,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from mavsysid.estimation.estimate_job import check_result
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.kinematics_check import check_kinematics
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.experiments.replanned_flight import relative_covariance
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
 from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
@@ -47,8 +47,8 @@ from mavsysid.planner.robust_plan import plan_most_confident
 
 from mavsysid.errors import InputError
 
-__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "relative_covariance", "replanning_continuation",
-           "run_replanned_stream", "snapshot_pose"]
+__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "replanning_continuation", "run_replanned_stream",
+           "snapshot_pose"]
 
 
 #: Rotor n² share the re-planned rest leaves free at each end for the autopilot's feedback:
@@ -83,22 +83,6 @@ class ReplanSettings:
     estimator: EstimatorSettings | None = None
     min_rest: float = 2.0
     rounds: int = 1
-
-
-def relative_covariance(estimate: ParameterEstimate) -> np.ndarray:
-    """Σ of θ relative to θ̂: Σ_jk / (θ̂_j θ̂_k), shape (6, 6).
-
-    Raises
-    ------
-    InputError
-        A θ̂_j that is zero or not finite (no relative spread around it).
-    """
-    theta = np.asarray(estimate.value, dtype=float)
-    if not np.all(np.isfinite(theta) & (theta != 0.0)):
-        raise InputError(f"estimate θ̂ = {theta.tolist()}: a relative covariance needs every "
-                         "parameter finite and non-zero")
-    rel = np.asarray(estimate.covariance, dtype=float) / np.outer(theta, theta)
-    return 0.5 * (rel + rel.T)
 
 
 def snapshot_pose(pose: Path, directory: Path) -> Path:
@@ -139,13 +123,13 @@ def replanning_continuation(settings: ReplanSettings,
         began = time.monotonic()
         estimate = _estimate(so_far, settings.estimator)
         estimated = time.monotonic()
-        sigma = estimate.sigma / np.abs(estimate.value)
+        sigma = estimate.relative_sigma
         say("estimate after {:.1f} s: σ/θ {}".format(
             so_far.flown, ", ".join(f"{100 * s:.1f} %" for s in sigma)))
         rel = relative_covariance(estimate)
         planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
                           start=tuple(so_far.hover),
-                          prior_covariance=tuple(tuple(row) for row in rel.tolist()),
+                          prior_covariance=rel,
                           autopilot_limits=(so_far.autopilot_limits
                                             or settings.planner.autopilot_limits))
         confident = plan_most_confident(so_far.config.with_parameters(estimate.value), planner)

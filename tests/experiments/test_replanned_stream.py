@@ -9,10 +9,8 @@ import sys
 
 import numpy as np
 import pytest
-from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.replanned_stream import (
     ReplanSettings,
-    relative_covariance,
     run_replanned_stream,
     snapshot_pose,
 )
@@ -76,19 +74,6 @@ def test_opening_then_replanned_rest_in_one_flight(tmp_path):
     assert np.all(ref >= np.array(BOX[:3])) and np.all(ref <= np.array(BOX[3:]))
     assert abs(log.position[-1, 2]) < 0.05  # landed
     assert meta["trajectory_window"]["end"] == pytest.approx(w["end"])
-
-
-def test_relative_covariance_divides_by_the_estimate():
-    """Σ_rel = Σ / θ̂ θ̂ᵀ: a correlation is kept, a diagonal is σ_j²/θ_j²."""
-    rng = np.random.default_rng(4)
-    theta = rng.uniform(0.5, 2.0, 6)
-    a = rng.normal(size=(6, 6))
-    cov = a @ a.T
-    rel = relative_covariance(ParameterEstimate(theta, cov))
-    assert np.diag(rel) == pytest.approx(np.diag(cov) / theta**2)
-    assert rel[1, 4] == pytest.approx(cov[1, 4] / (theta[1] * theta[4]))
-    with pytest.raises(ValueError, match="non-zero"):
-        relative_covariance(ParameterEstimate(np.zeros(6), cov))
 
 
 def test_snapshot_leaves_out_a_half_written_row(tmp_path):
