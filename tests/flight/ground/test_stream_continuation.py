@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -66,6 +67,12 @@ def test_a_continuation_is_flown_in_the_same_recording(tmp_path):
         if len(seen) > 1:
             return None
         prefix_rows.append(len(read_pose_log(so_far.pose, 6)))
+        # The vehicle holds, and is recorded, while the callback works: wait for rows
+        # that arrive during the hold (so the hold also lasts some vehicle time).
+        deadline = time.monotonic() + 120.0
+        while len(read_pose_log(so_far.pose, 6)) <= prefix_rows[0] + 5:
+            assert time.monotonic() < deadline, "no pose rows recorded during the hold"
+            time.sleep(0.05)
         return NextSegment(excitation_trajectory(replace(OPENING, duration=8.0)), "second",
                            {"note": "from the test"})
 
