@@ -35,12 +35,13 @@ TARGET_NED = (1.0, 0.5, -2.0)
 REACHED = 0.2  # m
 
 
-def _start_sim(tmp_path: Path, port: int, *extra: str) -> tuple[SimProcess, Path]:
+def _start_sim(tmp_path: Path, port: int, *extra: str,
+               lockstep: bool = True) -> tuple[SimProcess, Path]:
     """Start the sim sending to ``127.0.0.1:port`` and wait until it runs (its first start
     compiles the physics, which can take tens of seconds); the process and its truth log."""
     truth = tmp_path / "truth"
     sim = SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
-                     "1", "--truth-log", str(truth), *extra)
+                     "1", "--truth-log", str(truth), *extra, lockstep=lockstep)
     try:
         sim.wait_ready(timeout=90.0)
     except BaseException:
@@ -230,11 +231,15 @@ async def _first_autopilot(mavsdk, timeout: float):
     its own subscription once on a busy CI machine (the component was logged as added, the
     call still timed out), so the list is read directly until ``timeout`` s pass."""
     deadline = time.monotonic() + timeout
+    seen: list[tuple[bool, bool]] = []
     while time.monotonic() < deadline:
-        for system in await mavsdk.get_systems():
-            if await system.has_autopilot() and await system.is_connected():
+        systems = await mavsdk.get_systems()
+        seen = [(await s.has_autopilot(), await s.is_connected()) for s in systems]
+        for system, (autopilot, connected) in zip(systems, seen, strict=True):
+            if autopilot and connected:
                 return system
         await asyncio.sleep(0.1)
+    print(f"MAVSDK's systems at the time-out, (has_autopilot, is_connected): {seen}")
     return None
 
 
@@ -310,11 +315,14 @@ def test_mavsdk_offboard_reaches_position_setpoint(tmp_path: Path) -> None:
     """MAVSDK connects to the PX4 sim, reads position, arms, and offboard reaches a setpoint."""
     pytest.importorskip("mavsdk.asyncio", reason="mavsdk (4.x) cannot be installed here")
     port = free_udp_port()
-    sim, truth = _start_sim(tmp_path, port, "--autopilot", "px4")
+    # On the wall clock from the start, heartbeating as a booted PX4 does: a held lock-step
+    # start sends only its frame until a peer speaks, and twice on CI MAVSDK saw the
+    # autopilot's component but never reported it connected.
+    sim, truth = _start_sim(tmp_path, port, "--autopilot", "px4", lockstep=False)
     try:
-        hold_error = asyncio.run(asyncio.wait_for(_fly_offboard(port, truth), timeout=50.0))
-    except TimeoutError:
-        pytest.fail(f"MAVSDK offboard flight timed out; sim log:\n{sim.output()[-3000:]}")
+        hold_error = asyncio.run(asyncio.wait_for(_fly_offboard(port, truth), timeout=80.0))
+    except (TimeoutError, AssertionError) as error:
+        pytest.fail(f"MAVSDK offboard flight failed ({error}); sim log:\n{sim.output()[-3000:]}")
     finally:
         sim.stop()
     assert hold_error < REACHED
