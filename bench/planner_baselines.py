@@ -26,7 +26,11 @@ summary and the per-seed rows; rows are also appended to ``FILE.rows.jsonl`` as 
 and ``--from-rows FILE.rows.jsonl`` summarises those (a run stopped early included).
 
     nice -n 10 python bench/planner_baselines.py [--seeds 100] [--budget 30] [--time 5]
-        [--jobs 1] [--mismatch] [--json out.json]
+        [--jobs 1] [--mismatch] [--estimator filter|estimate|auto-effects] [--json out.json]
+
+``--estimator`` also scores ``--estimator-kinds`` (default the planned flight and the
+practitioner's) by the tool's own answer (`bench/tool_estimate.py`): median |error| over
+the flights not refused, refusals, and 95 % coverage.
 """
 
 from __future__ import annotations
@@ -66,6 +70,7 @@ from mavsysid.vehicle.model_effects import effect_from_values
 
 from bench.mismatch_coverage import CASES, truth_side
 from bench.planner_baselines_summary import format_summary, summarize
+from bench.tool_estimate import ESTIMATORS, tool_scores
 from mavsysid.errors import JobFailedError
 
 KINDS = ("dopt", "dopt_once", *BASELINES)
@@ -91,6 +96,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "for the controller's feedback on a vehicle with motor lag")
     parser.add_argument("--mismatch", action="store_true",
                         help="hide linear rotor drag and motor lag in the truth")
+    parser.add_argument("--estimator", choices=("filter", *ESTIMATORS), default="filter",
+                        help="also score --estimator-kinds by what `mavsysid estimate` runs "
+                             "(estimate), or with the effects diagnose names (auto-effects)")
+    parser.add_argument("--estimator-kinds", default="dopt,practitioner",
+                        help="comma-separated kinds scored by --estimator")
     parser.add_argument("--json", type=Path, help="write the summary and rows here")
     parser.add_argument("--from-rows", type=Path,
                         help="summarise the rows of an earlier (perhaps unfinished) run, "
@@ -169,6 +179,9 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict:
                                                   args.opening)
                 row[kind] = fly(sim, truth, prior, model, trajectory, tmp / kind, settings)
                 row[kind]["note"] = note
+                if args.estimator != "filter" and kind in args.estimator_kinds.split(","):
+                    row[kind].update(tool_scores(tmp / kind, prior, truth.theta,
+                                                 args.estimator))
         except JobFailedError as exc:
             print(f"seed {seed}: failed: {kind}: {exc}", flush=True)
             return {"seed": seed, "failed": f"{kind}: {exc}"}

@@ -123,6 +123,22 @@ def paper_column(rows: list[dict], kind: str, truth: np.ndarray) -> list[float] 
     return median_convergence_time(np.arange(length) / 10.0, ratios / truth).tolist()
 
 
+def tool_estimates(rows: list[dict], kinds: Sequence[str]) -> dict:
+    """The tool's answer (``--estimator``) per kind scored by it: median |error| over the
+    flights not refused, refusals, share of flights whose 95 % interval covers the truth."""
+    out = {}
+    for kind in kinds:
+        if "tool_error" not in rows[0][kind]:
+            continue
+        error = np.array([[np.nan if e is None else e for e in r[kind]["tool_error"]]
+                          for r in rows], dtype=float)
+        covered = np.array([r[kind]["tool_covered"] for r in rows], dtype=bool)
+        out[kind] = {"median_error": np.nanmedian(error, axis=0).tolist(),
+                     "refused": int(sum(r[kind]["tool_refused"] is not None for r in rows)),
+                     "covered_share": covered.mean(axis=0).tolist()}
+    return out
+
+
 def targets(summary: dict, n: int) -> dict:
     """The issue's acceptance targets, each with its figure and whether it is met."""
     fly, ratio = summary["flyability"], summary["dopt_ratio"]
@@ -141,7 +157,17 @@ def targets(summary: dict, n: int) -> dict:
                                      eff["practitioner"]["to_planned_budgets"]
                                      >= FLIGHT_TIME_RATIO],
         "sigma_prediction": [sig, all(abs(r - 1.0) <= SIGMA_TOLERANCE for r in sig)],
+        **_tool_target(summary.get("tool_estimates", {})),
     }
+
+
+def _tool_target(tool: dict) -> dict:
+    """The error target judged on the tool's answer, when both kinds were scored by it."""
+    if PLANNED not in tool or "practitioner" not in tool:
+        return {}
+    no_worse = all(a <= b for a, b in zip(tool[PLANNED]["median_error"],
+                                          tool["practitioner"]["median_error"], strict=True))
+    return {"tool_error_no_worse_than_practitioner": [None, no_worse]}
 
 
 def summarize(rows: list[dict], kinds: Sequence[str], budget: float, max_passes: int,
@@ -158,6 +184,7 @@ def summarize(rows: list[dict], kinds: Sequence[str], budget: float, max_passes:
     summary["flyability"] = flyability(ok, kinds)
     summary["sigma_prediction"] = sigma_prediction(ok, kinds)
     summary["efficiency"] = efficiency(ok, kinds, budget, np.asarray(truth, dtype=float))
+    summary["tool_estimates"] = tool_estimates(ok, kinds)
     summary["targets"] = targets(summary, len(ok))
     return summary
 
@@ -204,6 +231,13 @@ def format_summary(summary: dict) -> str:
                      f"{_ci(e['to_planned_ci95'], '.1f')} = {e['to_planned_budgets']:.2f}× "
                      f"budget | 1 %: {e['to_1pct_median']:6.2f} s, {e['to_1pct_never']} never"
                      + ("" if paper is None else " | " + " ".join(f"{c:.2f}" for c in paper)))
+    if summary["tool_estimates"]:
+        lines.append("the tool's answer (--estimator): median |error| / θ (%) over flights not "
+                     "refused; refused; 95 % interval covers the truth (% of flights)")
+    for kind, t in summary["tool_estimates"].items():
+        lines.append(f"  {kind:<18} " + "  ".join(f"{100 * e:.3f}" for e in t["median_error"])
+                     + f" | refused {t['refused']} | covers "
+                     + " ".join(f"{100 * c:.0f}" for c in t["covered_share"]))
     lines.append("targets (issue 20): figure, met")
     for name, (value, met) in summary["targets"].items():
         shown = ("" if value is None else " ".join(f"{v:.2f}" for v in value)

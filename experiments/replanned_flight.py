@@ -5,9 +5,10 @@ The design issue 20 chose for a plan robust to the prior (README, "robust to the
 1. plan a short **opening** (budget `OPENING_BUDGET`) from the prior, with the prior's wide
    belief, so that the planner's chance-constrained rotor check keeps it gentle (in the box
    inset by the rotor clearance, so that its end is a valid start: `opening_settings`);
-2. fly it (here in the offline simulator, `mavsysid.flight.offline.simulator`) and filter
-   it from the prior (`mavsysid.experiments.experiment.filter_flight`): θ̂ and its
-   covariance Σ;
+2. fly it (here in the offline simulator, `mavsysid.flight.offline.simulator`) and estimate
+   θ̂ and its covariance Σ as ``mavsysid estimate`` does (`checked_estimate`, the same
+   pipeline a ``stream --replan-budget`` run uses: robust start, filter, batch
+   refinement, σ aware of residual whiteness, and the checks that refuse);
 3. plan the **rest** of the budget with θ̂ as the config's θ and Σ relative to θ̂
    (Σ_ij / (θ̂_i θ̂_j)) as ``PlannerSettings.prior_covariance``, starting at the hover where
    the opening ended;
@@ -24,8 +25,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation.estimate_job import check_result
+from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.kinematics_check import check_kinematics
+from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.experiments.experiment import filter_flight
 from mavsysid.flight.offline.simulator import Simulator
 from mavsysid.planner.plan_request import rotor_clearance
 from mavsysid.planner.results import PlannerSettings, PlanResult
@@ -36,7 +41,7 @@ from mavsysid.vehicle.trajectory import PiecewisePolynomial
 from mavsysid.errors import JobFailedError
 
 __all__ = ["CONTINUITY_TOLERANCE", "OPENING_BUDGET", "START_MARGIN", "ReplannedFlight",
-           "concatenate", "end_hover", "opening_settings", "prior_estimate",
+           "checked_estimate", "concatenate", "end_hover", "opening_settings", "prior_estimate",
            "relative_covariance", "replan_flight", "rest_settings"]
 
 #: Default budget of the opening flight, s.
@@ -59,7 +64,7 @@ class ReplannedFlight:
     opening, rest : PlanResult
         The two plans.
     posterior : ParameterEstimate
-        θ̂ and Σ (SI) after filtering the opening from the prior.
+        θ̂ and Σ (SI) estimated from the opening (`checked_estimate`).
     rest_config : VehicleConfig
         The prior vehicle with θ̂: the model the rest was planned with.
     rest_settings : PlannerSettings
@@ -79,6 +84,27 @@ def prior_estimate(prior: VehicleConfig, settings: PlannerSettings) -> Parameter
     (``PlannerSettings.theta_covariance``, relative to θ)."""
     theta = prior.theta
     return ParameterEstimate(theta.copy(), settings.theta_covariance * np.outer(theta, theta))
+
+
+def checked_estimate(flight: FlightData, config: VehicleConfig,
+                     settings: EstimatorSettings | None = None,
+                     source: str | None = None) -> ParameterEstimate:
+    """θ̂ and Σ (SI) as ``mavsysid estimate`` reports them: the final estimate.
+
+    The kinematics check, `estimate_parameters` and `check_result` (``source``, default the
+    flight's, names the log in a refusal).
+
+    Raises
+    ------
+    JobFailedError
+        Refused, as ``estimate`` would refuse it (exit 3).
+    InputError
+        The log's kinematics are inconsistent (bad input).
+    """
+    check_kinematics(flight)
+    result = estimate_parameters(flight, config, settings)
+    check_result(flight.source if source is None else source, result)
+    return result.final
 
 
 def relative_covariance(estimate: ParameterEstimate) -> tuple[tuple[float, ...], ...]:
@@ -180,7 +206,8 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     Raises
     ------
     JobFailedError
-        A plan cannot be found, or the opening's estimate cannot seed a re-plan.
+        A plan cannot be found, or the opening's estimate is refused or cannot seed a
+        re-plan.
     """
     if not 0.0 < opening_budget < settings.budget:
         raise ValueError(f"opening budget {opening_budget:g} s: expected within "
@@ -189,7 +216,8 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     # with the wide prior that is usually a low z (a gentle opening), after it a high one.
     opening = plan_most_confident(prior, opening_settings(settings, prior, opening_budget)).result
     simulator.run(opening.trajectory, directory)
-    posterior = filter_flight(directory, prior, prior_estimate(prior, settings)).estimate
+    # The estimate the stream's continuation would use (experiments.replanned_stream).
+    posterior = checked_estimate(load_flight(directory / "pose.csv", prior), prior)
     later = rest_settings(settings, posterior, opening.trajectory)
     config = prior.with_parameters(posterior.value)
     confident = plan_most_confident(config, later)

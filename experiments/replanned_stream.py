@@ -32,12 +32,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from mavsysid.estimation.estimate_job import check_result
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.kinematics_check import check_kinematics
+from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.experiments.replanned_flight import relative_covariance
+from mavsysid.experiments.replanned_flight import checked_estimate, relative_covariance
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
 from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
@@ -101,10 +99,7 @@ def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> Parame
     with tempfile.TemporaryDirectory(prefix="mavsysid-replan-") as tmp:
         pose = snapshot_pose(so_far.pose, Path(tmp))
         flight = load_flight(pose, so_far.config, start=so_far.window_start)
-        check_kinematics(flight)
-        result = estimate_parameters(flight, so_far.config, settings)
-        check_result(str(so_far.pose), result)
-    return result.final
+        return checked_estimate(flight, so_far.config, settings, source=str(so_far.pose))
 
 
 def replanning_continuation(settings: ReplanSettings,

@@ -6,9 +6,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.experiment import draw_prior
 from mavsysid.experiments.replanned_flight import (
+    checked_estimate,
     concatenate,
     end_hover,
     opening_settings,
@@ -143,4 +145,7 @@ def test_replanned_flight_starts_the_rest_from_the_opening_posterior(tmp_path):
                                relative_covariance(flight.posterior), rtol=1e-12)
     # The opening taught something: every σ below the prior's ±50 %.
     assert np.all(flight.posterior.sigma < 0.5 * prior.theta)
-    assert (tmp_path / "opening" / "pose.csv").is_file()
+    # The posterior is what `estimate` (and a stream's continuation) reports on the opening.
+    again = checked_estimate(load_flight(tmp_path / "opening" / "pose.csv", prior), prior)
+    np.testing.assert_allclose(flight.posterior.value, again.value, rtol=1e-9)
+    np.testing.assert_allclose(flight.posterior.covariance, again.covariance, rtol=1e-9)
