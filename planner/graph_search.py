@@ -46,13 +46,41 @@ from mavsysid.planner.yaw_branch import nearest_yaw_branch, wrap_angle
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel
 
-__all__ = ["GraphSearch"]
+__all__ = ["FULL_FLIGHT_SHARE", "SEARCH_SHARE_MAX", "GraphSearch", "search_time_is_up"]
+
+#: The search runs past its share of the planning time while its best flight uses less
+#: than this share of the budget: with 10 % of 5 s the search sometimes stopped at a 7.6 s
+#: flight of a 30 s budget (4× worse D-opt), which no refinement of that path can lengthen.
+FULL_FLIGHT_SHARE = 0.9
+#: … but never past this share of the planning time, so the refinement keeps the rest.
+SEARCH_SHARE_MAX = 0.5
 
 #: Stops end at least this far inside the box, m.
 _STOP_MARGIN = 0.2
 _PROGRESS_PERIOD = 0.25
 #: Vertices (nearest first) from which a sample's free-end connection is tried.
 _NEAREST_TRIES = 5
+
+
+def search_time_is_up(elapsed: float, deadline: float, planning_time: float,
+                      best_flight: float | None, budget: float) -> bool:
+    """Whether the graph search must stop (timed planning).
+
+    Parameters
+    ----------
+    elapsed, deadline, planning_time : float
+        Time since the search began, its share of the planning time, and the whole
+        planning time, s.
+    best_flight : float or None
+        Duration of the best candidate flight so far, s (None: none yet).
+    budget : float
+        The flight's time budget, s.
+    """
+    if elapsed < deadline:
+        return False
+    if deadline >= SEARCH_SHARE_MAX * planning_time or elapsed >= SEARCH_SHARE_MAX * planning_time:
+        return True
+    return best_flight is not None and best_flight >= FULL_FLIGHT_SHARE * budget
 
 
 class GraphSearch:
@@ -92,8 +120,17 @@ class GraphSearch:
         return time.perf_counter() - self.t0
 
     def out_of_time(self) -> bool:
-        """Past the search phase's share of the planning time."""
-        return self.elapsed() >= self.search_deadline
+        """Past the search phase's share of the planning time (`search_time_is_up`)."""
+        return search_time_is_up(self.elapsed(), self.search_deadline,
+                                 self.settings.planning_time, self.best_flight_time(),
+                                 self.settings.budget)
+
+    def best_flight_time(self) -> float | None:
+        """Duration of the best candidate flight, its stop included, s (None: none yet)."""
+        if self.best is None:
+            return None
+        belief = self.best[1]
+        return float(belief.cost + self.vertices[belief.vertex].stop_time)
 
     def done(self) -> bool:
         s = self.settings
