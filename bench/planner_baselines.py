@@ -145,18 +145,21 @@ def fly(sim: Simulator, truth: VehicleConfig, prior: VehicleConfig, planned_with
 
 def planned(kind: str, prior: VehicleConfig, truth: VehicleConfig, settings: PlannerSettings,
             sim: Simulator, tmp: Path, opening: float) -> tuple:
-    """(trajectory, the vehicle it was planned with, note) of one kind."""
+    """(trajectory, the vehicle it was planned with, extra row fields) of one kind."""
     if kind == "dopt":
         flight = replan_flight(prior, settings, sim, tmp / "opening", opening)
         err = np.abs(flight.posterior.value / truth.theta - 1.0)
-        return flight.trajectory, flight.rest_config, (
-            f"opening {flight.opening.trajectory.duration:.1f} s at z "
-            f"{flight.opening.settings.rotor_confidence:g}, rest at z "
-            f"{flight.rest_settings.rotor_confidence:g}, max |θ̂ err| {err.max():.0%}")
+        belief = ("rest from the prior, the opening's estimate refused"
+                  if flight.refusal else f"max |θ̂ err| {err.max():.0%}")
+        return flight.trajectory, flight.rest_config, {
+            "note": f"opening {flight.opening.trajectory.duration:.1f} s at z "
+                    f"{flight.opening.settings.rotor_confidence:g}, rest at z "
+                    f"{flight.rest_settings.rotor_confidence:g}, {belief}",
+            "opening_refused": flight.refusal}
     if kind == "dopt_once":
-        return plan(prior, settings).trajectory, prior, ""
+        return plan(prior, settings).trajectory, prior, {"note": ""}
     model = truth if kind == "oracle" else prior
-    return baseline_trajectory(kind, prior, truth, settings), model, ""
+    return baseline_trajectory(kind, prior, truth, settings), model, {"note": ""}
 
 
 def run_seed(args: argparse.Namespace, seed: int) -> dict:
@@ -175,10 +178,10 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict:
         tmp = Path(name)
         try:
             for kind in KINDS:
-                trajectory, model, note = planned(kind, prior, truth, settings, sim, tmp,
-                                                  args.opening)
+                trajectory, model, extra = planned(kind, prior, truth, settings, sim, tmp,
+                                                   args.opening)
                 row[kind] = fly(sim, truth, prior, model, trajectory, tmp / kind, settings)
-                row[kind]["note"] = note
+                row[kind].update(extra)
                 if args.estimator != "filter" and kind in args.estimator_kinds.split(","):
                     row[kind].update(tool_scores(tmp / kind, prior, truth.theta,
                                                  args.estimator))

@@ -185,6 +185,7 @@ def summarize(rows: list[dict], kinds: Sequence[str], budget: float, max_passes:
     summary["sigma_prediction"] = sigma_prediction(ok, kinds)
     summary["efficiency"] = efficiency(ok, kinds, budget, np.asarray(truth, dtype=float))
     summary["tool_estimates"] = tool_estimates(ok, kinds)
+    summary["opening_refused"] = sum(bool(r[PLANNED].get("opening_refused")) for r in ok)
     summary["targets"] = targets(summary, len(ok))
     return summary
 
@@ -238,6 +239,8 @@ def format_summary(summary: dict) -> str:
         lines.append(f"  {kind:<18} " + "  ".join(f"{100 * e:.3f}" for e in t["median_error"])
                      + f" | refused {t['refused']} | covers "
                      + " ".join(f"{100 * c:.0f}" for c in t["covered_share"]))
+    lines.append(f"the opening's estimate refused (rest planned from the prior): "
+                 f"{summary.get('opening_refused', 0)} of {summary['completed']}")
     lines.append("targets (issue 20): figure, met")
     for name, (value, met) in summary["targets"].items():
         shown = ("" if value is None else " ".join(f"{v:.2f}" for v in value)

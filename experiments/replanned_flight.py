@@ -9,6 +9,9 @@ The design issue 20 chose for a plan robust to the prior (README, "robust to the
    θ̂ and its covariance Σ as ``mavsysid estimate`` does (`checked_estimate`, the same
    pipeline a ``stream --replan-budget`` run uses: robust start, filter, batch
    refinement, σ aware of residual whiteness, and the checks that refuse);
+   when ``estimate`` refuses it (the model cannot follow the opening: a diverged filter,
+   a force balance that contradicts θ̂), the rest is planned from the belief the opening
+   was planned from (`belief_after_opening`): as gentle as the opening, which flew;
 3. plan the **rest** of the budget with θ̂ as the config's θ and Σ relative to θ̂
    (Σ_ij / (θ̂_i θ̂_j)) as ``PlannerSettings.prior_covariance``, starting at the hover where
    the opening ended;
@@ -21,6 +24,7 @@ it in one run (the opening's noise realisation is the same, since the seed is).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -41,8 +45,9 @@ from mavsysid.vehicle.trajectory import PiecewisePolynomial
 from mavsysid.errors import JobFailedError
 
 __all__ = ["CONTINUITY_TOLERANCE", "OPENING_BUDGET", "START_MARGIN", "ReplannedFlight",
-           "checked_estimate", "concatenate", "end_hover", "opening_settings", "prior_estimate",
-           "relative_covariance", "replan_flight", "rest_settings"]
+           "belief_after_opening", "checked_estimate", "concatenate", "end_hover",
+           "opening_settings", "prior_estimate", "relative_covariance", "replan_flight",
+           "rest_settings"]
 
 #: Default budget of the opening flight, s.
 OPENING_BUDGET = 6.0
@@ -64,11 +69,15 @@ class ReplannedFlight:
     opening, rest : PlanResult
         The two plans.
     posterior : ParameterEstimate
-        θ̂ and Σ (SI) estimated from the opening (`checked_estimate`).
+        θ̂ and Σ (SI) estimated from the opening (`checked_estimate`), or the prior belief
+        when that estimate was refused.
     rest_config : VehicleConfig
         The prior vehicle with θ̂: the model the rest was planned with.
     rest_settings : PlannerSettings
         The settings the rest was planned with.
+    refusal : str or None
+        Why the opening's estimate was refused (the rest was then planned from the prior
+        belief); None when it was accepted.
     """
 
     trajectory: PiecewisePolynomial
@@ -77,6 +86,7 @@ class ReplannedFlight:
     posterior: ParameterEstimate
     rest_config: VehicleConfig
     rest_settings: PlannerSettings
+    refusal: str | None = None
 
 
 def prior_estimate(prior: VehicleConfig, settings: PlannerSettings) -> ParameterEstimate:
@@ -105,6 +115,20 @@ def checked_estimate(flight: FlightData, config: VehicleConfig,
     result = estimate_parameters(flight, config, settings)
     check_result(flight.source if source is None else source, result)
     return result.final
+
+
+def belief_after_opening(estimate: Callable[[], ParameterEstimate], prior: ParameterEstimate
+                         ) -> tuple[ParameterEstimate, str | None]:
+    """The opening's estimate, or ``prior`` and the refusal's line when ``estimate`` refuses.
+
+    A refused estimate is no belief to plan aggressively from; the belief the opening was
+    planned from is, and its chance-constrained rotor check keeps the rest as gentle as the
+    opening that flew. The whole flight is estimated (and may be refused) afterwards.
+    """
+    try:
+        return estimate(), None
+    except JobFailedError as refusal:
+        return prior, str(refusal).splitlines()[0]
 
 
 def relative_covariance(estimate: ParameterEstimate) -> tuple[tuple[float, ...], ...]:
@@ -206,8 +230,7 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     Raises
     ------
     JobFailedError
-        A plan cannot be found, or the opening's estimate is refused or cannot seed a
-        re-plan.
+        A plan cannot be found, or the opening's estimate cannot seed a re-plan.
     """
     if not 0.0 < opening_budget < settings.budget:
         raise ValueError(f"opening budget {opening_budget:g} s: expected within "
@@ -217,10 +240,12 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     opening = plan_most_confident(prior, opening_settings(settings, prior, opening_budget)).result
     simulator.run(opening.trajectory, directory)
     # The estimate the stream's continuation would use (experiments.replanned_stream).
-    posterior = checked_estimate(load_flight(directory / "pose.csv", prior), prior)
+    posterior, refusal = belief_after_opening(
+        lambda: checked_estimate(load_flight(directory / "pose.csv", prior), prior),
+        prior_estimate(prior, settings))
     later = rest_settings(settings, posterior, opening.trajectory)
     config = prior.with_parameters(posterior.value)
     confident = plan_most_confident(config, later)
     rest, later = confident.result, replace(later, rotor_confidence=confident.rotor_confidence)
     return ReplannedFlight(concatenate(opening.trajectory, rest.trajectory), opening, rest,
-                           posterior, config, later)
+                           posterior, config, later, refusal)

@@ -32,10 +32,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.experiments.replanned_flight import checked_estimate, relative_covariance
+from mavsysid.experiments.replanned_flight import (
+    belief_after_opening,
+    checked_estimate,
+    relative_covariance,
+)
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
 from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
@@ -116,11 +121,17 @@ def replanning_continuation(settings: ReplanSettings,
         if rest < settings.min_rest or so_far.segments > settings.rounds:
             return None
         began = time.monotonic()
-        estimate = _estimate(so_far, settings.estimator)
+        theta = so_far.config.theta
+        estimate, refusal = belief_after_opening(
+            lambda: _estimate(so_far, settings.estimator),
+            ParameterEstimate(theta, settings.planner.theta_covariance * np.outer(theta, theta)))
         estimated = time.monotonic()
-        sigma = estimate.relative_sigma
-        say("estimate after {:.1f} s: σ/θ {}".format(
-            so_far.flown, ", ".join(f"{100 * s:.1f} %" for s in sigma)))
+        if refusal is None:
+            say("estimate after {:.1f} s: σ/θ {}".format(
+                so_far.flown, ", ".join(f"{100 * s:.1f} %" for s in estimate.relative_sigma)))
+        else:
+            say(f"estimate after {so_far.flown:.1f} s refused ({refusal}); the rest is "
+                "planned from the prior belief")
         rel = relative_covariance(estimate)
         planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
                           start=tuple(so_far.hover),
@@ -137,7 +148,7 @@ def replanning_continuation(settings: ReplanSettings,
         record: dict[str, Any] = {
             "estimate": {"theta": estimate.value.tolist(), "sigma": estimate.sigma.tolist(),
                          "covariance": estimate.covariance.tolist(),
-                         "from_flown_s": so_far.flown},
+                         "from_flown_s": so_far.flown, "refused": refusal},
             "estimation_s": estimated - began, "planning_s": planned - estimated,
             "planner": {"budget": rest, "max_samples": planner.max_samples,
                         "planning_time": (planner.planning_time if math.isfinite(

@@ -10,6 +10,7 @@ from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.experiment import draw_prior
 from mavsysid.experiments.replanned_flight import (
+    belief_after_opening,
     checked_estimate,
     concatenate,
     end_hover,
@@ -67,6 +68,25 @@ def test_relative_covariance_refuses_a_non_positive_estimate():
     value[1] = -value[1]
     with pytest.raises(JobFailedError, match="non-positive"):
         relative_covariance(ParameterEstimate(value, estimate.covariance))
+
+
+def test_an_accepted_opening_estimate_is_the_belief():
+    """An estimate that is not refused is the rest's belief, with no refusal."""
+    estimate = _random_estimate(np.random.default_rng(3))
+    prior = _random_estimate(np.random.default_rng(4))
+    belief, refusal = belief_after_opening(lambda: estimate, prior)
+    assert belief is estimate and refusal is None
+
+
+def test_a_refused_opening_estimate_falls_back_to_the_prior():
+    """A refused estimate leaves the prior belief and the refusal's first line."""
+    prior = _random_estimate(np.random.default_rng(4))
+
+    def refused() -> ParameterEstimate:
+        raise JobFailedError("pose.csv: the parameter filter diverged\ndetails")
+
+    belief, refusal = belief_after_opening(refused, prior)
+    assert belief is prior and refusal == "pose.csv: the parameter filter diverged"
 
 
 def test_default_prior_estimate_is_the_settings_relative_sigma():
@@ -146,6 +166,7 @@ def test_replanned_flight_starts_the_rest_from_the_opening_posterior(tmp_path):
     # The opening taught something: every σ below the prior's ±50 %.
     assert np.all(flight.posterior.sigma < 0.5 * prior.theta)
     # The posterior is what `estimate` (and a stream's continuation) reports on the opening.
+    assert flight.refusal is None
     again = checked_estimate(load_flight(tmp_path / "opening" / "pose.csv", prior), prior)
     np.testing.assert_allclose(flight.posterior.value, again.value, rtol=1e-9)
     np.testing.assert_allclose(flight.posterior.covariance, again.covariance, rtol=1e-9)
