@@ -71,7 +71,7 @@ from mavsysid.vehicle.model_effects import effect_from_values
 from bench.mismatch_coverage import CASES, truth_side
 from bench.planner_baselines_summary import format_summary, summarize
 from bench.tool_estimate import ESTIMATORS, tool_scores
-from mavsysid.errors import JobFailedError
+from mavsysid.errors import MavsysidError
 
 KINDS = ("dopt", "dopt_once", *BASELINES)
 #: The hidden truth of ``--mismatch``: the issue-18 effects that change what is fitted.
@@ -185,7 +185,7 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict:
                 if args.estimator != "filter" and kind in args.estimator_kinds.split(","):
                     row[kind].update(tool_scores(tmp / kind, prior, truth.theta,
                                                  args.estimator))
-        except JobFailedError as exc:
+        except MavsysidError as exc:  # refused, or a flight whose log the filter cannot read
             print(f"seed {seed}: failed: {kind}: {exc}", flush=True)
             return {"seed": seed, "failed": f"{kind}: {exc}"}
     target = row["dopt"]["predicted"]
