@@ -32,13 +32,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.replanned_flight import (
     belief_after_opening,
     checked_estimate,
+    prior_estimate,
     relative_covariance,
 )
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
@@ -121,10 +121,9 @@ def replanning_continuation(settings: ReplanSettings,
         if rest < settings.min_rest or so_far.segments > settings.rounds:
             return None
         began = time.monotonic()
-        theta = so_far.config.theta
         estimate, refusal = belief_after_opening(
             lambda: _estimate(so_far, settings.estimator),
-            ParameterEstimate(theta, settings.planner.theta_covariance * np.outer(theta, theta)))
+            prior_estimate(so_far.config, settings.planner))
         estimated = time.monotonic()
         if refusal is None:
             say("estimate after {:.1f} s: σ/θ {}".format(
