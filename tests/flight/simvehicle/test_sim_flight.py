@@ -240,9 +240,11 @@ def test_streamed_trajectory_is_tracked_closely():
     excitation figure at 50 Hz are tracked with a position RMS below 2 cm.
 
     WALL CLOCK on purpose (``lockstep=False``): the real-time path, setpoints paced by the
-    wall clock as a ground station would."""
+    wall clock as a ground station would. At real time (speedup 1), as a ground station
+    flies: at 4× a 0.1 s scheduling stall on a busy CI machine cost 0.4 s of sim time and
+    once 5.9 cm of tracking."""
     traj = excitation_trajectory(ExcitationSpec(duration=12.0, center=(0.0, 0.0, 2.0)))
-    with running_sim(ekf_delay=0.0, speedup=4.0, lockstep=False) as (_, gcs):
+    with running_sim(ekf_delay=0.0, speedup=1.0, lockstep=False) as (_, gcs):
         _fast_telemetry(gcs)
         start = traj.flat_outputs(np.array([0.0]))
         _take_off(gcs, float(start.position[0, 2]))
