@@ -18,13 +18,6 @@ PRIOR = load_vehicle("quad_x").theta
 PRIOR_SIGMA = 0.5 * PRIOR
 
 
-def _theta(**changes: float) -> np.ndarray:
-    theta = PRIOR.copy()
-    for name, value in changes.items():
-        theta[PARAMETER_NAMES.index(name)] = value
-    return theta
-
-
 def _stub_result(theta: np.ndarray) -> SimpleNamespace:
     final = SimpleNamespace(value=theta, sigma=0.05 * np.abs(theta))
     prior = SimpleNamespace(value=PRIOR, sigma=PRIOR_SIGMA)
@@ -54,7 +47,9 @@ def test_run_estimate_returns_a_plausible_estimate(stub_estimation) -> None:
 def test_estimate_command_refuses_negative_c_M_without_writing(
     stub_estimation, tmp_path: Path, capsys: pytest.CaptureFixture[str],
 ) -> None:
-    stub_estimation(_theta(c_M=-5e-15))
+    theta = PRIOR.copy()
+    theta[PARAMETER_NAMES.index("c_M")] = -5e-15
+    stub_estimation(theta)
     out, toml = tmp_path / "estimate.json", tmp_path / "vehicle.toml"
     code = main(["estimate", "flight.ulg", "--vehicle", "quad_x", "-o", str(out),
                  "--update-vehicle", str(toml)])
