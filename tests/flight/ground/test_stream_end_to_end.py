@@ -123,8 +123,8 @@ def test_estimate_reads_the_streamed_tlog(ardupilot_flight, tmp_path):
     """`estimate` reads the streamer's flight.tlog (slow telemetry before the rates are
     raised included): by default only the trajectory window of meta.json, else the GUIDED
     span of the HEARTBEATs; the refined θ within 5 % of the sim's truth."""
-    from mavsysid.estimation.estimate_job import run_estimate
     from mavsysid.estimation.readers import load_flight
+    from mavsysid.pipeline.estimate import run_estimate
 
     from mavsysid.errors import JobFailedError
 

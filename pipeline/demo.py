@@ -4,7 +4,7 @@
 2. **Fly** it: start ``mavsysid sim`` as its own process — a vehicle whose true θ differs
    from the nominal by a seeded, hidden factor — and stream the plan to it over MAVLink
    on UDP loopback, recording ``pose.csv``, ``flight.tlog`` and ``meta.json``
-   (`mavsysid.experiments.demo_flight`).
+   (`mavsysid.pipeline.demo_flight`).
 3. **Estimate** θ with the paper's EKF from the part of the recorded pose log where the
    plan was flown.
 4. **Diagnose** the identified model on the last flight
@@ -32,16 +32,16 @@ from mavsysid.discrepancy.report import write_diagnosis_json
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.results import EstimationResult, ParameterEstimate
-from mavsysid.experiments.demo_flight import (
+from mavsysid.formats.flight_dir import new_flight_dir, write_json_atomic
+from mavsysid.pipeline.demo_flight import (
     fly_over_mavlink,
     hidden_scale,
     trajectory_window,
     with_headroom,
 )
-from mavsysid.flight.offline.offline_flight import parse_hidden_effects
-from mavsysid.formats.flight_dir import new_flight_dir, write_json_atomic
+from mavsysid.pipeline.plan import run_plan
+from mavsysid.pipeline.simulate import parse_hidden_effects
 from mavsysid.planner.plan_file import write_trajectory
-from mavsysid.planner.plan_job import run_plan
 from mavsysid.planner.results import PlannerSettings, PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 

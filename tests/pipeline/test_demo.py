@@ -1,4 +1,5 @@
-"""Tests of ``mavsysid demo``: plan, fly over MAVLink against the simulated vehicle, estimate."""
+"""Tests of the demo (`mavsysid.pipeline.demo`): plan, fly over MAVLink against the simulated
+vehicle, estimate, diagnose."""
 
 from __future__ import annotations
 
@@ -6,13 +7,12 @@ import json
 
 import numpy as np
 import pytest
-from mavsysid.experiments.demo import DemoSettings, run_demo
-from mavsysid.experiments.demo_flight import hidden_scale
 from mavsysid.formats.poselog import read_pose_log
+from mavsysid.pipeline.demo import DemoSettings, run_demo
+from mavsysid.pipeline.demo_flight import hidden_scale
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from rerun.chunk import RrdReader
 
-from mavsysid.cli import main
 from mavsysid.cli.demo import format_summary
 
 
@@ -76,15 +76,3 @@ def test_demo_diagnoses_a_faithful_model_as_such(demo_run):
     doc = json.loads((demo_run.directory / "diagnosis.json").read_text())
     assert doc["effects"] == []
     assert "no significant discrepancy" in format_summary(demo_run)
-
-
-@pytest.mark.parametrize(("argv", "fragment"), [
-    (["--iterations", "0"], "--iterations 0"),
-    (["--hidden-effect", "warp:x=1"], "unknown effect 'warp'"),
-])
-def test_demo_bad_input_exits_2(argv, fragment, tmp_path, capsys):
-    """A bad option is one line and exit 2, before anything flies."""
-    assert main(["demo", "--logs", str(tmp_path), *argv]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and fragment in err
-    assert not any(tmp_path.iterdir())

@@ -1,5 +1,5 @@
 """Re-planning in flight: a 6 s opening, estimate, plan the rest, fly it, in one stream run
-against `mavsysid sim` (lock-step, its own process)."""
+against `mavsysid sim` (lock-step, its own process); the belief the rest is planned from."""
 
 from __future__ import annotations
 
@@ -9,20 +9,25 @@ import sys
 
 import numpy as np
 import pytest
-from mavsysid.experiments.replanned_stream import (
-    ReplanSettings,
-    run_replanned_stream,
-    snapshot_pose,
-)
+from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+from mavsysid.pipeline.replanned_stream import (
+    ReplanSettings,
+    belief_after_opening,
+    prior_estimate,
+    relative_covariance,
+    run_replanned_stream,
+    snapshot_pose,
+)
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
+from mavsysid.errors import JobFailedError
 from tests.support.stream_flights import BOX, SimProcess
 
 SPEEDUP = 4.0
@@ -96,3 +101,54 @@ def test_budget_not_longer_than_the_opening_is_refused_before_connecting(tmp_pat
     assert "--replan-budget 5: must exceed the opening's 6.0 s" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "logs").exists()
+
+
+def _random_estimate(rng: np.random.Generator) -> ParameterEstimate:
+    theta = load_vehicle("firefly").theta * rng.uniform(0.6, 1.4, 6)
+    a = rng.normal(size=(6, 6)) * 0.05
+    return ParameterEstimate(theta, (a @ a.T + 1e-4 * np.eye(6)) * np.outer(theta, theta))
+
+
+def test_relative_covariance_is_the_posterior_seen_from_its_mean():
+    rng = np.random.default_rng(11)
+    estimate = _random_estimate(rng)
+    rel = relative_covariance(estimate)
+    config = load_vehicle("firefly").with_parameters(estimate.value)
+    back = prior_estimate(config, PlannerSettings(prior_covariance=rel))
+    np.testing.assert_allclose(back.value, estimate.value, rtol=1e-12)
+    np.testing.assert_allclose(back.covariance, estimate.covariance, rtol=1e-10, atol=0.0)
+    np.testing.assert_allclose(np.sqrt(np.diag(rel)), estimate.relative_sigma, rtol=1e-12)
+
+
+def test_relative_covariance_refuses_a_non_positive_estimate():
+    estimate = _random_estimate(np.random.default_rng(12))
+    value = estimate.value.copy()
+    value[1] = -value[1]
+    with pytest.raises(JobFailedError, match="non-positive"):
+        relative_covariance(ParameterEstimate(value, estimate.covariance))
+
+
+def test_an_accepted_opening_estimate_is_the_belief():
+    """An estimate that is not refused is the rest's belief, with no refusal."""
+    estimate = _random_estimate(np.random.default_rng(3))
+    prior = _random_estimate(np.random.default_rng(4))
+    belief, refusal = belief_after_opening(lambda: estimate, prior)
+    assert belief is estimate and refusal is None
+
+
+def test_a_refused_opening_estimate_falls_back_to_the_prior():
+    """A refused estimate leaves the prior belief and the refusal's first line."""
+    prior = _random_estimate(np.random.default_rng(4))
+
+    def refused() -> ParameterEstimate:
+        raise JobFailedError("pose.csv: the parameter filter diverged\ndetails")
+
+    belief, refusal = belief_after_opening(refused, prior)
+    assert belief is prior and refusal == "pose.csv: the parameter filter diverged"
+
+
+def test_default_prior_estimate_is_the_settings_relative_sigma():
+    config = load_vehicle("firefly")
+    est = prior_estimate(config, PlannerSettings(prior_relative_sigma=0.3))
+    np.testing.assert_allclose(est.relative_sigma, 0.3, rtol=1e-12)
+    assert np.count_nonzero(est.covariance - np.diag(np.diag(est.covariance))) == 0

@@ -2,14 +2,14 @@
 
 The paper names re-planning as future work; here it turns ``--iterations`` into one
 continuous flight (issue 20, "robust to the prior"). `run_replanned_stream` streams the
-opening trajectory file (`mavsysid.flight.ground.stream_job.run_stream`) with a
+opening trajectory file (`mavsysid.pipeline.stream.run_stream`) with a
 continuation (`mavsysid.flight.ground.continuation`) that, while the vehicle holds at the
 opening's end:
 
 1. estimates θ̂ and its covariance Σ from the pose recorded so far (the pipeline of
-   ``mavsysid estimate``: `load_flight` from the opening's first setpoint on,
-   `check_kinematics`, `estimate_parameters`, `check_result`), on a snapshot of the
-   complete rows of ``pose.csv``;
+   ``mavsysid estimate``: `load_flight` from the opening's first setpoint on, then
+   `mavsysid.pipeline.estimate.checked_estimate`), on a snapshot of the complete rows of
+   ``pose.csv``; a refused estimate leaves the prior belief (`belief_after_opening`);
 2. plans the rest of the budget for ``config.with_parameters(θ̂)`` from the hover where the
    opening ended, with the posterior as the planner's prior: ``prior_covariance`` = Σ
    relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the chance-constrained rotor
@@ -20,6 +20,9 @@ opening's end:
 ``meta.json`` records the segments (``opening``, ``replanned``), the estimate used (θ̂, σ,
 Σ), the predicted D-optimality and the estimation and planning times. A failed estimate or
 plan, or a refused plan, lands the vehicle and the run fails (exit 3) with one line.
+
+The belief steps (`prior_estimate`, `belief_after_opening`, `relative_covariance`) are also
+those of the offline evaluation of re-planning (`mavsysid.experiments.replanned_flight`).
 """
 
 from __future__ import annotations
@@ -32,25 +35,23 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.experiments.replanned_flight import (
-    belief_after_opening,
-    checked_estimate,
-    prior_estimate,
-    relative_covariance,
-)
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
-from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.formats.trajectory_file import read_trajectory
+from mavsysid.pipeline.estimate import checked_estimate
+from mavsysid.pipeline.stream import StreamOutcome, run_stream
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.robust_plan import plan_most_confident
+from mavsysid.vehicle.config import VehicleConfig
 
-from mavsysid.errors import InputError
+from mavsysid.errors import InputError, JobFailedError
 
-__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "replanning_continuation", "run_replanned_stream",
+__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "belief_after_opening", "prior_estimate",
+           "relative_covariance", "replanning_continuation", "run_replanned_stream",
            "snapshot_pose"]
 
 
@@ -86,6 +87,70 @@ class ReplanSettings:
     estimator: EstimatorSettings | None = None
     min_rest: float = 2.0
     rounds: int = 1
+
+
+def prior_estimate(prior: VehicleConfig, settings: PlannerSettings) -> ParameterEstimate:
+    """The planner's θ belief as an estimate (SI): the config's θ and the settings' prior
+    (``PlannerSettings.theta_covariance``, relative to θ).
+
+    Parameters
+    ----------
+    prior : VehicleConfig
+        The vehicle as known before flying; its θ is the mean.
+    settings : PlannerSettings
+        The planner's prior (``prior_covariance`` or ``prior_relative_sigma``).
+    """
+    theta = prior.theta
+    return ParameterEstimate(theta.copy(), settings.theta_covariance * np.outer(theta, theta))
+
+
+def belief_after_opening(estimate: Callable[[], ParameterEstimate], prior: ParameterEstimate
+                         ) -> tuple[ParameterEstimate, str | None]:
+    """The opening's estimate, or ``prior`` and the refusal's line when ``estimate`` refuses.
+
+    A refused estimate is no belief to plan aggressively from; the belief the opening was
+    planned from is, and its chance-constrained rotor check keeps the rest as gentle as the
+    opening that flew. The whole flight is estimated (and may be refused) afterwards.
+
+    Parameters
+    ----------
+    estimate : callable
+        Returns the opening's estimate (θ̂, Σ in SI), or raises `JobFailedError` to refuse.
+    prior : ParameterEstimate
+        The belief the opening was planned from (`prior_estimate`).
+
+    Returns
+    -------
+    belief : ParameterEstimate
+    refusal : str or None
+        The refusal's first line, None when the estimate was accepted.
+    """
+    try:
+        return estimate(), None
+    except JobFailedError as refusal:
+        return prior, str(refusal).splitlines()[0]
+
+
+def relative_covariance(estimate: ParameterEstimate) -> tuple[tuple[float, ...], ...]:
+    """Σ relative to the estimate's θ̂: Σ_ij / (θ̂_i θ̂_j), as ``prior_covariance`` takes it.
+
+    Parameters
+    ----------
+    estimate : ParameterEstimate
+        θ̂ and Σ, SI.
+
+    Raises
+    ------
+    JobFailedError
+        A θ̂ component is not positive (the opening's filter diverged): no relative belief.
+    """
+    theta = np.asarray(estimate.value, dtype=float)
+    if not np.all(np.isfinite(theta)) or np.any(theta <= 0.0):
+        raise JobFailedError("the opening flight's estimate has a non-positive parameter "
+                             f"({', '.join(f'{v:.3g}' for v in theta)}): cannot re-plan from it")
+    rel = np.asarray(estimate.covariance, dtype=float) / np.outer(theta, theta)
+    rel = 0.5 * (rel + rel.T)
+    return tuple(tuple(float(v) for v in row) for row in rel)
 
 
 def snapshot_pose(pose: Path, directory: Path) -> Path:

@@ -29,7 +29,6 @@ from pathlib import Path
 import numpy as np
 from mavsysid.discrepancy.diagnosis import Diagnosis, DiagnosisSettings, diagnose_flight
 from mavsysid.discrepancy.selection import FittedEffect
-from mavsysid.estimation.estimate_job import EstimateRun, run_estimate
 from mavsysid.estimation.estimator import (
     EstimatorSettings,
     estimate_parameters,
@@ -37,6 +36,7 @@ from mavsysid.estimation.estimator import (
 )
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.results import EstimationResult
+from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
@@ -151,7 +151,7 @@ def run_estimate_with_named_effects(
     time_offset: float | None = None, settings: EstimatorSettings | None = None,
     start: float | None = None, end: float | None = None,
 ) -> EstimateRun:
-    """`mavsysid.estimation.estimate_job.run_estimate` with `estimate_with_named_effects`.
+    """`mavsysid.pipeline.estimate.run_estimate` with `estimate_with_named_effects`.
 
     Parameters and result as for `run_estimate` (the log, the vehicle, the window; the
     same plausibility checks, which let c_D be ≈ 0 when ``rotor_drag_linear`` was named).

@@ -3,7 +3,9 @@
 `run_estimate` is what the command line and the tests call; the console layer
 (``mavsysid estimate``) only parses its options, calls it and prints. An estimate that is
 physically impossible or far outside the prior is refused here
-(`mavsysid.estimation.plausibility`), before anything is written.
+(`mavsysid.estimation.plausibility`), before anything is written. `checked_estimate` takes
+the same steps on a flight already read and gives θ̂ and Σ as ``estimate`` reports them
+(re-planning in flight, `mavsysid.pipeline.replanned_stream`, and its offline evaluation).
 """
 
 from __future__ import annotations
@@ -22,10 +24,10 @@ from mavsysid.estimation.results import EstimationResult, ParameterEstimate
 from mavsysid.estimation.robust_covariance import widened
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
-__all__ = ["EstimateRun", "Estimator", "check_result", "run_estimate"]
+__all__ = ["EstimateRun", "Estimator", "check_result", "checked_estimate", "run_estimate"]
 
 #: What estimates θ from a read flight: `estimate_parameters` or a caller's (e.g. with the
-#: effects a diagnosis names, `mavsysid.discrepancy.checked_estimate`).
+#: effects a diagnosis names, `mavsysid.pipeline.auto_effects`).
 Estimator = Callable[[FlightData, VehicleConfig, EstimatorSettings | None], EstimationResult]
 
 
@@ -105,3 +107,34 @@ def check_result(source: str, result: EstimationResult) -> None:
         unwidened = final if result.mismatch_widening is None else ParameterEstimate(
             final.value, widened(final.covariance, 1.0 / result.mismatch_widening))
         check_agreement(source, unwidened, result.equation_error)
+
+
+def checked_estimate(flight: FlightData, config: VehicleConfig,
+                     settings: EstimatorSettings | None = None,
+                     source: str | None = None) -> ParameterEstimate:
+    """θ̂ and Σ (SI) as ``mavsysid estimate`` reports them: the final estimate.
+
+    The kinematics check, `estimate_parameters` and `check_result`.
+
+    Parameters
+    ----------
+    flight : FlightData
+        The flight as read (`load_flight`).
+    config : VehicleConfig
+        The vehicle: known mass and geometry, and the prior.
+    settings : EstimatorSettings, optional
+        The defaults of ``mavsysid estimate`` when None.
+    source : str, optional
+        Names the log in a refusal; the flight's source by default.
+
+    Raises
+    ------
+    JobFailedError
+        Refused, as ``estimate`` would refuse it (exit 3).
+    InputError
+        The log's kinematics are inconsistent (bad input).
+    """
+    check_kinematics(flight)
+    result = estimate_parameters(flight, config, settings)
+    check_result(flight.source if source is None else source, result)
+    return result.final

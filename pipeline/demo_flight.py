@@ -4,7 +4,7 @@ The simulated vehicle's true θ differs from the nominal by a seeded, hidden fac
 (`hidden_scale`); the demo plans inside a reduced envelope (`with_headroom`), flies the
 plan over MAVLink on UDP loopback against ``mavsysid sim`` in its own process
 (`SimVehicleProcess`, `fly_over_mavlink`) and keeps the part of the recording where the
-plan was flown (`trajectory_window`). `mavsysid.experiments.demo` strings the rounds
+plan was flown (`trajectory_window`). `mavsysid.pipeline.demo` strings the rounds
 together.
 """
 
@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.readers import load_flight
-from mavsysid.flight.ground.stream_job import run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.formats.flight_dir import read_meta
+from mavsysid.pipeline.stream import run_stream
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import JobFailedError

@@ -1,5 +1,5 @@
 """Tests of θ re-estimated with the effects the diagnosis names
-(`mavsysid.discrepancy.checked_estimate`) and of ``mavsysid estimate --auto-effects``."""
+(`mavsysid.pipeline.auto_effects`) and of ``mavsysid estimate --auto-effects``."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.discrepancy.checked_estimate import estimate_with_named_effects
 from mavsysid.estimation.estimator import estimate_parameters
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.pipeline.auto_effects import estimate_with_named_effects
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import effect_from_values
 
