@@ -48,11 +48,11 @@ from scipy.signal import butter, filtfilt
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from mavsysid.estimation.readers.motor_curve import (  # noqa: E402
+from mavsysid.flight.mavlink_setup import load_mavutil  # noqa: E402
+from mavsysid.formats.motor_curve import (  # noqa: E402
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
 )
-from mavsysid.flight.mavlink_setup import load_mavutil  # noqa: E402
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle  # noqa: E402
 
 #: The shared SITL build beside the checkout (``../shared/sitl``; a worktree one level deeper).

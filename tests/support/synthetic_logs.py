@@ -1,4 +1,4 @@
-"""Fixtures of the reader tests: a synthetic flight and minimal writers of each log format.
+"""A synthetic flight and minimal writers of each log format, for the format and reader tests.
 
 The flight is smooth, known in closed form, and physically consistent in its collective
 thrust (Σ c_T n² = m e_z^B · (a − g)), so the hover check passes and the clock alignment
@@ -7,7 +7,8 @@ matrices, independently of the reader's quaternion formula.
 
 Writers: ``.tlog`` with pymavlink's own MAVLink packer (8-byte big-endian µs receipt time,
 then the packed message); ULog and DataFlash with the library's writers
-(`mavsysid.formats.ulog_writer`, `mavsysid.formats.dataflash_writer`).
+(`mavsysid.formats.ulog.write_ulog`, `mavsysid.formats.dataflash.write_dataflash`). The
+fixtures are registered for every test by ``tests/conftest.py``.
 """
 
 from __future__ import annotations
@@ -20,11 +21,15 @@ from typing import Any
 import numpy as np
 import pytest
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.formats.dataflash_writer import write_dataflash
-from mavsysid.formats.ulog_writer import write_ulog
+from mavsysid.formats.dataflash import write_dataflash
+from mavsysid.formats.ulog import write_ulog
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.rotation import matrix_to_quat, quat_exp, quat_to_matrix
+
+__all__ = ["ULOG_FORMATS", "Truth", "assert_matches_truth", "dataflash_writer",
+           "synthetic_truth", "tlog_writer", "truth", "ulog_flight", "ulog_writer",
+           "write_tlog"]
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 

@@ -1,11 +1,20 @@
-"""MAVLink telemetry logs (``.tlog``): each message preceded by its receipt time.
+"""MAVLink telemetry logs (``.tlog``): the record format, the messages read, writer and reader.
 
-Pose: ATT_POS_MOCAP (motion capture forwarded to the vehicle; NED, q [w, x, y, z] FRD →
-NED) if present, else LOCAL_POSITION_NED with ATTITUDE_QUATERNION (or ATTITUDE Euler
-angles), the autopilot's own estimate. Rotor speeds: ESC_TELEMETRY_1_TO_4 / _5_TO_8 /
-_9_TO_12 ``rpm`` (ESC i is motor output i), else the SERVO_OUTPUT_RAW channels that move
-(the motors) through the motor curve (a warning says so); the outputs are put into the
-config's rotor order by `mavsysid.estimation.readers.motor_outputs`.
+A ``.tlog`` is the ground-station convention pymavlink and MAVProxy read: records of an
+8-byte big-endian timestamp (µs since the Unix epoch, the receipt time) followed by one
+MAVLink packet as sent on the wire. `TlogWriter` writes each record with a single
+unbuffered ``write``, so the file is complete up to the last packet whenever the process
+dies; `read_tlog` reads a log with pymavlink.
+
+Messages read (MAVLink common and ardupilotmega dialects):
+
+- Pose: ATT_POS_MOCAP (motion capture forwarded to the vehicle; x, y, z NED, q [w, x, y,
+  z] FRD → NED) if present, else LOCAL_POSITION_NED with ATTITUDE_QUATERNION (or
+  ATTITUDE Euler angles), the autopilot's own estimate.
+- Rotor speeds: ESC_TELEMETRY_1_TO_4 / _5_TO_8 / _9_TO_12 ``rpm`` (`ESC_TELEMETRY`: ESC i
+  is motor output i + 1), else the SERVO_OUTPUT_RAW port 0 channels that move (the
+  motors), PWM through the motor curve (a note says so).
+- Modes: the autopilot's HEARTBEAT custom mode, named by pymavlink.
 
 Time base: the autopilot's clock (s since boot), because the pose messages carry it
 (``time_boot_ms``). ESC_TELEMETRY and ATT_POS_MOCAP carry no autopilot time (the mocap
@@ -20,43 +29,101 @@ used, from the first message.
 
 Only messages from the autopilot (the sender of the first HEARTBEAT from an autopilot)
 count as the vehicle's, except ATT_POS_MOCAP, which a ground station or companion sends.
-The autopilot's HEARTBEATs also give the spans flown in GUIDED/OFFBOARD mode
-(``LogStreams.control_spans``, for the default window).
 """
 
 from __future__ import annotations
 
+import struct
+import threading
 from collections import defaultdict
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from mavsysid.estimation.readers.guard import import_parser, parsing
-from mavsysid.estimation.readers.motor_curve import describe_curve, rotor_speed_from_pwm
-from mavsysid.estimation.readers.motor_outputs import motor_output_count, rotors_in_config_order
-from mavsysid.estimation.readers.streams import LogStreams, PoseSource, Series, combine_pose
-from mavsysid.estimation.readers.window import CONTROLLED_MODES, spans_of
+from mavsysid.formats.bounded_parse import import_parser, parsing
+from mavsysid.formats.motor_curve import pwm_curve_caveat, rotor_speed_from_pwm
+from mavsysid.formats.parsed_log import (
+    ModeChanges,
+    ParsedLog,
+    PoseSource,
+    Series,
+    motor_output_count,
+)
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
-from mavsysid.vehicle.frames import (
-    euler_ned_to_quaternion,
-    ned_to_enu,
-    quaternion_ned_to_enu,
-)
+from mavsysid.vehicle.frames import euler_ned_to_quaternion
 
-from mavsysid.errors import LogFormatError
+from mavsysid.errors import InputError, LogFormatError
 
-__all__ = ["read_tlog"]
+__all__ = ["ESC_TELEMETRY", "EpochClock", "TlogWriter", "read_tlog"]
 
-_ESC = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_8": 4, "ESC_TELEMETRY_9_TO_12": 8}
+#: ESC telemetry messages → the motor output (0-based) of their first ``rpm`` entry; each
+#: carries four.
+ESC_TELEMETRY: dict[str, int] = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_8": 4,
+                                 "ESC_TELEMETRY_9_TO_12": 8}
 _CLOCKED = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE", "SYSTEM_TIME",
             "GLOBAL_POSITION_INT")
-_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", *_CLOCKED, *_ESC]
+_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", *_CLOCKED, *ESC_TELEMETRY]
 _POSE_HINT = "no ATT_POS_MOCAP, nor LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE"
 
 # (receipt time s, (system, component), message) per message type.
 _Messages = dict[str, list[tuple[float, tuple[int, int], Any]]]
+# pose (m = 7) or position and attitude, and where the pose comes from.
+_Pose = tuple[Series | None, Series | None, Series | None, PoseSource]
+
+
+class EpochClock(Protocol):
+    """What stamps tlog records: `epoch_us` gives the time now, µs since the Unix epoch."""
+
+    def epoch_us(self) -> int:
+        """The stamp of a record written now, µs since the Unix epoch."""
+        ...
+
+
+# --- writing -----------------------------------------------------------------------------
+
+
+class TlogWriter:
+    """Appends timestamped raw packets to a new ``.tlog`` (thread-safe).
+
+    Parameters
+    ----------
+    path : Path
+        The file to create (an existing file is an `InputError`: never overwrite a log).
+    clock : EpochClock
+        Stamps each record with its ``epoch_us()`` (the streamer's
+        `mavsysid.flight.ground.link_clock.LinkClock`).
+    """
+
+    def __init__(self, path: Path, clock: EpochClock) -> None:
+        self.path = Path(path)
+        self.clock = clock
+        self.records = 0
+        self._lock = threading.Lock()
+        try:
+            # Unbuffered: each record reaches the OS in one write() as it is made.
+            self._file = open(self.path, "xb", buffering=0)  # noqa: SIM115 - closed by close()
+        except FileExistsError:
+            raise InputError(f"{self.path}: exists; refusing to overwrite a flight log") from None
+
+    def write(self, packet: bytes | bytearray) -> None:
+        """Record one packet, stamped now."""
+        data = bytes(packet)
+        with self._lock:
+            # Stamped under the lock, so records from the heartbeat thread and the main
+            # loop stay in time order in the file.
+            if not self._file.closed:
+                self._file.write(struct.pack(">Q", self.clock.epoch_us()) + data)
+                self.records += 1
+
+    def close(self) -> None:
+        """Close the file. Harmless twice."""
+        with self._lock:
+            self._file.close()
+
+
+# --- reading -----------------------------------------------------------------------------
 
 
 def _collect(path: Path) -> _Messages:
@@ -107,19 +174,17 @@ def _unwrap_us(ticks: np.ndarray) -> np.ndarray:
     return (ticks + wraps * 2.0**32) * 1e-6
 
 
-def _pose(path: Path, found: _Messages, own: _Messages,
-          offset: float) -> tuple[Series | None, PoseSource, list[str]]:
-    """The pose series, its origin and warnings from cleaning it."""
+def _pose(found: _Messages, own: _Messages, offset: float) -> _Pose:
+    """Motion-capture pose, else local position and attitude (NED/FRD); the pose's origin."""
     mocap = found.get("ATT_POS_MOCAP", [])
     if mocap:
         t = np.array([r for r, _, _ in mocap]) - offset
         p = np.array([[m.x, m.y, m.z] for _, _, m in mocap], dtype=float)
         q = np.array([list(m.q) for _, _, m in mocap], dtype=float)
-        values = np.column_stack([ned_to_enu(p), quaternion_ned_to_enu(q)])
-        return Series(t, values, "ATT_POS_MOCAP"), "motion_capture", []
+        return Series(t, np.column_stack([p, q]), "ATT_POS_MOCAP"), None, None, "motion_capture"
     local = own.get("LOCAL_POSITION_NED", [])
     if not local:
-        return None, "autopilot", []
+        return None, None, None, "autopilot"
     position = Series(np.array([m.time_boot_ms * 1e-3 for _, _, m in local]),
                       np.array([[m.x, m.y, m.z] for _, _, m in local], dtype=float),
                       "LOCAL_POSITION_NED")
@@ -133,22 +198,21 @@ def _pose(path: Path, found: _Messages, own: _Messages,
                                               dtype=float).T)
         label = "ATTITUDE"
     else:
-        return None, "autopilot", []
+        return None, None, None, "autopilot"
     attitude = Series(np.array([m.time_boot_ms * 1e-3 for _, _, m in rows]), q, label)
-    pose, notes = combine_pose(str(path), position, attitude)
-    return pose, "autopilot", notes
+    return None, position, attitude, "autopilot"
 
 
 def _esc_rotors(path: Path, own: _Messages, offset: float,
                 k: int) -> tuple[Series, ...]:
     """Rotor speeds from ESC_TELEMETRY_*: as many rotors as ESCs that ever turned."""
-    present = {name: own[name] for name in _ESC if own.get(name)}
-    turned = [base + j for name, base in _ESC.items() if name in present
+    present = {name: own[name] for name in ESC_TELEMETRY if own.get(name)}
+    turned = [base + j for name, base in ESC_TELEMETRY.items() if name in present
               for j in range(4) if any(m.rpm[j] for _, _, m in present[name])]
     # An ESC never turning is a rotor of this vehicle only if the config says so.
     count = max(turned) + 1 if turned else k
     series = []
-    for name, base in _ESC.items():
+    for name, base in ESC_TELEMETRY.items():
         if base >= count:
             break
         rows = present.get(name)
@@ -176,19 +240,18 @@ def _servo_rotors(own: _Messages, vehicle: VehicleConfig) -> Series | None:
     return Series(t, rotor_speed_from_pwm(pwm[:, :count], vehicle), "SERVO_OUTPUT_RAW PWM")
 
 
-def _control_spans(own: _Messages, mavutil: ModuleType,
-                   offset: float) -> tuple[tuple[float, float], ...] | None:
-    """Spans of the autopilot's HEARTBEATs in GUIDED/OFFBOARD mode, s; None without any."""
+def _modes(own: _Messages, mavutil: ModuleType, offset: float) -> ModeChanges | None:
+    """The modes of the autopilot's HEARTBEATs, periodic reports; None without any."""
     beats = own.get("HEARTBEAT", [])
     if not beats:
         return None
     t = np.array([r for r, _, _ in beats]) - offset
-    active = np.array([mavutil.mode_string_v10(m) in CONTROLLED_MODES for _, _, m in beats])
-    return tuple(spans_of(t, active, False, float(t[-1])))
+    modes = tuple(mavutil.mode_string_v10(m) for _, _, m in beats)
+    return ModeChanges(t=t, modes=modes, events=False, end=float(t[-1]))
 
 
-def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
-    """Read the pose and rotor speeds of a telemetry log.
+def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
+    """Read the pose, rotor speeds and modes of a telemetry log.
 
     Parameters
     ----------
@@ -199,8 +262,9 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
 
     Returns
     -------
-    LogStreams
-        In ENU/FLU and rad/s, on the autopilot's clock (see the module docstring).
+    ParsedLog
+        NED/FRD, rad/s, the autopilot's motor numbering, on the autopilot's clock (see
+        the module docstring); with the modes of its HEARTBEATs.
 
     Raises
     ------
@@ -216,23 +280,19 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> LogStreams:
         offset = min(rows[0][0] for rows in found.values())
         notes.append(f"{path}: no autopilot time_boot_ms in the log; times are its receipt "
                      "times from the first message")
+    rotor_notes = []
     with parsing(path, "a MAVLink telemetry log with the usual message fields"):
-        pose, pose_source, more = _pose(path, found, own, offset)
-        notes += more
-        if any(own.get(name) for name in _ESC):
+        pose, position, attitude, pose_source = _pose(found, own, offset)
+        if any(own.get(name) for name in ESC_TELEMETRY):
             rotors = _esc_rotors(path, own, offset, vehicle.rotor_count)
         elif (servo := _servo_rotors(own, vehicle)) is not None:
             rotors = (servo,)
-            notes.append(f"{path}: no ESC rpm; rotor speeds are motor outputs "
-                         "(SERVO_OUTPUT_RAW) through the motor curve "
-                         f"{describe_curve(vehicle, pwm=True)}: commanded, not measured, and "
-                         "only as right as the [motor] keys of the vehicle config")
+            rotor_notes.append(f"{path}: no ESC rpm; rotor speeds are motor outputs "
+                               f"(SERVO_OUTPUT_RAW) {pwm_curve_caveat(vehicle)}")
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
                                  "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")
-        spans = _control_spans(own, mavutil, offset)
-    rotors, ordered = rotors_in_config_order(str(path), rotors, vehicle)
-    notes += ordered
-    return LogStreams(source=str(path), pose=pose, pose_source=pose_source,
-                      rotors=rotors, warnings=tuple(notes), pose_hint=_POSE_HINT,
-                      control_spans=spans)
+        modes = _modes(own, mavutil, offset)
+    return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,
+                     pose_source=pose_source, pose_hint=_POSE_HINT, rotors=rotors,
+                     notes=tuple(notes), rotor_notes=tuple(rotor_notes), modes=modes)

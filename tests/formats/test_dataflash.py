@@ -1,4 +1,5 @@
-"""Round trips of ArduPilot DataFlash logs (FMT + data messages) through load_flight."""
+"""ArduPilot DataFlash (`mavsysid.formats.dataflash`): the writer read back by pymavlink, and
+reading (FMT + data messages) through load_flight."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.dataflash import read_dataflash
+from mavsysid.estimation.readers import READERS, load_flight
+from mavsysid.formats.dataflash import write_dataflash
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
 from mavsysid.errors import LogFormatError
@@ -121,7 +122,7 @@ def test_dataflash_global_position_fallback(tmp_path: Path, firefly: VehicleConf
     np.testing.assert_allclose(sign * data.quaternion, x["quaternion"], atol=1e-5)
 
 
-REAL_LOG = (Path(__file__).resolve().parents[3] / ".." / "shared" / "real-logs"
+REAL_LOG = (Path(__file__).resolve().parents[2] / ".." / "shared" / "real-logs"
             / "ardupilot-test.BIN")
 
 
@@ -133,7 +134,7 @@ def test_real_ardupilot_log_pose_and_inputs() -> None:
     if not REAL_LOG.exists():
         pytest.skip(f"{REAL_LOG} absent")
     quad = load_vehicle("quad_x")
-    streams = read_dataflash(REAL_LOG, quad)
+    streams = READERS[".bin"](REAL_LOG, quad)
     assert streams.pose_source == "autopilot"
     assert streams.pose is not None and streams.pose.label == "NKF1 core 0 + NKQ1 core 0"
     assert [r.label for r in streams.rotors] == ["RCOU PWM"]
@@ -141,3 +142,68 @@ def test_real_ardupilot_log_pose_and_inputs() -> None:
     with pytest.raises(LogFormatError, match=r"ardupilot-test\.BIN: ") as refused:
         load_flight(REAL_LOG, quad)
     assert "\n" not in str(refused.value)
+
+
+# ------------------------------------------------ writing
+
+_WRITTEN = {
+    "MODE": (11, "QMBB", "TimeUS,Mode,ModeNum,Rsn"),
+    "XKF1": (181, "QBccCfffffffccce", "TimeUS,C,Roll,Pitch,Yaw,VN,VE,VD,dPD,PN,PE,PD,"
+                                      "GX,GY,GZ,OH"),
+    "MSG": (91, "QZ", "TimeUS,Message"),
+}
+
+
+def test_dataflash_round_trip_through_dfreader(tmp_path):
+    from pymavlink.DFReader import DFReader_binary
+
+    rng = np.random.default_rng(4)
+    values = rng.normal(size=(5, 7))
+    rows = [("MSG", (1000, b"ArduCopter V4.5.7"))]
+    rows += [("XKF1", (2000 + 10 * i, 0, round(v[0] * 100), round(v[1] * 100), 1234, *v,
+                       0, 0, 0, 0)) for i, v in enumerate(values)]
+    rows.append(("MODE", (5000, 4, 4, 2)))
+    path = tmp_path / "a.bin"
+    write_dataflash(path, _WRITTEN, rows)
+    log = DFReader_binary(str(path))
+    got = list(iter(lambda: log.recv_match(type=["XKF1", "MODE", "MSG"]), None))
+    assert [m.get_type() for m in got] == ["MSG", *["XKF1"] * 5, "MODE"]
+    assert got[0].Message == "ArduCopter V4.5.7"
+    xkf1 = got[1:6]
+    np.testing.assert_allclose([m.TimeUS for m in xkf1], 2000 + 10 * np.arange(5))
+    # Scaled characters come back in their unit (c: centi), floats at single precision.
+    np.testing.assert_allclose([m.Roll for m in xkf1], np.round(values[:, 0] * 100) / 100)
+    np.testing.assert_allclose([m.Yaw for m in xkf1], 12.34)
+    np.testing.assert_allclose([[m.VN, m.VE, m.VD, m.dPD, m.PN, m.PE, m.PD] for m in xkf1],
+                               values, rtol=1e-6)
+    assert (got[6].Mode, got[6].Rsn) == (4, 2)
+
+
+@pytest.mark.parametrize("formats", [
+    {"MODE": (128, "QMBB", "TimeUS,Mode,ModeNum,Rsn")},
+    {"MODE": (11, "QMBB", "TimeUS,Mode,ModeNum,Rsn"), "MSG": (11, "QZ", "TimeUS,Message")},
+    {"MODE": (11, "QMB", "TimeUS,Mode,ModeNum,Rsn")},
+    {"TOOLONG": (12, "Q", "TimeUS")},
+])
+def test_dataflash_bad_formats_are_refused(tmp_path, formats):
+    with pytest.raises(ValueError):
+        write_dataflash(tmp_path / "a.bin", formats, [])
+
+
+def test_rows_by_column_name_fill_the_rest_with_zero(tmp_path):
+    """A row given by column name is the row given in column order, unnamed columns 0."""
+    from pymavlink.DFReader import DFReader_binary
+
+    by_position = [("MSG", (1000, b"ArduCopter")),
+                   ("XKF1", (2000, 0, 150, -250, 1234, 1.0, 2.0, 3.0, 0.0, 4.0, 5.0, 6.0,
+                             0, 0, 0, 0))]
+    by_name = [("MSG", {"TimeUS": 1000, "Message": b"ArduCopter"}),
+               ("XKF1", {"TimeUS": 2000, "Roll": 150, "Pitch": -250, "Yaw": 1234, "VN": 1.0,
+                         "VE": 2.0, "VD": 3.0, "PN": 4.0, "PE": 5.0, "PD": 6.0})]
+    write_dataflash(tmp_path / "a.bin", _WRITTEN, by_position)
+    write_dataflash(tmp_path / "b.bin", _WRITTEN, by_name)
+    assert (tmp_path / "a.bin").read_bytes() == (tmp_path / "b.bin").read_bytes()
+    xkf1 = DFReader_binary(str(tmp_path / "b.bin")).recv_match(type=["XKF1"])
+    assert (xkf1.Roll, xkf1.PD, xkf1.OH) == (1.5, 6.0, 0)
+    with pytest.raises(KeyError, match="Altitude"):
+        write_dataflash(tmp_path / "c.bin", _WRITTEN, [("XKF1", {"TimeUS": 1, "Altitude": 2.0})])

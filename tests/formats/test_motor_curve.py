@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers.motor_curve import (
+from mavsysid.formats.motor_curve import (
+    pwm_from_rotor_speed,
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
     throttle_from_pwm,
 )
-from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
 
 @pytest.mark.parametrize(("u", "expo", "expected"), [
@@ -38,3 +39,10 @@ def test_rotor_speed_from_pwm_uses_the_vehicle_curve(firefly: VehicleConfig) -> 
     n = rotor_speed_from_pwm(pwm, firefly)
     assert n[0] == 0.0 and n[-1] == pytest.approx(firefly.limits.rotor_speed_max)
     assert (np.diff(n) > 0).all()
+
+
+def test_pwm_is_the_inverse_of_the_readers_motor_curve():
+    vehicle = load_vehicle("quad_x")
+    n = np.random.default_rng(2).uniform(0.0, vehicle.limits.rotor_speed_max, (50, 4))
+    np.testing.assert_allclose(rotor_speed_from_pwm(pwm_from_rotor_speed(n, vehicle), vehicle),
+                               n, rtol=1e-9, atol=1e-6)

@@ -1,12 +1,13 @@
-"""Calling third-party log parsers without their noise: prints captured, errors one line.
+"""Calling third-party log parsers, bounded: in file size and time, silent, errors one line.
 
 pymavlink and pyulog print progress and complaints to stdout/stderr (pymavlink's compiled
 DataFlash indexer straight to file descriptor 2) and raise whatever their parsing hits
 (struct.error, IndexError, …). The CLI contract is one line naming the file, so every
-call into them goes through `parsing`, which also bounds them: a file larger than
-`MAX_LOG_BYTES` is refused before parsing (`check_log_size`), and a parse running longer
-than `parse_budget` is stopped (pymavlink resyncs byte by byte through corrupt data, and
-a few MB of junk already take seconds).
+call into them (`mavsysid.formats.tlog`, `mavsysid.formats.ulog`,
+`mavsysid.formats.dataflash`) goes through `parsing`, which also bounds them: a file
+larger than `MAX_LOG_BYTES` is refused before parsing (`check_log_size`), and a parse
+running longer than `parse_budget` is stopped (pymavlink resyncs byte by byte through
+corrupt data, and a few MB of junk already take seconds).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ import numpy as np
 from mavsysid.estimation.flight_data import MIN_DURATION
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.mav_model import collective_thrust
+from mavsysid.vehicle.mav_model import collective_thrust, rotor_thrust
 
 from mavsysid.errors import LogFormatError
 
@@ -189,7 +189,7 @@ def drop_unphysical_samples(t: np.ndarray, stacked: np.ndarray, source: str,
     with np.errstate(over="ignore", invalid="ignore"):
         thrust = collective_thrust(vehicle.parameters.c_T, n)
         # A dead rotor lowers Σ c_T n²; the median rotor tells whether the others fly.
-        typical = n.shape[1] * vehicle.parameters.c_T * np.median(n**2, axis=1)
+        typical = n.shape[1] * np.median(rotor_thrust(vehicle.parameters.c_T, n), axis=1)
     weight = FLYING_THRUST * vehicle.mass * GRAVITY
     airborne = thrust >= weight
     found = [

@@ -1,4 +1,4 @@
-"""Motor outputs of autopilot logs: how many drive motors, refusals, the autopilot's order."""
+"""Autopilot logs in the project's conventions: motor outputs refused or in the config's order."""
 
 from __future__ import annotations
 
@@ -9,11 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.motor_outputs import motor_output_count
 from mavsysid.vehicle.config import RotorConfig, VehicleConfig, load_vehicle, save_vehicle
 
 from mavsysid.errors import LogFormatError
-from tests.estimation.readers.conftest import synthetic_truth
+from tests.support.synthetic_logs import synthetic_truth
 
 # Config rotor (0-based) of motor output 1..4 for quad_x's rotor list (front left, rear
 # left, rear right, front right): ArduPilot's and PX4's quad X motors are front right,
@@ -30,22 +29,6 @@ def ardupilot_quad(tmp_path: Path) -> VehicleConfig:
     path = tmp_path / "ardupilot_quad.toml"
     save_vehicle(replace(quad, rotors=rotors, autopilot_frame="ardupilot:quad_x"), path)
     return load_vehicle(path)
-
-
-def test_motor_output_count_ignores_idle_slots() -> None:
-    rng = np.random.default_rng(3)
-    moving = 1100.0 + 400.0 * rng.random((50, 4))
-    servo = np.full((50, 1), 1500.0)
-    unused = np.zeros((50, 9))
-    assert motor_output_count(np.hstack([moving, servo, unused])) == 4
-    assert motor_output_count(np.hstack([moving, moving[:, :2], unused])) == 6
-    # Never armed: every motor at its disarmed PWM, unused slots at 0.
-    assert motor_output_count(np.hstack([np.full((50, 6), 900.0), unused])) == 6
-    # PX4 actuator_motors: NaN for an unused slot, NaN at times for a stopped motor.
-    control = np.hstack([rng.random((50, 4)), np.full((50, 4), np.nan)])
-    control[:10, 2] = np.nan
-    assert motor_output_count(control) == 4
-    assert motor_output_count(np.zeros((50, 8))) == 0
 
 
 def _dataflash_rows(truth: Callable[[np.ndarray], dict[str, np.ndarray]],

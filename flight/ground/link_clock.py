@@ -1,15 +1,10 @@
-"""The streamer's clock and its raw MAVLink log (``flight.tlog``).
-
-A ``.tlog`` is the ground-station convention pymavlink and MAVProxy read: records of an
-8-byte big-endian timestamp (µs since the Unix epoch) followed by one MAVLink packet as
-sent on the wire. `TlogWriter` writes each record with a single unbuffered ``write``, so
-the file is complete up to the last packet whenever the process dies.
+"""The streamer's clock, which also stamps its raw MAVLink log (``flight.tlog``).
 
 `LinkClock` is the streamer's time: monotonic seconds since it started, multiplied by the
 speedup when flying against a simulator that runs faster than real time. Every time the
 streamer handles — trajectory clock, setpoint period, heartbeat period, timeouts — is on
-this clock, and the tlog stamps are the start's epoch time plus this clock, so a tlog of
-a sped-up flight reads as if flown in real time.
+this clock, and the tlog stamps (`mavsysid.formats.tlog.TlogWriter`) are the start's
+epoch time plus this clock, so a tlog of a sped-up flight reads as if flown in real time.
 
 With ``lockstep`` (a test and bench tool, against ``mavsysid sim --lockstep`` only; see
 `mavsysid.flight.simvehicle.clock`), the clock *is* the vehicle's sim time: it stands at 0
@@ -29,17 +24,14 @@ no vehicle at all).
 
 from __future__ import annotations
 
-import struct
-import threading
 import time
-from pathlib import Path
 from typing import Any
 
 from mavsysid.flight.mavlink_setup import GCS_SYSTEM
 
 from mavsysid.errors import InputError
 
-__all__ = ["FRAME_GRACE", "FRAME_WAIT", "START_GRACE", "LinkClock", "TlogWriter"]
+__all__ = ["FRAME_GRACE", "FRAME_WAIT", "START_GRACE", "LinkClock"]
 
 #: Wall seconds without a lock-step frame after which the clock runs on the wall clock.
 FRAME_GRACE = 2.0
@@ -161,41 +153,3 @@ class LinkClock:
         """Sleep ``seconds`` of streamer time."""
         if seconds > 0.0:
             time.sleep(self.wall(seconds))
-
-
-class TlogWriter:
-    """Appends timestamped raw packets to a new ``.tlog`` (thread-safe).
-
-    Parameters
-    ----------
-    path : Path
-        The file to create (an existing file is an `InputError`: never overwrite a log).
-    clock : LinkClock
-        Stamps each record with `LinkClock.epoch_us`.
-    """
-
-    def __init__(self, path: Path, clock: LinkClock) -> None:
-        self.path = Path(path)
-        self.clock = clock
-        self.records = 0
-        self._lock = threading.Lock()
-        try:
-            # Unbuffered: each record reaches the OS in one write() as it is made.
-            self._file = open(self.path, "xb", buffering=0)  # noqa: SIM115 - closed by close()
-        except FileExistsError:
-            raise InputError(f"{self.path}: exists; refusing to overwrite a flight log") from None
-
-    def write(self, packet: bytes | bytearray) -> None:
-        """Record one packet, stamped now."""
-        data = bytes(packet)
-        with self._lock:
-            # Stamped under the lock, so records from the heartbeat thread and the main
-            # loop stay in time order in the file.
-            if not self._file.closed:
-                self._file.write(struct.pack(">Q", self.clock.epoch_us()) + data)
-                self.records += 1
-
-    def close(self) -> None:
-        """Close the file. Harmless twice."""
-        with self._lock:
-            self._file.close()

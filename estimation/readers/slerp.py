@@ -1,7 +1,7 @@
-"""Interpolation of pose samples at the log boundary.
+"""Spherical linear interpolation (slerp) of attitude quaternions between their samples.
 
-Frame conversions (NED/FRD → ENU/FLU) live in `mavsysid.vehicle.frames`, shared with the MAVLink
-link in `flight/`.
+Used where attitudes sampled at one set of times are needed at others: combining a log's
+position and attitude, aligning clocks, resampling a flight.
 """
 
 from __future__ import annotations

@@ -1,4 +1,7 @@
-"""Round trips of PX4 ULog files (minimal spec writer in conftest) through load_flight."""
+"""PX4 ULog (`mavsysid.formats.ulog`): the writer read back by pyulog; reading, through load_flight.
+
+Flights are written with the synthetic-flight writer (`tests.support.synthetic_logs`).
+"""
 
 from __future__ import annotations
 
@@ -8,12 +11,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.ulog import read_ulog
-from mavsysid.formats.ulog_writer import write_ulog
+from mavsysid.estimation.readers import READERS, load_flight
+from mavsysid.formats.ulog import flattened_fields, write_ulog
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
-from tests.estimation.readers.conftest import ULOG_FORMATS
+from tests.support.synthetic_logs import ULOG_FORMATS
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
 
@@ -65,7 +67,7 @@ def test_ulog_unused_motor_columns_are_dropped(tmp_path: Path, firefly: VehicleC
 
 # ------------------------------------------------ which rotor input, which instance
 
-REAL_LOGS = Path(__file__).resolve().parents[3] / ".." / "shared" / "real-logs"
+REAL_LOGS = Path(__file__).resolve().parents[2] / ".." / "shared" / "real-logs"
 
 Topics = dict[Any, list[dict[str, float]]]
 
@@ -179,8 +181,55 @@ def test_real_px4_log_with_4_hz_esc_status_reads_its_motor_commands() -> None:
     if not path.is_file():
         pytest.skip(f"no {path}")
     quad = load_vehicle("quad_x")
-    streams = read_ulog(path, quad)
+    streams = READERS[".ulg"](path, quad)
     (rotors,) = streams.rotors
     assert rotors.label == "actuator_motors" and rotors.values.shape[1] == 4
     assert [w for w in streams.warnings if "esc_status rpm sampled only every 0.248 s" in w]
     assert rotors.values.max() > 0.5 * quad.limits.rotor_speed_max * np.sqrt(0.5)
+
+
+# ------------------------------------------------ writing
+
+_ULOG_FORMATS = {
+    "esc_report": "uint64_t timestamp;int32_t esc_rpm;float esc_voltage;",
+    "esc_status": "uint64_t timestamp;uint8_t esc_count;esc_report[2] esc;",
+    "vehicle_attitude": "uint64_t timestamp;float[4] q;",
+}
+
+
+def test_flattened_fields_expand_arrays_and_nested_types():
+    fields = flattened_fields("esc_status", _ULOG_FORMATS)
+    assert [name for name, _ in fields] == [
+        "timestamp", "esc_count", "esc[0].timestamp", "esc[0].esc_rpm", "esc[0].esc_voltage",
+        "esc[1].timestamp", "esc[1].esc_rpm", "esc[1].esc_voltage"]
+    assert "".join(code for _, code in fields) == "QBQifQif"
+
+
+def test_ulog_round_trip_through_pyulog(tmp_path):
+    from pyulog import ULog
+
+    rng = np.random.default_rng(5)
+    q = rng.normal(size=(6, 4))
+    rpm = rng.integers(1000, 20000, size=(4, 2))
+    topics = {
+        "vehicle_attitude": [{"timestamp": 1000 * (i + 1), **{f"q[{c}]": q[i, c]
+                                                              for c in range(4)}}
+                             for i in range(6)],
+        "esc_status": [{"timestamp": 1500 * (i + 1), "esc_count": 2,
+                        **{f"esc[{m}].esc_rpm": int(rpm[i, m]) for m in range(2)}}
+                       for i in range(4)],
+        ("vehicle_attitude", 1): [{"timestamp": 7, "q[0]": 1.0}],
+    }
+    path = tmp_path / "a.ulg"
+    write_ulog(path, _ULOG_FORMATS, topics, info={"sys_name": "PX4"}, start_us=500)
+    ulog = ULog(str(path))
+    assert ulog.msg_info_dict["sys_name"] == "PX4"
+    assert ulog.start_timestamp == 500
+    data = {(d.name, d.multi_id): d.data for d in ulog.data_list}
+    np.testing.assert_allclose(np.column_stack([data["vehicle_attitude", 0][f"q[{c}]"]
+                                                for c in range(4)]), q, rtol=1e-6)
+    np.testing.assert_array_equal(data["vehicle_attitude", 1]["timestamp"], [7])
+    esc = data["esc_status", 0]
+    np.testing.assert_array_equal(np.column_stack([esc["esc[0].esc_rpm"],
+                                                   esc["esc[1].esc_rpm"]]), rpm)
+    np.testing.assert_array_equal(esc["esc[1].esc_voltage"], 0.0)  # missing fields are 0
