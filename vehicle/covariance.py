@@ -89,6 +89,16 @@ _MEASURED = MEASURED_ERROR_INDICES  # a global array: numba compiles it in as a 
 
 
 @numba.njit(cache=True)
+def _symmetrise(P):
+    """P ← ½ (P + Pᵀ) in place, without temporaries (the same values as the expression)."""
+    for i in range(P.shape[0]):
+        for j in range(i + 1, P.shape[0]):
+            v = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = v
+            P[j, i] = v
+
+
+@numba.njit(cache=True)
 def predict_covariance_kernel(P, F, Q):
     """Paper Eq. prior: P ← F P Fᵀ + Q, symmetrised, in place.
 
@@ -102,7 +112,7 @@ def predict_covariance_kernel(P, F, Q):
         Process noise accumulated over the step.
     """
     P[:] = F @ P @ F.T + Q
-    P[:] = 0.5 * (P + P.T)
+    _symmetrise(P)
 
 
 @numba.njit(cache=True)
@@ -138,4 +148,4 @@ def update_covariance_kernel(P, R, S, SI, K):
     for j in range(m):
         IKH[:, _MEASURED[j]] -= K[:, j]
     P[:] = IKH @ P @ IKH.T + K @ R @ K.T
-    P[:] = 0.5 * (P + P.T)
+    _symmetrise(P)
