@@ -131,21 +131,23 @@ def rk4_step_kernel(x, n_stages, w_stages, theta, dt, mass, r, eps, out):
     out : ndarray, shape (13,)
         Receives the state at the step's end, its quaternion renormalised.
     """
-    k1 = np.empty(STATE_DIM)
-    k2 = np.empty(STATE_DIM)
-    k3 = np.empty(STATE_DIM)
-    k4 = np.empty(STATE_DIM)
+    # Written out element by element: the simulator takes this step at 1 kHz, and array
+    # expressions would allocate a temporary for every stage.
+    k = np.empty((4, STATE_DIM))
+    stage = np.empty(STATE_DIM)
     derivative_kernel(x, n_stages[0], theta, mass, r, eps, w_stages[0, 0:3], w_stages[0, 3:6],
-                      k1)
-    derivative_kernel(x + 0.5 * dt * k1, n_stages[1], theta, mass, r, eps, w_stages[1, 0:3],
-                      w_stages[1, 3:6], k2)
-    derivative_kernel(x + 0.5 * dt * k2, n_stages[2], theta, mass, r, eps, w_stages[2, 0:3],
-                      w_stages[2, 3:6], k3)
-    derivative_kernel(x + dt * k3, n_stages[3], theta, mass, r, eps, w_stages[3, 0:3],
-                      w_stages[3, 3:6], k4)
-    out[:] = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    q = out[6:10]
-    out[6:10] = q / np.sqrt(np.sum(q * q))
+                      k[0])
+    for s in range(1, 4):
+        h = dt if s == 3 else 0.5 * dt
+        for i in range(STATE_DIM):
+            stage[i] = x[i] + h * k[s - 1, i]
+        derivative_kernel(stage, n_stages[s], theta, mass, r, eps, w_stages[s, 0:3],
+                          w_stages[s, 3:6], k[s])
+    for i in range(STATE_DIM):
+        out[i] = x[i] + dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+    norm = np.sqrt(out[6] * out[6] + out[7] * out[7] + out[8] * out[8] + out[9] * out[9])
+    for i in range(6, 10):
+        out[i] = out[i] / norm
 
 
 @numba.njit(cache=True)

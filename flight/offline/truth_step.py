@@ -30,15 +30,16 @@ def _lag_stages(n, n_cmd, tau, dt, n_stages, n_end):
     RK4 of ṅ = (n_cmd − n) / τ with ``n_cmd`` held: ``n_stages`` (4, k) receives the
     speeds each stage evaluates the model at, ``n_end`` (k,) the speeds after the step.
     """
-    d1 = (n_cmd - n) / tau
-    n_stages[0] = n
-    n_stages[1] = n + 0.5 * dt * d1
-    d2 = (n_cmd - n_stages[1]) / tau
-    n_stages[2] = n + 0.5 * dt * d2
-    d3 = (n_cmd - n_stages[2]) / tau
-    n_stages[3] = n + dt * d3
-    d4 = (n_cmd - n_stages[3]) / tau
-    n_end[:] = n + dt / 6.0 * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
+    for i in range(n.shape[0]):
+        d1 = (n_cmd[i] - n[i]) / tau
+        n_stages[0, i] = n[i]
+        n_stages[1, i] = n[i] + 0.5 * dt * d1
+        d2 = (n_cmd[i] - n_stages[1, i]) / tau
+        n_stages[2, i] = n[i] + 0.5 * dt * d2
+        d3 = (n_cmd[i] - n_stages[2, i]) / tau
+        n_stages[3, i] = n[i] + dt * d3
+        d4 = (n_cmd[i] - n_stages[3, i]) / tau
+        n_end[i] = n[i] + dt / 6.0 * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
 
 
 @numba.njit(cache=True)
