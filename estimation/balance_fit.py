@@ -114,14 +114,15 @@ def _dead_axes(rows: BalanceRows, choices: FitChoices) -> BalanceRows:
 
 
 def balance_rows_for(builders: list[BalanceBuilder], choices: FitChoices,
-                     roll_pitch: Band | None = None, yaw: Band | None = None
-                     ) -> list[BalanceRows]:
+                     roll_pitch: Band | None = None, yaw: Band | None = None,
+                     force: Band | None = None) -> list[BalanceRows]:
     """Thinned rows of every segment at ``choices`` (bands overridable), dead axes zeroed."""
     rp = roll_pitch or choices.roll_pitch
     yw = yaw or choices.yaw
+    fc = force or choices.force
     out = []
     for b in builders:
-        rows = b.rows(choices.delay, choices.c_d, rp, yw, choices.force)
+        rows = b.rows(choices.delay, choices.c_d, rp, yw, fc)
         rows = rows.rows(slice(None, None, _stride(choices, b.dt)))
         if len(rows) > 4:
             out.append(_dead_axes(rows, choices))
@@ -131,7 +132,8 @@ def balance_rows_for(builders: list[BalanceBuilder], choices: FitChoices,
 def _pilot_bands(segments: list[UniformSegment], config: VehicleConfig, c_d: float
                  ) -> tuple[Band | None, Band | None, Band | None]:
     """Roll/pitch, yaw and force bands from the pilot-smoothed rows (coherence)."""
-    rows = [BalanceBuilder(s, config, PILOT_WINDOW).rows(0.0, c_d) for s in segments]
+    rows = [BalanceBuilder(s, config, PILOT_WINDOW).rows(0.0, c_d, magnitude=False)
+            for s in segments]
     rows = [r for r in rows if len(r) > 0]
     if not rows:
         return None, None, None

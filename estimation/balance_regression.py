@@ -147,8 +147,8 @@ def reverse_coefficient(y: Sequence[np.ndarray], X: Sequence[np.ndarray], column
     XX = np.concatenate(X)[:, axes, :] * weights[axes][None, :, None]
     live = np.sqrt(np.einsum("tai,tai->i", XX, XX)) > 0.0
     live[column] = False
-    design = np.concatenate([Y.reshape(-1, 1), XX[:, :, live].reshape(-1, int(live.sum()))],
-                            axis=1)
+    others = XX[:, :, live].reshape(Y.size, int(live.sum()))
+    design = np.concatenate([Y.reshape(-1, 1), others], axis=1)
     target = XX[:, :, column].reshape(-1)
     slope = np.linalg.lstsq(design, target, rcond=None)[0][0]
     return float(1.0 / slope) if slope != 0.0 else float("nan")

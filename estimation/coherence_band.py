@@ -108,7 +108,8 @@ def _coherence(measured: np.ndarray, model: np.ndarray, dt: float
     nper = welch_length(measured.shape[0])
     if measured.shape[0] < 2 * nper:
         return None
-    f, gamma = coherence(measured, model, fs=1.0 / dt, nperseg=nper, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a signal without power: γ² = 0
+        f, gamma = coherence(measured, model, fs=1.0 / dt, nperseg=nper, axis=0)
     return f, np.nan_to_num(gamma.reshape(len(f), -1)).mean(axis=1)
 
 

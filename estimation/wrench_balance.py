@@ -27,6 +27,7 @@ from mavsysid.estimation.balance_fit import (
     regress,
 )
 from mavsysid.estimation.balance_regression import fit_rows
+from mavsysid.estimation.coherence_band import Band
 from mavsysid.estimation.estimator import EstimatorSettings, prior_from_config
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.holdout import HoldoutCheck, predict_holdout
@@ -179,11 +180,20 @@ def _halves(rows: list[BalanceRows]) -> tuple[list[BalanceRows], list[BalanceRow
 
 def _band_halves(builders: list[BalanceBuilder], choices: FitChoices
                  ) -> tuple[list[BalanceRows], list[BalanceRows]]:
+    """Rows in the lower and upper halves of each torque band.
+
+    The force rows, whose information starts at zero frequency, are compared at half
+    their low-pass cut against the full cut instead: what the faster part of the motion
+    adds must not move c_T or c_D beyond their σ (an unmodelled filter on the pose, such
+    as an on-board estimator's, would).
+    """
     low, high = [], []
+    force = choices.force
     for band, out in ((0, low), (1, high)):
         rp = choices.roll_pitch.halves()[band] if choices.roll_pitch else None
         yw = choices.yaw.halves()[band] if choices.yaw else None
-        out.extend(balance_rows_for(builders, choices, rp, yw))
+        fc = Band(0.0, 0.5 * force.high) if force is not None and band == 0 else None
+        out.extend(balance_rows_for(builders, choices, rp, yw, fc))
     return low, high
 
 

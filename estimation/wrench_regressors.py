@@ -114,6 +114,23 @@ def _unit_wrenches(n: np.ndarray, config: VehicleConfig, v_b: np.ndarray, w: np.
     return f_t, f_td - f_t, m_t, m_td - m_t, m_m
 
 
+def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """The z row replaced by magnitudes: |f| against |thrust + c_D drag| per unit c_T.
+
+    An attitude error ε turns the measured specific force out of z_B and shortens its z
+    component by cos ε ≈ 1 − ε²/2: with a noisy attitude (an on-board estimator's, 1°) the
+    z row alone would bias c_T low by σ_ε². The magnitude is free of it. The rotor drag,
+    perpendicular to the thrust, lengthens it at second order, so the model's magnitude
+    includes it at the given c_D (linear in c_T; the drag column leaves this row).
+    """
+    force, cols = force.copy(), cols.copy()
+    force[:, 2] = np.linalg.norm(force, axis=1)
+    cols[:, 2, 0] = np.linalg.norm(cols[:, :, 0] + c_d * cols[:, :, 1], axis=1)
+    cols[:, 2, 1:] = 0.0
+    return force, cols
+
+
 class BalanceBuilder:
     """Builds `BalanceRows` of one segment for any delay, smoothing the pose once.
 
@@ -154,7 +171,7 @@ class BalanceBuilder:
 
     def rows(self, delay: float, c_d: float, roll_pitch: BandFilter | None = None,
              yaw: BandFilter | None = None, force: BandFilter | None = None,
-             trim: float = 0.0) -> BalanceRows:
+             trim: float = 0.0, magnitude: bool = True) -> BalanceRows:
         """The balance rows at ``delay`` (module docstring).
 
         Parameters
@@ -168,6 +185,8 @@ class BalanceBuilder:
             Applied to both sides of the ω̇_x, ω̇_y rows, the ω̇_z rows and the force rows.
         trim : float
             Time cut off each end, s, beyond the smoother's and the filters' edges.
+        magnitude : bool
+            Make the thrust row the specific force's magnitude (else its z component).
         """
         n = self.segment.rotor_speeds(delay)
         n_dot = np.gradient(n, self.dt, axis=0)
@@ -194,6 +213,9 @@ class BalanceBuilder:
             specific_force = force.apply(specific_force, self.dt)
             force_cols = force.apply(force_cols, self.dt)
             settle = max(settle, trim + force.settle())
+        if magnitude:
+            specific_force, force_cols = _thrust_row_as_magnitude(specific_force, force_cols,
+                                                                  c_d)
         for band, axes in ((roll_pitch, [0, 1]), (yaw, [2])):
             if band is not None:
                 torque[:, axes] = band.apply(torque[:, axes], self.dt)
