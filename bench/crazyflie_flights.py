@@ -32,7 +32,8 @@ per parameter the error against the reference, σ, status (D = determined), whet
 95 % interval covers the reference, the held-out RMSE ratio, run times.
 
     nice python bench/crazyflie_flights.py --repo /path/to/crazyflie-data-collection \\
-        [--json out.json] [--flights jana0,eckart1] [--jobs 2] [--no-tool]
+        [--json out.json] [--markdown table.md] [--flights jana0,eckart1] [--jobs 2]
+        [--no-tool]
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, vehicle_to_to
 from mavsysid.vehicle.config_types import RotorConfig
 from mavsysid.vehicle.constants import GRAVITY, RPM_TO_RAD_S
 
-from bench.crazyflie_report import print_summary, print_table
+from bench.crazyflie_report import markdown_table, print_summary, print_table
 from mavsysid.cli.main import exit_code
 from mavsysid.errors import LogFormatError, MavsysidError
 
@@ -262,6 +263,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="write the per-flight results here")
     parser.add_argument("--flights", default="", help="comma-separated name filters")
     parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--markdown", type=Path, help="write the per-flight table (Markdown)")
     parser.add_argument("--no-tool", action="store_true",
                         help="skip today's `estimate` path (the balance only)")
     args = parser.parse_args()
@@ -285,6 +287,8 @@ def main() -> None:
     if args.json:
         args.json.write_text(json.dumps({"references": stand, "flights": rows}, indent=1),
                              encoding="utf-8")
+    if args.markdown:
+        args.markdown.write_text(markdown_table(rows), encoding="utf-8")
 
 
 if __name__ == "__main__":

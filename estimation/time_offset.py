@@ -7,8 +7,8 @@ attitude loop's frequencies, which biases the inertia as much as a wrong window 
 offset δ (the pose lags the rotor speeds by δ) is the one minimising the band-passed
 torque balance's normalised residual: a grid over ±`MAX_DELAY` at the coarser of 2 ms and
 the sample step, refined by a parabola through the best grid point and its neighbours.
-Its σ comes from the balance itself (`delay_sigma`): the residual regressed, with the
-Newey–West covariance, on the model's derivative with respect to δ.
+Its σ comes from the balance itself (`mavsysid.estimation.wrench_balance`): the residual
+regressed, with the Newey–West covariance, on the model's derivative with respect to δ.
 """
 
 from __future__ import annotations
