@@ -203,10 +203,16 @@ def choose_fit(segments: list[UniformSegment], config: VehicleConfig, c_d: float
     bands = [b for b in (roll_pitch, yaw, force) if b is not None]
     dt = segments[0].dt
     window = smoother_window(max(b.high for b in bands), dt) if bands else PILOT_WINDOW
-    builders = [BalanceBuilder(s, config, window) for s in segments]
+    # A stretch shorter than two windows has no sample the smoother reaches from both sides.
+    builders = [BalanceBuilder(s, config, window) for s in segments
+                if s.t[-1] - s.t[0] >= 2.0 * window + 4.0 * s.dt]
+    if not builders:
+        window = PILOT_WINDOW
+        builders = [BalanceBuilder(s, config, window) for s in segments]
     choices = FitChoices(window, roll_pitch, yaw, 0.0, c_d, force)
     if roll_pitch is not None or yaw is not None:
         rows = [_dead_axes(b.rows(0.0, c_d, roll_pitch, yaw, force), choices) for b in builders]
+        rows = [r for r in rows if len(r) > 0]
         stride = _stride(choices, dt)
         delay, _, _ = scan_delay(lambda d: _torque_objective(rows, d, stride), dt)
         choices = replace(choices, delay=delay)

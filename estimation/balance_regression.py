@@ -150,5 +150,5 @@ def reverse_coefficient(y: Sequence[np.ndarray], X: Sequence[np.ndarray], column
     others = XX[:, :, live].reshape(Y.size, int(live.sum()))
     design = np.concatenate([Y.reshape(-1, 1), others], axis=1)
     target = XX[:, :, column].reshape(-1)
-    slope = np.linalg.lstsq(design, target, rcond=None)[0][0]
+    slope = np.linalg.lstsq(design.T @ design, design.T @ target, rcond=None)[0][0]
     return float(1.0 / slope) if slope != 0.0 else float("nan")

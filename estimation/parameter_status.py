@@ -7,7 +7,7 @@ combined by inverse variance); c_M = (c_M/j_z) j_z. The covariance follows by th
 method (a numerical Jacobian). The force and torque fits are taken as independent: c_T's σ
 is far below the torque ratios'.
 
-**σ** has five parts, added in quadrature (`widened_sigma`):
+**σ** has six parts, added in quadrature (`widened_sigma`):
 
 * the Newey–West sandwich of the regressions (sampling error of correlated residuals);
 * errors in the variables: the interval reaches the reverse regression's value (Frisch's
@@ -16,7 +16,9 @@ is far below the torque ratios'.
   disagreement beyond their own σ is model error the sandwich cannot see, and adds
   (d² − σ_a² − σ_b²)/4 (half the difference, squared);
 * the same for the two routes to j_z (roll's and pitch's gyroscopic coefficient), which
-  carries over to c_M.
+  carries over to c_M;
+* the thrust row's second-order bias, bounded by the noise across the thrust
+  (`mavsysid.estimation.wrench_balance`).
 
 **Determined** (`parameter_status`): a parameter is determined by the flight when its
 value is physical (positive) and its widened σ is at most `MAX_RELATIVE_SIGMA` of it,
@@ -42,7 +44,7 @@ __all__ = ["COMBINATION_NAMES", "MAX_RELATIVE_SIGMA", "SIGMA_PARTS", "DataTheta"
 MAX_RELATIVE_SIGMA = 0.125
 #: The parts of σ, in the order of `DataTheta.parts`.
 SIGMA_PARTS = ("newey_west", "errors_in_variables", "flight_halves", "band_halves",
-               "j_z_routes")
+               "j_z_routes", "thrust_row")
 #: Combinations a flight may determine when a parameter alone is not: the yaw ratio and
 #: the rotors' inertia relative to the yaw inertia.
 COMBINATION_NAMES = ("c_M/j_z", "J_r/j_z")
@@ -186,7 +188,8 @@ def split_widening(a: np.ndarray, sigma_a: np.ndarray, b: np.ndarray, sigma_b: n
 
 def widened_sigma(parts: np.ndarray) -> np.ndarray:
     """The quadrature sum of σ parts, shape (P,) from (len(SIGMA_PARTS), P)."""
-    return np.sqrt(np.sum(np.asarray(parts, float) ** 2, axis=0))
+    with np.errstate(over="ignore"):  # a part beyond float range is an infinite σ
+        return np.sqrt(np.sum(np.asarray(parts, float) ** 2, axis=0))
 
 
 def errors_in_variables_sigma(forward: np.ndarray, reverse: np.ndarray) -> np.ndarray:

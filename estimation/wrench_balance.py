@@ -90,7 +90,7 @@ class WrenchBalanceResult:
     determined : ndarray of bool, shape (6,)
     data : DataTheta
         The data-only values (also where not determined) and the combinations.
-    sigma_parts : ndarray, shape (5, 6)
+    sigma_parts : ndarray, shape (6, 6)
         σ of θ by source (`SIGMA_PARTS`), SI.
     combination_sigma : ndarray, shape (2,)
         Widened σ of the combinations (`COMBINATION_NAMES`).
@@ -169,6 +169,26 @@ def _split_sigma(rows_a: list[BalanceRows], rows_b: list[BalanceRows]
                            b.combination_sigma))
 
 
+def _thrust_row_sigma(fit: BalanceFit, rows: list[BalanceRows], theta: np.ndarray
+                      ) -> np.ndarray:
+    """σ of θ from the thrust row's second-order bias, bounded by the noise across thrust.
+
+    The thrust row compares magnitudes (`mavsysid.estimation.wrench_regressors`): noise
+    perpendicular to the thrust lengthens the measured |f| by σ_⊥² / (2 |f|), and an
+    attitude error would shorten its z component by as much. The horizontal rows'
+    residuals measure σ_⊥² (pose noise, attitude error times g, unmodelled horizontal
+    force), so ±σ_⊥² / (2 |f|²) of c_T, and of everything scaled by c_T (c_M and J), is
+    a bias the sandwich cannot see.
+    """
+    magnitude = float(np.mean(np.concatenate([r.force[:, 2] for r in rows]))) if rows else 0.0
+    if not magnitude > 0.0:
+        return np.zeros(6)
+    relative = float(np.sum(fit.force.residual_rms[:2] ** 2)) / (2.0 * magnitude**2)
+    scaled = np.array([1.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+    with np.errstate(invalid="ignore"):
+        return np.nan_to_num(relative * np.abs(theta) * scaled)
+
+
 def _halves(rows: list[BalanceRows]) -> tuple[list[BalanceRows], list[BalanceRows]]:
     """The rows before and after the middle of their time span."""
     t = np.concatenate([r.t for r in rows])
@@ -221,8 +241,8 @@ def _segments(flight: FlightData, settings: WrenchBalanceSettings) -> list[Unifo
     segments = uniform_segments(flight, settings.min_segment)
     if not segments:
         raise JobFailedError(f"{flight.source}: no stretch of at least "
-                             f"{settings.min_segment:g} s without a gap: too short for the "
-                             "force and torque balance")
+                             f"{settings.min_segment:g} s without a gap in which the pose "
+                             "changes: too short for the force and torque balance")
     return segments
 
 
@@ -233,9 +253,11 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     fit, builders = fit_balance(segments, config, float(prior.value[1]))
     base = _fit_theta(fit)
     eiv, eiv_c = _eiv_sigma(fit, base)
-    halves, halves_c = _split_sigma(*_halves(balance_rows_for(builders, fit.choices)))
+    rows = balance_rows_for(builders, fit.choices)
+    halves, halves_c = _split_sigma(*_halves(rows))
     bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices))
-    parts = np.vstack([base.sigma, eiv, halves, bands, base.route_sigma])
+    parts = np.vstack([base.sigma, eiv, halves, bands, base.route_sigma,
+                       _thrust_row_sigma(fit, rows, base.value)])
     sigma = widened_sigma(parts)
     combo_sigma = widened_sigma([base.combination_sigma, eiv_c, halves_c, bands_c])
     determined = parameter_status(base.value, sigma, settings.max_relative_sigma)
@@ -304,13 +326,16 @@ def _holdout(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
     t0, t1 = float(flight.t[0]), float(flight.t[-1])
     cut = t1 - settings.holdout_fraction * (t1 - t0)
     try:
-        train, fit = _answer(flight.time_slice(t0, cut), config, prior, settings)
-    except (JobFailedError, np.linalg.LinAlgError):
+        train = uniform_segments(flight.time_slice(t0, cut), settings.min_segment)
+        fit, _ = fit_balance(train, config, float(prior.value[1])) if train else (None, None)
+    except np.linalg.LinAlgError:
         return None
-    test = uniform_segments(flight.time_slice(cut, t1), 4 * train.choices.window)
+    if fit is None:
+        return None
+    test = uniform_segments(flight.time_slice(cut, t1), 4 * fit.choices.window)
     if not test:
         return None
     model = np.concatenate([fit.force.coefficients, fit.torque.coefficients])
-    return predict_holdout(test, config, train.choices, model,
+    return predict_holdout(test, config, fit.choices, model,
                            coefficients_from_theta(prior.value))
 

@@ -99,3 +99,27 @@ def test_not_determined_parameters_keep_the_prior():
     keep = ~result.determined
     assert np.array_equal(result.estimate.value[keep], prior.value[keep])
     assert np.allclose(result.estimate.sigma[keep], prior.sigma[keep])
+
+
+@pytest.mark.parametrize("kind", ["noise", "still", "split"])
+def test_garbage_flights_get_a_one_line_refusal_or_an_answer(kind):
+    """Random poses and speeds, a pose that never changes, short segments: a one-line
+    refusal (JobFailedError) or an answer, never another exception or a warning."""
+    rng = np.random.default_rng(["noise", "still", "split"].index(kind))
+    n = 3000
+    t = np.arange(n) * 0.002
+    if kind == "noise":
+        p, q = rng.standard_normal((n, 3)), rng.standard_normal((n, 4))
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        speeds = rng.uniform(0.0, 3000.0, (n, 4))
+    else:
+        p, q = np.zeros((n, 3)), np.tile([1.0, 0, 0, 0], (n, 1))
+        speeds = np.full((n, 4), 1900.0)
+    starts = (0, 1000, 2000) if kind == "split" else (0,)
+    flight = FlightData(t, p, q, speeds, f"{kind}.csv", segment_starts=starts)
+    try:
+        result = fit_wrench_balance(flight, CONFIG)
+    except JobFailedError as error:
+        assert str(error).startswith(f"{kind}.csv: ") and "\n" not in str(error)
+    else:
+        assert result.determined.any()
