@@ -54,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from mavsysid.estimation.estimate_job import run_estimate
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.parameter_status import widened_sigma
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
 from mavsysid.estimation.wrench_balance import fit_wrench_balance
@@ -213,7 +214,7 @@ def run_balance(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
     out.update(
         code=0, seconds=time.perf_counter() - t0, status=list(result.status),
         reader_refusal=reader_refusal,
-        data=_scored(result.data.value, np.sqrt(np.sum(parts**2, axis=0)), reference),
+        data=_scored(result.data.value, widened_sigma(parts), reference),
         sigma_parts=parts.tolist(), combinations=result.data.combinations.tolist(),
         combination_sigma=result.combination_sigma.tolist(),
         window_s=c.window, delay_s=c.delay, delay_sigma_s=result.delay_sigma,

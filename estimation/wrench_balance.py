@@ -44,6 +44,7 @@ from mavsysid.estimation.parameter_status import (
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.estimation.rotor_balance import check_rotor_balance
 from mavsysid.estimation.uniform_pose import UniformSegment, uniform_segments
+from mavsysid.estimation.wrench_balance_result import WrenchBalanceResult
 from mavsysid.estimation.wrench_regressors import (
     FORCE_COEFFICIENTS,
     STACKED_COEFFICIENTS,
@@ -77,50 +78,6 @@ class WrenchBalanceSettings:
     min_segment: float = 2.0
     holdout_fraction: float = 0.3
     max_relative_sigma: float = MAX_RELATIVE_SIGMA
-
-
-@dataclass(frozen=True)
-class WrenchBalanceResult:
-    """What the flight's force and torque balance says about θ.
-
-    Attributes
-    ----------
-    estimate : ParameterEstimate
-        θ: the data's value and widened σ where determined, the prior's elsewhere (SI).
-    determined : ndarray of bool, shape (6,)
-    data : DataTheta
-        The data-only values (also where not determined) and the combinations.
-    sigma_parts : ndarray, shape (6, 6)
-        σ of θ by source (`SIGMA_PARTS`), SI.
-    combination_sigma : ndarray, shape (2,)
-        Widened σ of the combinations (`COMBINATION_NAMES`).
-    prior : ParameterEstimate
-    choices : FitChoices
-        Window, bands and the offset δ (the pose lags the rotor speeds by δ).
-    delay_sigma : float
-        σ of δ, s.
-    holdout : HoldoutCheck or None
-    rows : int
-        Rows of the force fit (after thinning).
-    notes : tuple of str
-    """
-
-    estimate: ParameterEstimate
-    determined: np.ndarray
-    data: DataTheta
-    sigma_parts: np.ndarray
-    combination_sigma: np.ndarray
-    prior: ParameterEstimate
-    choices: FitChoices
-    delay_sigma: float
-    holdout: HoldoutCheck | None
-    rows: int
-    notes: tuple[str, ...] = ()
-
-    @property
-    def status(self) -> tuple[str, ...]:
-        """Per parameter: "determined" or "not determined"."""
-        return tuple("determined" if d else "not determined" for d in self.determined)
 
 
 def _theta(fit_force: np.ndarray, fit_torque: np.ndarray, cov_force: np.ndarray,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -123,3 +124,22 @@ def test_garbage_flights_get_a_one_line_refusal_or_an_answer(kind):
         assert str(error).startswith(f"{kind}.csv: ") and "\n" not in str(error)
     else:
         assert result.determined.any()
+
+
+def test_result_as_json_carries_status_parts_and_choices():
+    """as_dict is JSON-serialisable and carries, per parameter, status and σ parts."""
+    rng = np.random.default_rng(1)
+    n = 6000
+    t = np.arange(n) * 0.002
+    hover = np.sqrt(CONFIG.mass * 9.81 / (4 * CONFIG.theta[0]))
+    speeds = hover * (1.0 + 0.001 * rng.standard_normal((n, 4)))
+    p = np.column_stack([np.zeros(n), np.zeros(n), 1.0 + 1e-4 * rng.standard_normal(n)])
+    flight = FlightData(t, p, np.tile([1.0, 0, 0, 0], (n, 1)), speeds, "hover.csv")
+    doc = fit_wrench_balance(flight, PRIOR).as_dict()
+    text = json.dumps(doc)
+    assert "NaN" not in text and "Infinity" not in text
+    assert doc["parameters"]["c_T"]["status"] == "determined"
+    assert doc["parameters"]["j_x"]["status"] == "not determined"
+    assert set(doc["parameters"]["c_T"]["sigma_parts"]) >= {"newey_west", "flight_halves"}
+    assert set(doc["choices"]) == {"window_s", "roll_pitch_band_hz", "yaw_band_hz",
+                                   "force_lowpass_hz", "delay_s", "delay_sigma_s"}
