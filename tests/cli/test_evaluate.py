@@ -26,7 +26,7 @@ from mavsysid.vehicle.config import load_vehicle
 from mavsysid.cli import main
 
 #: Small, sample-budgeted experiments: the records depend only on the seeds.
-FAST = {"budget": 15.0, "samples": 150, "refine_steps": 30}
+FAST = {"budget": 15.0, "samples": 300, "refine_steps": 30}
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ def test_table_notes_give_the_headline_intervals_and_saturating_flights(two_expe
 @pytest.mark.slow
 def test_command_prints_the_table_and_its_notes(two_experiments, capsys):
     """A rerun over finished records prints the table and the very notes of table.md."""
-    code = main(["evaluate", "--n", "2", "--budget", "15", "--samples", "150",
+    code = main(["evaluate", "--n", "2", "--budget", "15", "--samples", str(FAST["samples"]),
                  "--refine-steps", "30", "--out", str(two_experiments), "--no-png"])
     out = capsys.readouterr().out
     table = (two_experiments / "table.md").read_text()

@@ -113,7 +113,7 @@ def test_firefly_matches_design_reference_table() -> None:
         assert rotor.direction == direction
     p = config.parameters
     assert (p.c_T, p.c_D, p.c_M) == (8.54858e-6, 0.0176, 1.36777e-7)
-    assert p.J == (0.0347563, 0.0458929, 0.0977)
+    assert p.J == (0.0347563, 0.0458929, 0.0770492)
     assert config.limits.rotor_speed_max == 838.0
     assert config.motor.time_constant == 0.025
     assert config.noise.position_sigma == 0.0005
@@ -296,7 +296,7 @@ def test_inertia_breaking_triangle_inequality_warns_and_loads(tmp_path: Path) ->
 
 
 def test_inertia_within_triangle_slack_does_not_warn(tmp_path: Path) -> None:
-    """The shipped Firefly (j_z 21 % over j_x + j_y, inside the slack) loads silently."""
+    """The shipped Firefly and an inertia inside the triangle slack load silently."""
     with warnings.catch_warnings():
         warnings.simplefilter("error", InertiaWarning)
         load_vehicle("firefly")
