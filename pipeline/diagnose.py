@@ -22,9 +22,9 @@ from mavsysid.discrepancy.diagnosis import (
     reestimate,
 )
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.kinematics_check import check_kinematics
 from mavsysid.estimation.plausibility import check_plausible
 from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.tilt_consistency import check_kinematics
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
