@@ -43,7 +43,13 @@ class DiagnoseRun:
 
 
 def read_estimate(path: str | Path) -> tuple[np.ndarray, tuple[ModelEffect, ...]]:
-    """θ (6,) and the model effects of an ``estimate.json`` (docs/architecture.md)."""
+    """θ (6,) and the model effects of an ``estimate.json`` (docs/architecture.md).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``estimate.json`` file.
+    """
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -112,6 +118,11 @@ def run_diagnose(
 
 def reestimate_comparison(run: DiagnoseRun) -> tuple[Any, Any]:
     """The estimator (EKF) run with the known effects only, and with the augmented model.
+
+    Parameters
+    ----------
+    run : DiagnoseRun
+        A diagnosis with its flight and config.
 
     Returns
     -------

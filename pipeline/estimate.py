@@ -96,6 +96,13 @@ def check_result(source: str, result: EstimationResult) -> None:
     with the log's own force and torque balance (`mavsysid.estimation.guard.check_agreement`,
     judged on the σ before the disagreement widened it).
 
+    Parameters
+    ----------
+    source : str
+        The log, as named in the message.
+    result : EstimationResult
+        The estimate to check.
+
     Raises
     ------
     JobFailedError

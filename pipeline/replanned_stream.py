@@ -158,6 +158,13 @@ def snapshot_pose(pose: Path, directory: Path) -> Path:
     """Copy the complete rows of a pose log being written into ``directory``; the copy.
 
     The streamer appends rows while the estimator reads; a row cut mid-write is left out.
+
+    Parameters
+    ----------
+    pose : Path
+        The pose log being written.
+    directory : Path
+        Folder the copy goes into.
     """
     data = Path(pose).read_bytes()
     out = Path(directory) / Path(pose).name
@@ -179,6 +186,13 @@ def replanning_continuation(settings: ReplanSettings,
 
     Returns None (land) after ``settings.rounds`` re-plans, or once less than
     ``settings.min_rest`` of the budget is left.
+
+    Parameters
+    ----------
+    settings : ReplanSettings
+        Rounds, budget and the planner's settings.
+    say : callable, optional
+        Receives one line per stage.
     """
     say = say or (lambda _text: None)
 
