@@ -1,4 +1,4 @@
-"""Exact rotor feasibility (issue 20): slabs of the allocation polytope against an LP.
+"""Exact rotor feasibility: slabs of the allocation polytope against an LP.
 
 Per shipped vehicle: agreement of the slab test and the HiGHS LP on seeded random
 wrenches (half within 10⁻⁵…10⁻² of the boundary), the time per wrench of each (numba

@@ -41,7 +41,7 @@ from tests.support.realistic import (
     realistic_micro_quad_flight,
 )
 
-#: Relative error allowed per parameter (c_D: 15 %, the rest 5 %; J 10 % in issue 26).
+#: Relative error allowed per parameter (c_D 15 %, J 10 %, c_T and c_M 5 %).
 TOLERANCE = np.array([0.05, 0.15, 0.05, 0.10, 0.10, 0.10])
 
 

@@ -12,7 +12,7 @@ flight into a temporary directory:
   ``rpm.m1..m4`` (rpm → rad/s) in the vehicle file's rotor order M1..M4. Rows are written
   as logged, repeated poses and dead rotor channels included: that is the tool's input;
 * a vehicle TOML: mass from the flights' READMEs (34.7 g brushed, 37 g brushless), the X
-  layout of FIELD-NOTES (arm 0.046 m; M1 front right CCW, M2 back right CW, M3 back left
+  layout checked on the flights (arm 0.046 m; M1 front right CCW, M2 back right CW, M3 back left
   CCW, M4 front left CW), ``rotor_speed_max`` the highest speed of the thrust stand, and
   a **generic prior θ**, what a user who knows mass, arm and top rotor speed would write:
   c_T for a thrust-to-weight ratio of 2 at top speed (2 m g = 4 c_T n_max²), c_M a 1 cm

@@ -10,8 +10,8 @@ __all__ = ["TARGETS", "markdown_table", "print_summary", "print_table", "summary
 
 #: Acceptance bounds on |error| against the reference: c_T 10 %, j_x and j_y 25 %.
 TARGETS = {"c_T": 0.10, "j_x": 0.25, "j_y": 0.25}
-#: The stand reference's own relative σ (FIELD-NOTES: "±3 %"; the two brushed stand files
-#: differ by 6 %), for the coverage that allows for it.
+#: The stand reference's own relative σ (±3 % of the least-squares stand fit; the two
+#: brushed stand files differ by 6 %), for the coverage that allows for it.
 REFERENCE_SIGMA = {"c_T": 0.03}
 
 

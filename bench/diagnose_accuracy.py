@@ -1,8 +1,8 @@
-"""Diagnosis accuracy (issue 6 acceptance): hidden effects named, CIs, gap shrink, clean flights.
+"""Diagnosis accuracy: hidden effects named, CIs, gap shrink, clean flights.
 
-For every catalogue effect at the issue's magnitudes (and a few seeds), fly the built-in
-30 s excitation (the ground effect: an excitation that descends within one rotor
-diameter of the ground) with the effect hidden, diagnose it from a θ 10 % off the truth,
+For every catalogue effect at the magnitudes of `tests.support.hidden` (and a few seeds),
+fly the built-in 30 s excitation (the ground effect: an excitation that descends within
+one rotor diameter of the ground) with the effect hidden, diagnose it from a θ 10 % off the truth,
 and print: the effect named first?, the 95 % CI containing the truth?, the held-out RMS
 shrink on the flagged axes, and the mean relative θ error before → after (equation-error
 θ without and with the named effects). Then pairs of hidden effects (both named?) and
@@ -27,12 +27,12 @@ from mavsysid.discrepancy.diagnosis import diagnose_flight
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.model_effects import effect_from_values
 
-from tests.support.hidden import ISSUE_MAGNITUDES, ground_trajectory, hidden_flight
+from tests.support.hidden import HIDDEN_MAGNITUDES, ground_trajectory, hidden_flight
 
-#: The issue's magnitudes (`tests.support.hidden.ISSUE_MAGNITUDES`); rotor drag linear in n
+#: The hidden magnitudes (`tests.support.hidden.HIDDEN_MAGNITUDES`); rotor drag linear in n
 #: at about 3.5× the paper's quadratic rotor drag in hover (c_T n c_D ≈ 8e-5): c_D absorbs
 #: most of it, so it is named but the held-out shrink stays ≈ 15 %.
-CASES = ISSUE_MAGNITUDES
+CASES = HIDDEN_MAGNITUDES
 PAIRS = (("motor_lag", "body_drag"), ("marker_offset", "wind"), ("thrust_drift", "cog_offset"))
 
 

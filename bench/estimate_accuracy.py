@@ -1,4 +1,4 @@
-"""Estimation accuracy over many seeds (issue: median < 5 %, worst < 10 % on the core, 3σ).
+"""Estimation accuracy over many seeds (target: median < 5 %, worst < 10 % on the core, 3σ).
 
 For each vehicle and seed: simulate the built-in 30 s excitation (docs/architecture.md noise), draw
 the prior ±50 % around the truth, estimate. Prints per parameter the median and worst

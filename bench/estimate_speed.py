@@ -1,4 +1,4 @@
-"""Run time of ``mavsysid estimate`` on a 60 s, 500 Hz log (issue 18: ≤ 20 s once compiled).
+"""Run time of ``mavsysid estimate`` on a 60 s, 500 Hz log (target: ≤ 20 s once compiled).
 
 Simulates the built-in excitation for 60 s logged at 500 Hz into a temporary folder, runs
 the estimate once (compiling the numba kernels into their cache), then times it again and

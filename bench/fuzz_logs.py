@@ -1,4 +1,4 @@
-"""Fuzzed flight logs of every format through the estimator (issue 19's acceptance).
+"""Fuzzed flight logs of every format through the estimator.
 
 Simulates a few short clean Firefly flights, writes each as every format the estimator
 reads (pose.csv, .tlog, .ulg, .bin), estimates each clean log, then ``--count`` fuzzed

@@ -1,4 +1,4 @@
-"""Real-flight robustness on our own data (issue 18 acceptance).
+"""Real-flight robustness on our own data.
 
 For each seed, fly the simulated micro_quad the way real small vehicles are logged
 (`tests.support.realistic`: on-board estimator pose lagged 20 ms + 15 ms smoothing with

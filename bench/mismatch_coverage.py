@@ -1,4 +1,4 @@
-"""Mismatch coverage (issue 18 acceptance): does the 95 % interval cover the truth?
+"""Mismatch coverage: does the 95 % interval cover the truth?
 
 Five truths, each hidden from the model, plus the clean flight as a control. For every
 truth and seed: fly the Firefly on the built-in 30 s excitation (`tests.support.hidden`,
@@ -16,12 +16,12 @@ Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
   3 m/s, ``pose_delay`` 20 ms: the nominal θ plus the hidden effect; scored against the
   nominal θ.
 * ``rotor_drag_linear``: rotor drag linear in rotor speed *instead of* the paper's
-  quadratic law, as in the issue's independent simulator. The truth flies with
+  quadratic law, as RotorPy models it. The truth flies with
   c_D = 0 and a hidden ``rotor_drag_linear`` of k = c_T c_D n_h (c_T, c_D nominal; n_h the
   hover rotor speed √(m g / (rotors · c_T))), so both laws give the same drag in hover.
   The estimate is scored against the nominal θ, i.e. c_D's hover equivalent.
 
-``--reestimate`` measures the second candidate of the issue (what ``mavsysid estimate
+``--reestimate`` measures θ re-estimated with the named effects (what ``mavsysid estimate
 --auto-effects`` runs): `mavsysid.pipeline.auto_effects.estimate_with_named_effects`
 estimates θ, lets `mavsysid.discrepancy.diagnosis.diagnose_flight` (from the estimate,
 without the NIS) name effects, and estimates θ again with them (fitted jointly); that θ is

@@ -12,7 +12,7 @@ the true θ) and "paper_constraints" (the planner without the rotor check). Ever
 flown in the offline simulator with the true θ (controller tuned to the truth) and filtered
 from the prior.
 
-``--mismatch`` hides the physics of issue 18 in the truth: rotor drag linear in rotor speed
+``--mismatch`` hides physics the model lacks in the truth: rotor drag linear in rotor speed
 instead of the quadratic law (c_D = 0 and k = c_T c_D n_h, the same drag in hover; errors
 scored against the nominal θ, i.e. c_D's hover equivalent; `bench/mismatch_coverage.py`)
 and a 40 ms motor lag whose log reports commanded speeds.
@@ -21,7 +21,7 @@ Reported (`bench/planner_baselines_summary.py`), with 95 % paired-bootstrap inte
 seeds: D-opt ratios against the re-planned flight, flyability (> 5 % saturated ticks,
 > 0.5 m RMS off path), median |error|, the planner's predicted σ at the θ it planned with
 against the filter's σ, seconds to the planned flight's D-opt, seconds to σ/θ ≤ 1 % and the
-paper's convergence column; the issue's targets with pass/fail. ``--json`` writes the
+paper's convergence column; the planner's targets with pass/fail. ``--json`` writes the
 summary and the per-seed rows; rows are also appended to ``FILE.rows.jsonl`` as seeds end,
 and ``--from-rows FILE.rows.jsonl`` summarises those (a run stopped early included).
 
@@ -74,7 +74,7 @@ from bench.tool_estimate import ESTIMATORS, tool_scores
 from mavsysid.errors import MavsysidError
 
 KINDS = ("dopt", "dopt_once", *BASELINES)
-#: The hidden truth of ``--mismatch``: the issue-18 effects that change what is fitted.
+#: The hidden truth of ``--mismatch``: the hidden effects that change what is fitted.
 MISMATCH = ("rotor_drag_linear", "motor_lag")
 
 

@@ -1,5 +1,5 @@
 """The summary of `bench/planner_baselines.py`: figures with 95 % paired-bootstrap intervals
-over seeds, the issue-20 targets with pass/fail, and their text form.
+over seeds, the planner's targets with pass/fail, and their text form.
 
 Every figure compares kinds on the same seeds (same prior draw, same true vehicle, same
 noise seed), so intervals resample seeds in pairs. "dopt" is the planned flight (re-planned
@@ -21,7 +21,7 @@ __all__ = ["PLANNED", "column", "format_summary", "interval", "summarize"]
 
 #: The kind every other is compared with.
 PLANNED = "dopt"
-#: Issue-20 targets.
+#: The planner's targets (docs/benchmarks.md).
 RANDOM_RATIO, PRACTITIONER_RATIO, FLIGHT_TIME_RATIO, SIGMA_TOLERANCE = 5.0, 2.0, 3.0, 0.25
 SATURATING_SHARE_ALLOWED = 1.0 / 20.0
 
@@ -140,7 +140,7 @@ def tool_estimates(rows: list[dict], kinds: Sequence[str]) -> dict:
 
 
 def targets(summary: dict, n: int) -> dict:
-    """The issue's acceptance targets, each with its figure and whether it is met."""
+    """The planner's acceptance targets, each with its figure and whether it is met."""
     fly, ratio = summary["flyability"], summary["dopt_ratio"]
     eff, sig = summary["efficiency"], summary["sigma_prediction"][PLANNED]["median_ratio"]
     no_worse = all(a <= b for a, b in zip(fly[PLANNED]["median_error"],
@@ -241,7 +241,7 @@ def format_summary(summary: dict) -> str:
                      + " ".join(f"{100 * c:.0f}" for c in t["covered_share"]))
     lines.append(f"the opening's estimate refused (rest planned from the prior): "
                  f"{summary.get('opening_refused', 0)} of {summary['completed']}")
-    lines.append("targets (issue 20): figure, met")
+    lines.append("targets: figure, met")
     for name, (value, met) in summary["targets"].items():
         shown = ("" if value is None else " ".join(f"{v:.2f}" for v in value)
                  if isinstance(value, list) else f"{value:.3g}")

@@ -1,4 +1,4 @@
-"""Offline simulation speed as a multiple of real time (issue: target ≥ 20× at 1 kHz physics).
+"""Offline simulation speed as a multiple of real time (target: ≥ 20× at 1 kHz physics).
 
 Flies the reference vehicle along the built-in 30 s excitation trajectory with 1 kHz
 RK4 physics, motor lag and the geometric controller, with and without writing the

@@ -1,4 +1,4 @@
-"""Setpoint stream timing against `mavsysid sim` in real time (issue 5's bench).
+"""Setpoint stream timing against `mavsysid sim` in real time.
 
 Runs ``mavsysid sim`` as its own process (speedup 1) and streams a 60 s excitation
 trajectory to it at 50 Hz over UDP loopback with the streamer of ``mavsysid stream``,

@@ -7,7 +7,8 @@ grid. At each step every remaining candidate is scored by the BIC of the model w
 added; the best is kept if it lowers the BIC by more than ``threshold``; candidates within
 ``tie_margin`` of the best are reported as explaining the residual about equally.
 One-at-a-time ranking against the bare model is not used: correlated regressors would
-all look good (FIELD-NOTES.md).
+all look good (on a residual with two hidden drag terms it also named ground effect and a
+thrust scale, where forward selection named exactly the two).
 
 The statistics (effective samples, per-axis variances, block-inflated covariance) are
 `mavsysid.discrepancy.regression`'s: BIC_eff = Σ_axes n_eff log(RSS_a / n) + k log(6 n_eff).
@@ -323,8 +324,9 @@ def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
         lo, hi = profile_interval(grid, dev)
         if cand.effect.parameters[0].unit == "s":
             # Rotor speeds and poses are stamped to within a sample interval of each other
-            # (ESC telemetry carries no time stamp, FIELD-NOTES.md); a time-like parameter
-            # cannot be resolved better: uniform ±dt/2, σ = dt/√12, in quadrature.
+            # (MAVLink's ESC_TELEMETRY_* messages carry no time stamp and are stamped on
+            # receipt); a time-like parameter cannot be resolved better: uniform ±dt/2,
+            # σ = dt/√12, in quadrature.
             extra = 1.96 * model.problem.dt / np.sqrt(12.0)
             lo = v - float(np.hypot(v - lo, extra))
             hi = v + float(np.hypot(hi - v, extra))

@@ -70,7 +70,6 @@ class BatchResult:
     iterations: int
     cost_initial: float
     cost_final: float
-    # --- honest σ (issue 18, C) ---
     sigma_inflation: np.ndarray | None = None
 
 
@@ -98,7 +97,6 @@ def _theta_covariance(fac: ThetaBorderedFactor, theta_scale: np.ndarray) -> np.n
     return 0.5 * (cov + cov.T)
 
 
-# --- honest σ (issue 18, C): begin ------------------------------------------------------
 def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarray,
                     fac: ThetaBorderedFactor) -> np.ndarray:
     """σ multiplier (6,) ≥ 1 of each parameter at the optimum, from the residuals' HAC.
@@ -123,7 +121,6 @@ def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarr
     sample = np.append(np.repeat(np.arange(rows.size), rows), np.full(6, -1))
     return inflated_theta_covariance(J, res, solve, 12 * K + np.arange(6), sample,
                                      rows.size)[1]
-# --- honest σ (issue 18, C): end --------------------------------------------------------
 
 
 def _damped_step(system: BlockSystem, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
@@ -214,7 +211,7 @@ def refine(
             break
 
     optimum = factor_at_optimum(system, flight.source)
-    inflation = sigma_inflation(problem, nodes, theta, optimum)  # honest σ (issue 18, C)
+    inflation = sigma_inflation(problem, nodes, theta, optimum)
     return BatchResult(
         estimate=ParameterEstimate(theta, _theta_covariance(optimum, model.theta_scale)
                                    * np.outer(inflation, inflation)),

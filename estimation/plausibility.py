@@ -39,7 +39,7 @@ __all__ = ["PRIOR_FACTOR_MAX", "VANISHES_WITH", "VANISH_SIGMAS", "check_plausibl
 #: below is a 90 % drop, which no flight that informs the parameter produces from a sane
 #: prior; it is also the signature of a unit or decimal slip (in the config or in the log's
 #: motor curve). A rule on σ alone would not do: the filter's σ shrinks on any long log,
-#: even when the model does not fit it (the wrong answers of issue 17 had small σ).
+#: even when the model does not fit it (wrong answers on real logs come with small σ).
 PRIOR_FACTOR_MAX = 10.0
 
 #: θ entries a model effect takes over, so that ≈ 0 is a correct estimate with it in the

@@ -1,6 +1,6 @@
 """Re-planning in flight, offline: an opening flight, an estimate, the rest planned from it.
 
-The design issue 20 chose for a plan robust to the prior (README, "robust to the prior"):
+A plan robust to the prior (docs/evaluation.md):
 
 1. plan a short **opening** (budget `OPENING_BUDGET`) from the prior, with the prior's wide
    belief, so that the planner's chance-constrained rotor check keeps it gentle (in the box

@@ -26,7 +26,15 @@ ARDUCOPTER_MODES: dict[str, int] = {
 
 
 def px4_custom_mode(main: int, sub: int = 0) -> int:
-    """PX4 custom_mode from main and sub mode (px4_custom_mode.h union layout)."""
+    """PX4 custom_mode from main and sub mode (px4_custom_mode.h union layout).
+
+    Parameters
+    ----------
+    main : int
+        PX4 main mode.
+    sub : int
+        PX4 sub mode.
+    """
     return (main << 16) | (sub << 24)
 
 
@@ -56,7 +64,13 @@ class Autopilot(Enum):
 
     @classmethod
     def from_heartbeat(cls, autopilot: int) -> Autopilot | None:
-        """The family of a HEARTBEAT.autopilot value; None for others (e.g. a GCS)."""
+        """The family of a HEARTBEAT.autopilot value; None for others (e.g. a GCS).
+
+        Parameters
+        ----------
+        autopilot : int
+            HEARTBEAT.autopilot (MAV_AUTOPILOT).
+        """
         try:
             return cls(autopilot)
         except ValueError:
@@ -64,7 +78,15 @@ class Autopilot(Enum):
 
 
 def mode_name(autopilot: Autopilot, custom_mode: int) -> str:
-    """Readable name of a custom_mode (``"mode 23"`` when unknown)."""
+    """Readable name of a custom_mode (``"mode 23"`` when unknown).
+
+    Parameters
+    ----------
+    autopilot : Autopilot
+        The family.
+    custom_mode : int
+        HEARTBEAT.custom_mode.
+    """
     for name, value in autopilot.modes.items():
         if value == custom_mode:
             return name

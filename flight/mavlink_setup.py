@@ -49,6 +49,11 @@ def signing_key_from_file(path: str | Path) -> bytes:
     The file holds the passphrase on one line (as MAVProxy's ``signing setup``);
     surrounding whitespace is ignored.
 
+    Parameters
+    ----------
+    path : str or Path
+        The passphrase file.
+
     Raises
     ------
     InputError
@@ -70,6 +75,11 @@ def parse_connect(connect: str) -> tuple[str, int | None]:
     Accepted: ``udp:HOST:PORT`` / ``udpin:HOST:PORT`` (listen), ``udpout:HOST:PORT``,
     ``tcp:HOST:PORT`` (connect), ``tcpin:HOST:PORT`` (listen), ``serial:DEVICE[:BAUD]``
     or a bare ``/dev/…[:BAUD]`` / ``COMn[:BAUD]`` device (115200 baud by default).
+
+    Parameters
+    ----------
+    connect : str
+        The connection string (forms below).
 
     Raises
     ------

@@ -43,7 +43,13 @@ class _ParseTimeout(BaseException):
 
 
 def check_log_size(path: Path) -> None:
-    """Refuse, in one line, a file larger than `MAX_LOG_BYTES`."""
+    """Refuse, in one line, a file larger than `MAX_LOG_BYTES`.
+
+    Parameters
+    ----------
+    path : Path
+        The log file.
+    """
     size = path.stat().st_size
     if size > MAX_LOG_BYTES:
         raise LogFormatError(f"{path}: {size / 1e9:.3g} GB, larger than the "
@@ -52,7 +58,13 @@ def check_log_size(path: Path) -> None:
 
 
 def parse_budget(path: Path) -> float:
-    """Seconds a parser may take on `path` (`PARSE_SECONDS` + `PARSE_SECONDS_PER_MB`/MB)."""
+    """Seconds a parser may take on `path` (`PARSE_SECONDS` + `PARSE_SECONDS_PER_MB`/MB).
+
+    Parameters
+    ----------
+    path : Path
+        The log file (its size sets the budget).
+    """
     return PARSE_SECONDS + PARSE_SECONDS_PER_MB * path.stat().st_size / 1e6
 
 
@@ -106,7 +118,13 @@ def _silent_descriptors() -> Iterator[None]:
 
 
 def one_line(exc: BaseException) -> str:
-    """An exception as ``Type: message`` on one line."""
+    """An exception as ``Type: message`` on one line.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception to describe.
+    """
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
@@ -141,6 +159,13 @@ def import_parser(module: str, path: Path) -> ModuleType:
     """Import a parser module (e.g. ``pymavlink.mavutil``); if missing, a one-line `InputError`.
 
     The log libraries are needed only for their formats, so they are imported on use.
+
+    Parameters
+    ----------
+    module : str
+        Import name of the parser (``pymavlink.mavutil``, ``pyulog``).
+    path : Path
+        The log it is needed for (named in the error).
     """
     try:
         return importlib.import_module(module)

@@ -24,7 +24,15 @@ __all__ = ["new_flight_dir", "read_meta", "write_json_atomic", "write_meta"]
 
 
 def write_meta(path: str | Path, meta: Mapping[str, Any]) -> None:
-    """Write ``meta.json`` atomically (see `write_json_atomic`)."""
+    """Write ``meta.json`` atomically (see `write_json_atomic`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``meta.json`` file.
+    meta : Mapping
+        The metadata document.
+    """
     write_json_atomic(path, meta)
 
 
@@ -33,6 +41,13 @@ def write_json_atomic(path: str | Path, data: Mapping[str, Any]) -> None:
 
     numpy scalars and arrays are stored as numbers and lists, paths as strings. Values
     JSON cannot hold (NaN and infinity included) raise before the disk is touched.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to (re)write.
+    data : Mapping
+        The JSON document.
     """
     path = Path(path)
     text = json.dumps(dict(data), indent=2, ensure_ascii=False, allow_nan=False,
@@ -59,7 +74,13 @@ def _json_default(value: Any) -> Any:
 
 
 def read_meta(path: str | Path) -> dict[str, Any]:
-    """Read ``meta.json``; a missing or malformed file is a one-line `LogFormatError`."""
+    """Read ``meta.json``; a missing or malformed file is a one-line `LogFormatError`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``meta.json`` file.
+    """
     path = Path(path)
     try:
         meta = json.loads(read_text_file(path, "utf-8"))
@@ -82,6 +103,13 @@ def new_flight_dir(root: str | Path = "logs", name: str | None = None) -> Path:
     ``name`` defaults to the local time ``%Y%m%d-%H%M%S``, suffixed ``-2``, ``-3``, … if
     taken; an explicit ``name`` that exists is an `InputError`. ``root`` is created if
     missing. Creation is atomic, so concurrent callers never share a directory.
+
+    Parameters
+    ----------
+    root : str or Path
+        Folder the flight directory is made in.
+    name : str, optional
+        Name of the directory; None: the local time.
     """
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)

@@ -80,7 +80,13 @@ class FlightRecorder:
         return self.directory / "pose.csv"
 
     def start(self, meta: dict[str, Any]) -> None:
-        """Open the logs and write the metadata with status ``recording``."""
+        """Open the logs and write the metadata with status ``recording``.
+
+        Parameters
+        ----------
+        meta : dict
+            The flight metadata (``meta.json``).
+        """
         self.directory.mkdir(parents=True, exist_ok=True)
         self._meta = {
             "format": "mavsysid-flight",
@@ -119,6 +125,25 @@ class FlightRecorder:
 
         ``reference`` is a controller reference row (p, v, a, yaw, …); its position and yaw
         go into the pose log.
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s.
+        position : ndarray, shape (3,)
+            Measured position, m, world ENU.
+        quaternion : ndarray, shape (4,)
+            Measured attitude [w, x, y, z], body FLU → world ENU.
+        rotor_speeds : ndarray, shape (k,)
+            Logged rotor speeds, rad/s.
+        reference : ndarray
+            Controller reference row (position m, velocity m/s, acceleration m/s², yaw rad, …).
+        true_state : ndarray, shape (13,), optional
+            True state [p, v_B, q, ω] for ``truth.csv``.
+        true_rotor_speeds : ndarray, shape (k,), optional
+            True (lagged) rotor speeds, rad/s.
+        commands : ndarray, shape (k,), optional
+            Commanded rotor speeds, rad/s.
         """
         assert self._pose is not None, "start() first"
         ref = dict(zip(REFERENCE_COLUMNS, (*reference[0:3], reference[9]), strict=True))
@@ -130,7 +155,15 @@ class FlightRecorder:
                 true_state[ATT]), true_rotor_speeds, extra)
 
     def finish(self, status: str, summary: dict[str, Any] | None = None) -> None:
-        """Close the logs and rewrite the metadata with the final status."""
+        """Close the logs and rewrite the metadata with the final status.
+
+        Parameters
+        ----------
+        status : str
+            Final status (``complete`` or ``aborted``).
+        summary : dict, optional
+            Keys merged into the metadata.
+        """
         for writer in (self._pose, self._truth):
             if writer is not None and not writer.closed:
                 writer.close()

@@ -77,5 +77,11 @@ def parse_parameter_lines(text: str, source: str) -> dict[str, float]:
 
 
 def read_parameter_file(path: str | Path) -> dict[str, float]:
-    """`parse_parameter_lines` of the file at ``path`` (missing or unreadable: InputError)."""
+    """`parse_parameter_lines` of the file at ``path`` (missing or unreadable: InputError).
+
+    Parameters
+    ----------
+    path : str or Path
+        The parameter file (``.parm``, ``.param``, ``.params``).
+    """
     return parse_parameter_lines(read_text_file(Path(path)), str(path))

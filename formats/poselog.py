@@ -59,7 +59,13 @@ class TruncatedLogWarning(UserWarning):
 
 
 def rotor_columns(k: int) -> tuple[str, ...]:
-    """Names of the rotor-speed columns of a ``k``-rotor vehicle: ``("n1", …, "nk")``."""
+    """Names of the rotor-speed columns of a ``k``-rotor vehicle: ``("n1", …, "nk")``.
+
+    Parameters
+    ----------
+    k : int
+        Number of rotors.
+    """
     return tuple(f"n{i}" for i in range(1, k + 1))
 
 
@@ -155,7 +161,13 @@ class PoseLog:
         return float(self.t[-1] - self.t[0]) if len(self) > 1 else 0.0
 
     def slice_time(self, t0: float, t1: float) -> PoseLog:
-        """The samples with ``t0 <= t <= t1`` (s) as a new `PoseLog`, possibly empty."""
+        """The samples with ``t0 <= t <= t1`` (s) as a new `PoseLog`, possibly empty.
+
+        Parameters
+        ----------
+        t0, t1 : float
+            First and last time kept, s.
+        """
         if not t1 >= t0:
             raise ValueError(f"slice_time needs t0 <= t1, got t0={t0}, t1={t1}")
         i, j = np.searchsorted(self.t, t0, "left"), np.searchsorted(self.t, t1, "right")
@@ -165,7 +177,15 @@ class PoseLog:
 
 
 def read_text_file(path: Path, encoding: str = "utf-8") -> str:
-    """The text of a file; anything unreadable is a one-line `LogFormatError`."""
+    """The text of a file; anything unreadable is a one-line `LogFormatError`.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    encoding : str
+        Its text encoding.
+    """
     try:
         return path.read_bytes().decode(encoding)
     except OSError as e:
@@ -490,6 +510,19 @@ class PoseLogWriter:
         """Write one sample: t (s), position (3,) m, quaternion (4,) [w,x,y,z], speeds (k,) rad/s.
 
         ``extra`` maps every name of ``extra_columns`` to a float.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        position : array_like, shape (3,)
+            Position, m, world ENU.
+        quaternion : array_like, shape (4,)
+            Attitude [w, x, y, z], body → world.
+        rotor_speeds : array_like, shape (k,)
+            Rotor speeds, rad/s.
+        extra : Mapping of str to float, optional
+            One value per extra column.
         """
         self._check_open()
         pos, quat, rot = (np.asarray(v, dtype=np.float64)
@@ -521,6 +554,19 @@ class PoseLogWriter:
         """Write N samples: t (N,) s, position (N, 3) m, quaternion (N, 4), speeds (N, k) rad/s.
 
         ``extra`` maps every name of ``extra_columns`` to an array of shape (N,).
+
+        Parameters
+        ----------
+        t : array_like, shape (N,)
+            Times, s.
+        position : array_like, shape (N, 3)
+            Positions, m, world ENU.
+        quaternion : array_like, shape (N, 4)
+            Attitudes [w, x, y, z], body → world.
+        rotor_speeds : array_like, shape (N, k)
+            Rotor speeds, rad/s.
+        extra : Mapping of str to array_like, optional
+            One array of shape (N,) per extra column.
         """
         self._check_open()
         t = np.asarray(t, dtype=np.float64)
@@ -595,7 +641,17 @@ class PoseLogWriter:
 
 
 def write_pose_log(path: str | Path, log: PoseLog, *, overwrite: bool = False) -> Path:
-    """Write a whole `PoseLog` to ``path`` with a `PoseLogWriter`; return the path."""
+    """Write a whole `PoseLog` to ``path`` with a `PoseLogWriter`; return the path.
+
+    Parameters
+    ----------
+    path : str or Path
+        The pose log to write.
+    log : PoseLog
+        The samples.
+    overwrite : bool
+        Replace an existing file (else an existing file is an error).
+    """
     with PoseLogWriter(path, log.rotor_count, log.extra, overwrite=overwrite) as w:
         w.write_rows(log.t, log.position, log.quaternion, log.rotor_speeds, log.extra)
     return w.path

@@ -27,7 +27,21 @@ def atomic_recording(
     path: str | Path, application_id: str, recording_id: str, name: str,
     blueprint: Any | None = None,
 ) -> Iterator[rr.RecordingStream]:
-    """A recording stream saving to ``path``, which appears only when the block succeeds."""
+    """A recording stream saving to ``path``, which appears only when the block succeeds.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.rrd`` file.
+    application_id : str
+        Rerun application id.
+    recording_id : str
+        Rerun recording id (fixed, so a recording is reproducible).
+    name : str
+        Recording name shown in the viewer.
+    blueprint : rerun blueprint, optional
+        Viewer layout sent first.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")

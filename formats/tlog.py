@@ -108,7 +108,13 @@ class TlogWriter:
             raise InputError(f"{self.path}: exists; refusing to overwrite a flight log") from None
 
     def write(self, packet: bytes | bytearray) -> None:
-        """Record one packet, stamped now."""
+        """Record one packet, stamped now.
+
+        Parameters
+        ----------
+        packet : bytes
+            One MAVLink packet as sent or received.
+        """
         data = bytes(packet)
         with self._lock:
             # Stamped under the lock, so records from the heartbeat thread and the main

@@ -167,6 +167,13 @@ def trajectory_file_for(
 def write_trajectory_file(path: str | Path, document: Mapping[str, Any]) -> None:
     """Check `document` as `read_trajectory` would, then write it atomically.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    document : Mapping
+        The trajectory document (schema in the module docstring).
+
     Raises
     ------
     InputError
@@ -346,6 +353,11 @@ def parse_trajectory(document: Any, source: str) -> TrajectoryFile:
 
 def read_trajectory(path: str | Path) -> TrajectoryFile:
     """Read and check a trajectory file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The trajectory file (``.json``).
 
     Raises
     ------

@@ -155,6 +155,21 @@ def run_estimate_with_named_effects(
 
     Parameters and result as for `run_estimate` (the log, the vehicle, the window; the
     same plausibility checks, which let c_D be ≈ 0 when ``rotor_drag_linear`` was named).
+
+    Parameters
+    ----------
+    log : str or Path
+        ``pose.csv``, ``.tlog``, ``.ulg`` or ``.bin``.
+    vehicle : str or Path
+        Shipped vehicle name or TOML path.
+    pose : str or Path, optional
+        External motion-capture pose CSV to merge.
+    time_offset : float, optional
+        Clock offset of ``pose`` relative to the log, s.
+    settings : EstimatorSettings, optional
+        Estimator settings (default: the defaults).
+    start, end : float, optional
+        The window of the log to use, s on its clock.
     """
     return run_estimate(log, vehicle, pose, time_offset, settings, start=start, end=end,
                         estimate=_estimate)

@@ -123,7 +123,21 @@ class DemoResult:
 def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
              progress: bool = True, name: str | None = None, record: bool = True
              ) -> DemoResult:
-    """Plan, fly over MAVLink and estimate, ``settings.iterations`` times."""
+    """Plan, fly over MAVLink and estimate, ``settings.iterations`` times.
+
+    Parameters
+    ----------
+    settings : DemoSettings
+        Vehicle, rounds, budgets, speed-up, hidden effects, seed.
+    say : callable, optional
+        Receives one line per stage.
+    progress : bool
+        Show the planner's progress bar.
+    name : str, optional
+        Name of the run folder (default: the local time).
+    record : bool
+        Write ``demo.rrd``.
+    """
     say = say or (lambda _text: None)
     if settings.iterations < 1:
         raise InputError(f"--iterations {settings.iterations}: expected at least 1")
@@ -182,7 +196,15 @@ def run_demo(settings: DemoSettings, say: Callable[[str], None] | None = None,
 
 def write_demo_rrd(path: Path, result: DemoResult) -> None:
     """One Rerun recording of every stage: the last round's plan and estimate, and each
-    round's planned and reached D-opt."""
+    round's planned and reached D-opt.
+
+    Parameters
+    ----------
+    path : Path
+        The ``.rrd`` file.
+    result : DemoResult
+        The demo run.
+    """
     import rerun as rr
     from mavsysid.discrepancy.recording import log_diagnosis
     from mavsysid.estimation.recording import log_estimation

@@ -65,7 +65,15 @@ TELEMETRY_RATE = 250.0
 def hidden_scale(config: VehicleConfig, seed: int) -> np.ndarray:
     """True θ / nominal θ of the simulated vehicle: seeded, within ±`HIDDEN_SPREAD`, and
     drawn again until the true inertia is as physical as the nominal one (a true θ must
-    pass the same config checks, since plans carry the updated model)."""
+    pass the same config checks, since plans carry the updated model).
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        The nominal vehicle.
+    seed : int
+        Seed of the draw.
+    """
     rng = np.random.default_rng([seed, 7])
     j = config.theta[3:]
     slack = max(1.0, float(np.max(j / (j.sum() - j))))
@@ -129,7 +137,13 @@ SIM_START_TIMEOUT = 600.0
 
 def with_headroom(model: VehicleConfig) -> VehicleConfig:
     """The model the demo plans with: `ROTOR_HEADROOM` off its top rotor speed, and its
-    body rate, yaw acceleration and thrust above hover scaled to `ENVELOPE`."""
+    body rate, yaw acceleration and thrust above hover scaled to `ENVELOPE`.
+
+    Parameters
+    ----------
+    model : VehicleConfig
+        The current model.
+    """
     lim = model.limits
     return replace(model, limits=replace(
         lim, rotor_speed_max=(1.0 - ROTOR_HEADROOM) * lim.rotor_speed_max,
@@ -140,7 +154,15 @@ def with_headroom(model: VehicleConfig) -> VehicleConfig:
 
 def trajectory_window(flight_dir: Path, model: VehicleConfig) -> FlightData:
     """The recorded flight while the plan was flown (the streamer's ``trajectory_window``):
-    the ground, take-off and landing are not in the model and stay out of the estimate."""
+    the ground, take-off and landing are not in the model and stay out of the estimate.
+
+    Parameters
+    ----------
+    flight_dir : Path
+        The streamed flight directory.
+    model : VehicleConfig
+        The vehicle the log is read for.
+    """
     flight = load_flight(flight_dir / "pose.csv", model)
     window = read_meta(flight_dir / "meta.json").get("trajectory_window")
     if not window:

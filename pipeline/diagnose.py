@@ -22,9 +22,9 @@ from mavsysid.discrepancy.diagnosis import (
     reestimate,
 )
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.kinematics_check import check_kinematics
 from mavsysid.estimation.plausibility import check_plausible
 from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.tilt_consistency import check_kinematics
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
@@ -43,7 +43,13 @@ class DiagnoseRun:
 
 
 def read_estimate(path: str | Path) -> tuple[np.ndarray, tuple[ModelEffect, ...]]:
-    """θ (6,) and the model effects of an ``estimate.json`` (docs/architecture.md)."""
+    """θ (6,) and the model effects of an ``estimate.json`` (docs/architecture.md).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``estimate.json`` file.
+    """
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -112,6 +118,11 @@ def run_diagnose(
 
 def reestimate_comparison(run: DiagnoseRun) -> tuple[Any, Any]:
     """The estimator (EKF) run with the known effects only, and with the augmented model.
+
+    Parameters
+    ----------
+    run : DiagnoseRun
+        A diagnosis with its flight and config.
 
     Returns
     -------

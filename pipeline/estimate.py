@@ -17,11 +17,11 @@ from pathlib import Path
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.guard import check_agreement
-from mavsysid.estimation.kinematics_check import check_kinematics  # issue 19 (H7b)
 from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import EstimationResult, ParameterEstimate
 from mavsysid.estimation.robust_covariance import widened
+from mavsysid.estimation.tilt_consistency import check_kinematics
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
 __all__ = ["EstimateRun", "Estimator", "check_result", "checked_estimate", "run_estimate"]
@@ -78,11 +78,11 @@ def run_estimate(
         contradicts it (`mavsysid.estimation.guard.check_agreement`); one line naming the
         log, the parameter and the numbers. Also before estimating, when the logged motion
         contradicts the logged tilt: a wrong clock or position unit
-        (`mavsysid.estimation.kinematics_check.check_kinematics`).
+        (`mavsysid.estimation.tilt_consistency.check_kinematics`).
     """
     config = load_vehicle(vehicle)
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
-    check_kinematics(flight)  # issue 19 (H7b): a clock or position unit the attitude denies
+    check_kinematics(flight)  # a clock or position unit the attitude denies
     result = (estimate or estimate_parameters)(flight, config, settings)
     check_result(flight.source, result)
     return EstimateRun(config, flight, result)
@@ -95,6 +95,13 @@ def check_result(source: str, result: EstimationResult) -> None:
     (`mavsysid.estimation.plausibility.check_plausible`), and, for the paper's model, agree
     with the log's own force and torque balance (`mavsysid.estimation.guard.check_agreement`,
     judged on the σ before the disagreement widened it).
+
+    Parameters
+    ----------
+    source : str
+        The log, as named in the message.
+    result : EstimationResult
+        The estimate to check.
 
     Raises
     ------

@@ -25,7 +25,13 @@ ProgressCallback = Callable[[PlanProgress], None]
 
 @contextmanager
 def progress_bar(settings: PlannerSettings) -> Iterator[ProgressCallback]:
-    """A tqdm bar on stderr fed by the planner's progress reports (off when not a tty)."""
+    """A tqdm bar on stderr fed by the planner's progress reports (off when not a tty).
+
+    Parameters
+    ----------
+    settings : PlannerSettings
+        Its sample or time budget sets the bar's total.
+    """
     from tqdm import tqdm  # only the console script needs it
 
     by_samples = settings.max_samples is not None

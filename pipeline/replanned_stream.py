@@ -1,7 +1,7 @@
 """Re-planning in flight: an opening flight, estimate, plan the rest, fly it, in one stream run.
 
 The paper names re-planning as future work; here it turns ``--iterations`` into one
-continuous flight (issue 20, "robust to the prior"). `run_replanned_stream` streams the
+continuous flight whose plan is robust to the prior. `run_replanned_stream` streams the
 opening trajectory file (`mavsysid.pipeline.stream.run_stream`) with a
 continuation (`mavsysid.flight.ground.continuation`) that, while the vehicle holds at the
 opening's end:
@@ -56,8 +56,9 @@ __all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "belief_after_opening", "prior
 
 
 #: Rotor n² share the re-planned rest leaves free at each end for the autopilot's feedback:
-#: with motor lag (25 ms) a plan on the rotor limit saturated 14–25 % of the control ticks
-#: even when planned with the true θ; 0.1 brought that to 0.4–1.6 % (README, issue 20).
+#: with motor lag (25 ms) a plan on the rotor limit saturates 14–25 % of the control ticks
+#: even when planned with the true θ; 0.1 brings that to 0.4–1.6 % (docs/benchmarks.md,
+#: "Rotor headroom").
 FEEDBACK_HEADROOM = 0.1
 
 
@@ -157,6 +158,13 @@ def snapshot_pose(pose: Path, directory: Path) -> Path:
     """Copy the complete rows of a pose log being written into ``directory``; the copy.
 
     The streamer appends rows while the estimator reads; a row cut mid-write is left out.
+
+    Parameters
+    ----------
+    pose : Path
+        The pose log being written.
+    directory : Path
+        Folder the copy goes into.
     """
     data = Path(pose).read_bytes()
     out = Path(directory) / Path(pose).name
@@ -178,6 +186,13 @@ def replanning_continuation(settings: ReplanSettings,
 
     Returns None (land) after ``settings.rounds`` re-plans, or once less than
     ``settings.min_rest`` of the budget is left.
+
+    Parameters
+    ----------
+    settings : ReplanSettings
+        Rounds, budget and the planner's settings.
+    say : callable, optional
+        Receives one line per stage.
     """
     say = say or (lambda _text: None)
 

@@ -61,6 +61,13 @@ def parse_hidden_effects(texts: Sequence[str], option: str = "--hidden-effect"
 
     The one-line message names the option, the text and the problem (an unknown effect
     with the list of names, an unknown parameter with the known ones, a non-number).
+
+    Parameters
+    ----------
+    texts : sequence of str
+        ``NAME:KEY=VALUE,...`` strings.
+    option : str
+        The option named in a message.
     """
     effects = []
     for text in texts:
@@ -135,7 +142,17 @@ def run_offline_flight(
 
 
 def check_rotor_speeds(trajectory: Trajectory, config: VehicleConfig, what: str) -> None:
-    """Refuse a trajectory whose flatness rotor speeds leave the vehicle's limits."""
+    """Refuse a trajectory whose flatness rotor speeds leave the vehicle's limits.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The flight.
+    config : VehicleConfig
+        The vehicle and its limits.
+    what : str
+        The trajectory as named in the message.
+    """
     t = np.linspace(0.0, trajectory.duration, int(trajectory.duration * 100) + 1)
     low, high = np.inf, -np.inf
     for chunk in np.array_split(t, max(1, t.size // 10_000)):

@@ -68,7 +68,13 @@ def identity_transfer() -> EdgeTransfer:
 
 @numba.njit(cache=True)
 def _star_kernel(A1, B1, C1, D1, A2, B2, C2, D2):
-    """Redheffer star product S1 ⋆ S2 of 2×2 block operators (FIELD-NOTES formula)."""
+    """Redheffer star product S1 ⋆ S2 of 2×2 block operators S = (A, B; C, D).
+
+    S1 ⋆ S2 = (A2 (I − B1 C2)⁻¹ A1,           B2 + A2 B1 (I − C2 B1)⁻¹ D2;
+               C1 + D1 C2 (I − B1 C2)⁻¹ A1,   D1 (I − C2 B1)⁻¹ D2),
+    the product under which (I, Σ; 0, I) ⋆ (F, Q; 0, Fᵀ) carries Σ' = F Σ Fᵀ + Q and
+    (I, Σ; 0, I) ⋆ (I, 0; −HᵀR⁻¹H, I) carries Σ' = (Σ⁻¹ + HᵀR⁻¹H)⁻¹ (paper Eq. one_step).
+    """
     eye = np.eye(A1.shape[0])
     M1 = eye - B1 @ C2
     M2 = eye - C2 @ B1

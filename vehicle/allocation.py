@@ -43,6 +43,13 @@ def allocation_pinv(config: VehicleConfig, theta: np.ndarray | None = None) -> n
     """Minimum-norm right inverse A⁺ of the allocation matrix, shape (k, 4).
 
     For 4 rotors this is the exact inverse; for more it gives the n² of least norm.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        Rotor layout.
+    theta : ndarray, shape (6,), optional
+        θ in SI (default: the nominal).
     """
     theta = config.theta if theta is None else np.asarray(theta, dtype=float)
     # The SVD costs more than the flatness of a whole segment, and θ rarely changes.
@@ -65,6 +72,10 @@ def rotor_speeds_squared(
     ----------
     wrench : ndarray, shape (..., 4)
         ``[T, τ_x, τ_y, τ_z]`` in N and N·m.
+    config : VehicleConfig
+        Rotor layout.
+    theta : ndarray, shape (6,), optional
+        θ in SI (default: the nominal).
 
     Returns
     -------

@@ -62,12 +62,24 @@ class AllocationSlabs:
     scale: np.ndarray
 
     def slack(self, wrench: np.ndarray) -> np.ndarray:
-        """Largest scaled slab violation, shape (...,) for wrenches (..., 4); ≤ 0 reachable."""
+        """Largest scaled slab violation, shape (...,) for wrenches (..., 4); ≤ 0 reachable.
+
+        Parameters
+        ----------
+        wrench : ndarray, shape (..., 4)
+            [T, τ_x, τ_y, τ_z], N and N·m.
+        """
         v = np.asarray(wrench, dtype=float) @ self.normals.T
         return (np.maximum(v - self.upper, self.lower - v) / self.scale).max(axis=-1)
 
     def contains(self, wrench: np.ndarray) -> np.ndarray:
-        """Whether each wrench (..., 4) is reachable, bool (...,)."""
+        """Whether each wrench (..., 4) is reachable, bool (...,).
+
+        Parameters
+        ----------
+        wrench : ndarray, shape (..., 4)
+            [T, τ_x, τ_y, τ_z], N and N·m.
+        """
         return self.slack(wrench) <= 0.0
 
 

@@ -4,7 +4,7 @@
 `check_vehicle` then checks the assembled `VehicleConfig`: inertia consistency (a
 warning only: a prior is a guess), a c_M that is really a ratio, rotor allocation rank,
 lift and the order of limits. Problems
-raise the one-line `ConfigError` of `mavsysid.vehicle.config_messages`.
+raise the one-line `ConfigError` of `mavsysid.vehicle.config_schema`.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 from mavsysid.vehicle.allocation import allocation_matrix
-from mavsysid.vehicle.config_messages import describe_value, raise_config_error
+from mavsysid.vehicle.config_schema import describe_value, raise_config_error
 from mavsysid.vehicle.config_types import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.mav_model import rotor_thrust

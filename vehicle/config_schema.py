@@ -6,9 +6,9 @@ Validation runs in two phases. `validate_document` checks the parsed TOML key by
 `VehicleConfig` can tell (inertia consistency, a c_M that is really a ratio, rotor
 allocation rank, lift, limit order).
 
-Every problem raises `ConfigError` with one line ``"<file>: <key>: <expected>, got
-<found>"``, keys spelled ``mass``, ``[parameters].c_M``, ``[[rotors]][3].direction``,
-``[effects.motor_lag].tau``.
+Every problem, here and in `check_vehicle`, raises `ConfigError` with one line
+``"<file>: <key>: <expected>, got <found>"`` (`raise_config_error`), keys spelled
+``mass``, ``[parameters].c_M``, ``[[rotors]][3].direction``, ``[effects.motor_lag].tau``.
 
 Known model effects are optional tables ``[effects.NAME]`` (NAME from
 `mavsysid.vehicle.model_effects.EFFECTS`) of the effect's parameters in SI units; a parameter
@@ -30,15 +30,66 @@ import math
 from collections.abc import Mapping
 from typing import Any, NoReturn
 
-from mavsysid.vehicle.config_messages import describe_value, raise_config_error
 from mavsysid.vehicle.config_types import ALLOCATION_MODES, PARAMETER_UNITS
 from mavsysid.vehicle.model_effects import EFFECTS
 from mavsysid.vehicle.motor_order import FRAME_NAMES, MotorOrderError, output_to_rotor
 
-__all__ = ["EFFECT_PARAMETER_SIGNS", "MIN_ROTORS", "validate_document"]
+from mavsysid.errors import ConfigError
+
+__all__ = ["EFFECT_PARAMETER_SIGNS", "MIN_ROTORS", "describe_value", "raise_config_error",
+           "validate_document"]
 
 #: Fewer rotors than this cannot control thrust, roll, pitch and yaw independently.
 MIN_ROTORS = 4
+
+
+#: Longest value shown in a message, characters.
+_MAX_SHOWN = 60
+
+
+def raise_config_error(file: str, key: str, expected: str, found: str) -> NoReturn:
+    """Raise the one-line ConfigError of the module docstring.
+
+    Parameters
+    ----------
+    file : str
+        The vehicle file (as the user named it).
+    key : str
+        The key, spelled as in the module docstring.
+    expected : str
+        What the key must hold (with its unit).
+    found : str
+        What it holds (`describe_value`).
+    """
+    message = f"{file}: {key}: {expected}, got {found}"
+    # One line is part of the CLI contract (exit 2, one-line message).
+    raise ConfigError(" ".join(message.split()))
+
+
+def describe_value(value: Any) -> str:
+    """A short, one-line description of a TOML value for error messages.
+
+    Parameters
+    ----------
+    value : Any
+        A parsed TOML value.
+    """
+    if isinstance(value, bool):
+        return f"a boolean ({str(value).lower()})"
+    if isinstance(value, str):
+        shown = value if len(value) <= _MAX_SHOWN else value[:_MAX_SHOWN] + "…"
+        return f"a string {shown!r}"
+    if isinstance(value, Mapping):
+        return "a table"
+    if isinstance(value, list):
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+            text = "[" + ", ".join(repr(v) for v in value) + "]"
+            if len(text) <= _MAX_SHOWN:
+                return text
+        return f"an array of {len(value)} item{'s' if len(value) != 1 else ''}"
+    if isinstance(value, int | float):
+        return repr(value)
+    return f"a {type(value).__name__} ({value})"
 
 # (key, unit, sign) per optional/required key of each table; sign is "positive" or
 # "nonnegative". Units go into messages so a user sees what scale is expected.

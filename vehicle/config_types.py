@@ -106,14 +106,36 @@ class Parameters:
 
     @classmethod
     def from_array(cls, theta: np.ndarray) -> Parameters:
-        """Build from θ of shape (6,) in the order of `PARAMETER_NAMES`."""
+        """Build from θ of shape (6,) in the order of `PARAMETER_NAMES`.
+
+        Parameters
+        ----------
+        theta : ndarray, shape (6,)
+            [c_T, c_D, c_M, j_x, j_y, j_z], SI.
+        """
         t = [float(v) for v in np.asarray(theta, dtype=float).reshape(6)]
         return cls(c_T=t[0], c_D=t[1], c_M=t[2], J=(t[3], t[4], t[5]))
 
 
 @dataclass(frozen=True)
 class Limits:
-    """Actuator and planner limits (optional `[limits]` keys have these defaults)."""
+    """Actuator and planner limits (optional `[limits]` keys have these defaults).
+
+    Attributes
+    ----------
+    rotor_speed_max, rotor_speed_min : float
+        Rotor speed range, rad/s.
+    thrust_min_ratio, thrust_max_ratio : float
+        Collective thrust range, × m g.
+    body_rate_max : float
+        Largest body-rate norm, rad/s.
+    yaw_acceleration_max : float
+        Largest yaw acceleration, rad/s².
+    speed_max : float
+        Largest speed, m/s.
+    segment_time_max : float
+        Longest planned segment, s.
+    """
 
     rotor_speed_max: float
     rotor_speed_min: float = 0.0
@@ -248,7 +270,13 @@ class VehicleConfig:
         return self.mass * GRAVITY
 
     def with_parameters(self, parameters: Parameters | np.ndarray) -> VehicleConfig:
-        """A copy with other nominal parameters (a `Parameters` or θ of shape (6,))."""
+        """A copy with other nominal parameters (a `Parameters` or θ of shape (6,)).
+
+        Parameters
+        ----------
+        parameters : Parameters or ndarray, shape (6,)
+            The new nominal θ, SI.
+        """
         if not isinstance(parameters, Parameters):
             parameters = Parameters.from_array(parameters)
         return replace(self, parameters=parameters)

@@ -59,7 +59,13 @@ RATE = slice(10, 13)
 
 @numba.njit(cache=True)
 def rotation_kernel(q):
-    """R(q), body → world, as a (3, 3) array, for numba code; q (4,) need not be unit."""
+    """R(q), body → world, as a (3, 3) array, for numba code; q (4,) need not be unit.
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        Quaternion [w, x, y, z].
+    """
     inv = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     w, x, y, z = q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv
     R = np.empty((3, 3))
@@ -77,7 +83,27 @@ def rotation_kernel(q):
 
 @numba.njit(cache=True, fastmath=False)
 def derivative_kernel(x, n, theta, mass, r, eps, force_ext, torque_ext, out):
-    """ẋ of one state into ``out`` (13,). Arrays: x (13,), n (k,), θ (6,), r (k, 3), ε (k,)."""
+    """ẋ of one state into ``out`` (13,). Arrays: x (13,), n (k,), θ (6,), r (k, 3), ε (k,).
+
+    Parameters
+    ----------
+    x : ndarray, shape (13,)
+        State [p, v_B, q, ω].
+    n : ndarray, shape (k,)
+        Rotor speeds, rad/s.
+    theta : ndarray, shape (6,)
+        θ, SI.
+    mass : float
+        kg.
+    r : ndarray, shape (k, 3)
+        Rotor positions, m, body FLU.
+    eps : ndarray, shape (k,)
+        Rotor directions ±1.
+    force_ext, torque_ext : ndarray, shape (3,)
+        Extra body force (N) and torque (N·m).
+    out : ndarray, shape (13,)
+        Receives ẋ.
+    """
     vx, vy, vz = x[3], x[4], x[5]
     wx, wy, wz = x[10], x[11], x[12]
     R = rotation_kernel(x[6:10])
@@ -235,7 +261,15 @@ def state_derivative(
 
 
 def hover_state(position: np.ndarray | None = None, yaw: float = 0.0) -> np.ndarray:
-    """State at rest, level, at ``position`` (m, world) with yaw (rad), shape (13,)."""
+    """State at rest, level, at ``position`` (m, world) with yaw (rad), shape (13,).
+
+    Parameters
+    ----------
+    position : ndarray, shape (3,), optional
+        m, world ENU (default: the origin).
+    yaw : float
+        rad.
+    """
     x = np.zeros(STATE_DIM)
     if position is not None:
         x[POS] = position

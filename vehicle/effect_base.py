@@ -102,6 +102,11 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     np.cross's axis handling costs tens of µs a call, which dominates the simulator's
     per-tick evaluation of one sample; this is the same formula without it.
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (..., 3)
+        The factors.
     """
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
@@ -113,14 +118,28 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def zero_wrench(inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
-    """No force and no torque: two zero arrays of shape (N, 3)."""
+    """No force and no torque: two zero arrays of shape (N, 3).
+
+    Parameters
+    ----------
+    inputs : EffectInputs
+        State, rotor speeds and vehicle at N samples.
+    """
     n = len(inputs.t)
     return np.zeros((n, 3)), np.zeros((n, 3))
 
 
 def hub_forces_wrench(inputs: EffectInputs, forces: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Sum of per-rotor body forces (N, k, 3) acting at the hubs: force and torque (N, 3)."""
+    """Sum of per-rotor body forces (N, k, 3) acting at the hubs: force and torque (N, 3).
+
+    Parameters
+    ----------
+    inputs : EffectInputs
+        State, rotor speeds and vehicle at N samples.
+    forces : ndarray, shape (N, k, 3)
+        Body force at each rotor hub, N.
+    """
     torque = cross3(inputs.rotor_positions[None, :, :], forces).sum(axis=1)
     return forces.sum(axis=1), torque
 
@@ -154,7 +173,13 @@ def rotor_force_wrench(inputs: EffectInputs, rotor_positions: np.ndarray | None 
 
 
 class ModelEffect:
-    """Base class: an effect with its parameter values; every channel defaults to none."""
+    """Base class: an effect with its parameter values; every channel defaults to none.
+
+    Parameters
+    ----------
+    **values : float
+        The effect's parameters by name, SI (an absent one is 0).
+    """
 
     name: ClassVar[str] = "effect"
     title: ClassVar[str] = ""
@@ -189,7 +214,13 @@ class ModelEffect:
         return {p.name: float(v) for p, v in zip(self.parameters, self.values, strict=True)}
 
     def with_values(self, values: np.ndarray) -> ModelEffect:
-        """The same effect with other parameter values, shape (P,)."""
+        """The same effect with other parameter values, shape (P,).
+
+        Parameters
+        ----------
+        values : ndarray, shape (P,)
+            Parameter values in the order of ``parameters``, SI.
+        """
         return type(self)(**dict(zip(self.parameter_names(), map(float, values), strict=True)))
 
     def __repr__(self) -> str:
@@ -203,7 +234,13 @@ class ModelEffect:
         return hash((self.name, tuple(self.values)))
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
-        """Extra body force (N) and torque (N·m), each of shape (N, 3)."""
+        """Extra body force (N) and torque (N·m), each of shape (N, 3).
+
+        Parameters
+        ----------
+        inputs : EffectInputs
+            State, rotor speeds and vehicle at N samples.
+        """
         return zero_wrench(inputs)
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
@@ -212,22 +249,57 @@ class ModelEffect:
 
         Shapes (N,), (N, 3), (N, 4). A delay needs the pose history, so it is applied
         by interpolating over the whole arrays (the simulator keeps a history).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times, s.
+        position : ndarray, shape (N, 3)
+            True positions, m.
+        quaternion : ndarray, shape (N, 4)
+            True attitudes [w, x, y, z].
         """
         return position, quaternion
 
     def corrected_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Measurement → model: times, positions and attitudes of the model's body frame."""
+        """Measurement → model: times, positions and attitudes of the model's body frame.
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times, s.
+        position : ndarray, shape (N, 3)
+            Measured positions, m.
+        quaternion : ndarray, shape (N, 4)
+            Measured attitudes [w, x, y, z].
+        """
         return t, position, quaternion
 
     def acting_rotor_speeds(self, t: np.ndarray, logged: np.ndarray) -> np.ndarray:
-        """Speeds acting on the body given the logged ones, shape (N, k), rad/s."""
+        """Speeds acting on the body given the logged ones, shape (N, k), rad/s.
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times, s.
+        logged : ndarray, shape (N, k)
+            Logged rotor speeds, rad/s.
+        """
         return logged
 
 
 def total_wrench(effects: tuple[ModelEffect, ...] | list[ModelEffect], inputs: EffectInputs
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Sum of the wrenches of ``effects`` at ``inputs``: force and torque (N, 3) each."""
+    """Sum of the wrenches of ``effects`` at ``inputs``: force and torque (N, 3) each.
+
+    Parameters
+    ----------
+    effects : sequence of ModelEffect
+        The effects.
+    inputs : EffectInputs
+        State, rotor speeds and vehicle at N samples.
+    """
     force, torque = zero_wrench(inputs)
     for effect in effects:
         if "wrench" in effect.channels:

@@ -132,7 +132,29 @@ def _rotation_rows(A, w, J, w_dot, c_D, Tr, dM_dw, dM_dcT, dM_dcD, sum_eps_n2):
 
 @numba.njit(cache=True)
 def jacobian_kernel(x, n, theta, mass, r, eps, scale, A, G):
-    """A (18, 18) and G (18, 6) of one state into ``A`` and ``G``; see `ErrorStateModel`."""
+    """A (18, 18) and G (18, 6) of one state into ``A`` and ``G``; see `ErrorStateModel`.
+
+    Parameters
+    ----------
+    x : ndarray, shape (13,)
+        State [p, v_B, q, ω].
+    n : ndarray, shape (k,)
+        Rotor speeds, rad/s.
+    theta : ndarray, shape (6,)
+        θ, SI.
+    mass : float
+        kg.
+    r : ndarray, shape (k, 3)
+        Rotor positions, m, body FLU.
+    eps : ndarray, shape (k,)
+        Rotor directions ±1.
+    scale : ndarray, shape (6,)
+        Units of the θ error states (`ErrorStateModel.theta_scale`).
+    A : ndarray, shape (18, 18)
+        Receives ∂ẋ/∂δx.
+    G : ndarray, shape (18, 6)
+        Receives the process-noise input matrix.
+    """
     c_D = theta[1]
     J = theta[3:6]
     v = x[3:6]

@@ -90,6 +90,21 @@ def flat_sample(ax: float, ay: float, az: float, jx: float, jy: float, jz: float
     Acceleration a (m/s²), jerk and snap are world ENU; ψ, ψ̇, ψ̈ in rad, rad/s, rad/s²;
     J (3,) the principal inertia, kg m². The planner's feasibility kernel and
     `flat_to_state` share this one implementation.
+
+    Parameters
+    ----------
+    ax, ay, az : float
+        Acceleration, m/s², world ENU.
+    jx, jy, jz : float
+        Jerk, m/s³.
+    sx, sy, sz : float
+        Snap, m/s⁴.
+    psi, dpsi, ddpsi : float
+        Yaw (rad), yaw rate (rad/s), yaw acceleration (rad/s²).
+    J : ndarray, shape (3,)
+        Principal moments of inertia, kg·m².
+    out : ndarray, shape (SAMPLE_SIZE,)
+        Receives the sample.
     """
     # Thrust direction: m (a - g) with g = [0, 0, -GRAVITY].
     tx, ty, tz = ax, ay, az + GRAVITY

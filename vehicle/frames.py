@@ -36,54 +36,114 @@ _SQRT_HALF = np.sqrt(0.5)
 
 
 def enu_to_ned(v: np.ndarray) -> np.ndarray:
-    """World vector(s) ENU → NED (positions, velocities, accelerations), shape (..., 3)."""
+    """World vector(s) ENU → NED (positions, velocities, accelerations), shape (..., 3).
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., 3)
+        World vectors, ENU.
+    """
     v = np.asarray(v, dtype=float)
     return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
 
 
 def ned_to_enu(v: np.ndarray) -> np.ndarray:
-    """World vector(s) NED → ENU, shape (..., 3). The map is its own inverse."""
+    """World vector(s) NED → ENU, shape (..., 3). The map is its own inverse.
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., 3)
+        World vectors, NED.
+    """
     return enu_to_ned(v)
 
 
 def flu_to_frd(v: np.ndarray) -> np.ndarray:
-    """Body vector(s) FLU → FRD (body rates, body velocities), shape (..., 3)."""
+    """Body vector(s) FLU → FRD (body rates, body velocities), shape (..., 3).
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., 3)
+        Body vectors, FLU.
+    """
     v = np.asarray(v, dtype=float)
     return np.stack([v[..., 0], -v[..., 1], -v[..., 2]], axis=-1)
 
 
 def frd_to_flu(v: np.ndarray) -> np.ndarray:
-    """Body vector(s) FRD → FLU, shape (..., 3). The map is its own inverse."""
+    """Body vector(s) FRD → FLU, shape (..., 3). The map is its own inverse.
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., 3)
+        Body vectors, FRD.
+    """
     return flu_to_frd(v)
 
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Angle(s) wrapped to [−π, π), rad."""
+    """Angle(s) wrapped to [−π, π), rad.
+
+    Parameters
+    ----------
+    angle : float or ndarray
+        rad.
+    """
     return (np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def yaw_enu_to_ned(yaw: np.ndarray | float) -> np.ndarray | float:
-    """Heading ENU (from east, counter-clockwise) → NED (from north, clockwise), rad."""
+    """Heading ENU (from east, counter-clockwise) → NED (from north, clockwise), rad.
+
+    Parameters
+    ----------
+    yaw : float or ndarray
+        Heading ENU, rad.
+    """
     return wrap_angle(0.5 * np.pi - np.asarray(yaw, dtype=float))
 
 
 def yaw_ned_to_enu(yaw: np.ndarray | float) -> np.ndarray | float:
-    """Heading NED → ENU, rad (the same map: π/2 − ψ)."""
+    """Heading NED → ENU, rad (the same map: π/2 − ψ).
+
+    Parameters
+    ----------
+    yaw : float or ndarray
+        Heading NED, rad.
+    """
     return yaw_enu_to_ned(yaw)
 
 
 def yaw_rate_enu_to_ned(rate: np.ndarray | float) -> np.ndarray | float:
-    """Yaw rate ENU → NED, rad/s."""
+    """Yaw rate ENU → NED, rad/s.
+
+    Parameters
+    ----------
+    rate : float or ndarray
+        Yaw rate ENU, rad/s.
+    """
     return -np.asarray(rate, dtype=float)
 
 
 def yaw_rate_ned_to_enu(rate: np.ndarray | float) -> np.ndarray | float:
-    """Yaw rate NED → ENU, rad/s."""
+    """Yaw rate NED → ENU, rad/s.
+
+    Parameters
+    ----------
+    rate : float or ndarray
+        Yaw rate NED, rad/s.
+    """
     return -np.asarray(rate, dtype=float)
 
 
 def quaternion_ned_to_enu(q: np.ndarray) -> np.ndarray:
-    """Attitude q_ned_frd → q_enu_flu, both [w, x, y, z], shape (..., 4)."""
+    """Attitude q_ned_frd → q_enu_flu, both [w, x, y, z], shape (..., 4).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        q_ned_frd [w, x, y, z].
+    """
     q = np.asarray(q, dtype=float)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return _SQRT_HALF * np.stack([w + z, x + y, x - y, w - z], axis=-1)
@@ -94,6 +154,11 @@ def quaternion_enu_to_ned(q: np.ndarray) -> np.ndarray:
 
     The inverse of `quaternion_ned_to_enu`: w = (a + d)/√2, x = (b + c)/√2,
     y = (b − c)/√2, z = (a − d)/√2 for q_enu_flu = (a, b, c, d).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        q_enu_flu [w, x, y, z].
     """
     q = np.asarray(q, dtype=float)
     a, b, c, d = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -106,6 +171,11 @@ def euler_ned_to_quaternion(roll: np.ndarray | float, pitch: np.ndarray | float,
 
     q = q_z(yaw) ⊗ q_y(pitch) ⊗ q_x(roll), the convention of MAVLink ATTITUDE and of
     ArduPilot's ATT and VISP log messages. Angles of shape (...) give shape (..., 4).
+
+    Parameters
+    ----------
+    roll, pitch, yaw : float or ndarray
+        Euler angles, rad.
     """
     cr, sr = np.cos(0.5 * np.asarray(roll, float)), np.sin(0.5 * np.asarray(roll, float))
     cp, sp = np.cos(0.5 * np.asarray(pitch, float)), np.sin(0.5 * np.asarray(pitch, float))

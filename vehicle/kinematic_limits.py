@@ -66,7 +66,21 @@ _EXTREME_OF = {name: (name, 1.0) for name in KINEMATIC_FIELDS} | {
 
 @dataclass(frozen=True)
 class KinematicLimits:
-    """A kinematic envelope: the same quantities as `KinematicPeaks`, None = no limit."""
+    """A kinematic envelope: the same quantities as `KinematicPeaks`, None = no limit.
+
+    Attributes
+    ----------
+    speed_xy, climb, descent : float or None
+        Horizontal, upward and downward speed, m/s.
+    accel_xy, accel_up, accel_down : float or None
+        Horizontal, upward and downward acceleration, m/s².
+    jerk_xy, jerk_z, jerk : float or None
+        Horizontal, vertical and total jerk, m/s³.
+    tilt : float or None
+        Lean angle, rad.
+    yaw_rate, yaw_acceleration : float or None
+        rad/s, rad/s².
+    """
 
     speed_xy: float | None = None
     climb: float | None = None
@@ -123,14 +137,28 @@ def polynomial_peaks(position_coeffs: np.ndarray, yaw_coeffs: np.ndarray,
 
 
 def kinematic_peaks(trajectory: PiecewisePolynomial) -> KinematicPeaks:
-    """The exact largest kinematic values of ``trajectory`` (`polynomial_peaks`)."""
+    """The exact largest kinematic values of ``trajectory`` (`polynomial_peaks`).
+
+    Parameters
+    ----------
+    trajectory : PiecewisePolynomial
+        The flight.
+    """
     return polynomial_peaks(trajectory.position_coeffs, trajectory.yaw_coeffs,
                             trajectory.durations)
 
 
 def exceeded(peaks: KinematicPeaks, limits: KinematicLimits
              ) -> list[tuple[str, float, float]]:
-    """(quantity, peak, limit) for every quantity whose peak is above its limit."""
+    """(quantity, peak, limit) for every quantity whose peak is above its limit.
+
+    Parameters
+    ----------
+    peaks : KinematicPeaks
+        A trajectory's peaks.
+    limits : KinematicLimits
+        The envelope.
+    """
     out = []
     for name in KINEMATIC_FIELDS:
         limit = getattr(limits, name)

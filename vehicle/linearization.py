@@ -62,6 +62,15 @@ def initial_state_sigma(
     Shared by the estimator (which initialises this way) and the planner (which must
     predict the covariance the estimator will reach).
 
+    Parameters
+    ----------
+    position_sigma : float
+        Pose position noise σ, m.
+    attitude_sigma : float
+        Pose attitude noise σ, rad.
+    dt : float
+        Pose sample interval, s.
+
     Returns
     -------
     tuple of 4 float
@@ -90,7 +99,15 @@ class ErrorStateModel:
     def for_vehicle(
         cls, config: VehicleConfig, theta_scale: np.ndarray | None = None
     ) -> ErrorStateModel:
-        """Model with parameter units ``theta_scale`` (default: |nominal θ|, 1 where zero)."""
+        """Model with parameter units ``theta_scale`` (default: |nominal θ|, 1 where zero).
+
+        Parameters
+        ----------
+        config : VehicleConfig
+            The vehicle.
+        theta_scale : ndarray, shape (6,), optional
+            Unit of each θ error state, SI.
+        """
         if theta_scale is None:
             theta_scale = np.abs(config.theta)
             theta_scale = np.where(theta_scale > 0.0, theta_scale, 1.0)
@@ -139,6 +156,17 @@ class ErrorStateModel:
         F_k = exp(A dt) (4th-order Taylor series of exp(A dt/2), squared); Q_k by
         Simpson's rule on ∫ Φ G Qc Gᵀ Φᵀ (see `transition_kernel`).
 
+        Parameters
+        ----------
+        x : ndarray, shape (..., 13)
+            Nominal state.
+        n : ndarray, shape (..., k)
+            Rotor speeds, rad/s.
+        theta : ndarray, shape (..., 6)
+            θ, SI.
+        dt : float
+            Step, s.
+
         Returns
         -------
         F, Q : ndarray, shape (..., 18, 18)
@@ -179,7 +207,13 @@ class ErrorStateModel:
 
     @staticmethod
     def measure(x: np.ndarray) -> np.ndarray:
-        """Noise-free measurement h(x) = [p, q], shape (..., 13) → (..., 7)."""
+        """Noise-free measurement h(x) = [p, q], shape (..., 13) → (..., 7).
+
+        Parameters
+        ----------
+        x : ndarray, shape (..., 13)
+            State.
+        """
         x = np.asarray(x, dtype=float)
         return np.concatenate([x[..., POS], x[..., ATT]], axis=-1)
 
@@ -189,6 +223,15 @@ class ErrorStateModel:
         self, x: np.ndarray, theta: np.ndarray, dx: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """x ⊞ δx: apply an error state to a nominal state and θ.
+
+        Parameters
+        ----------
+        x : ndarray, shape (..., 13)
+            Nominal state.
+        theta : ndarray, shape (..., 6)
+            Nominal θ, SI.
+        dx : ndarray, shape (..., 18)
+            Error state.
 
         Returns
         -------
@@ -207,7 +250,15 @@ class ErrorStateModel:
     def difference(
         self, x: np.ndarray, theta: np.ndarray, x_ref: np.ndarray, theta_ref: np.ndarray
     ) -> np.ndarray:
-        """δx = (x, θ) ⊟ (x_ref, θ_ref), shape (..., 18); the inverse of `inject`."""
+        """δx = (x, θ) ⊟ (x_ref, θ_ref), shape (..., 18); the inverse of `inject`.
+
+        Parameters
+        ----------
+        x, x_ref : ndarray, shape (..., 13)
+            States.
+        theta, theta_ref : ndarray, shape (..., 6)
+            θ, SI.
+        """
         x = np.asarray(x, dtype=float)
         x_ref = np.asarray(x_ref, dtype=float)
         dq = quat_multiply(quat_conjugate(x_ref[..., ATT]), x[..., ATT])
@@ -223,7 +274,13 @@ class ErrorStateModel:
         )
 
     def parameter_covariance_si(self, P: np.ndarray) -> np.ndarray:
-        """The 6×6 θ block of an error-state covariance P, converted to SI units."""
+        """The 6×6 θ block of an error-state covariance P, converted to SI units.
+
+        Parameters
+        ----------
+        P : ndarray, shape (..., 18, 18)
+            Error-state covariance.
+        """
         P = np.asarray(P, dtype=float)
         s = self.theta_scale
         return P[..., E_THETA, E_THETA] * s[:, None] * s[None, :]
@@ -236,6 +293,21 @@ def transition_kernel(A, G, Qc, dt, F, Q):
     exp(A dt/2) by a 4th-order Taylor series (Horner), squared for F. Q by Simpson's
     rule, exact for the cubic growth of position and attitude variance under force and
     moment noise (the trapezoidal rule overstates it by half).
+
+    Parameters
+    ----------
+    A : ndarray, shape (18, 18)
+        Continuous error-state Jacobian.
+    G : ndarray, shape (18, 6)
+        Noise input matrix.
+    Qc : ndarray, shape (6, 6)
+        Continuous noise density.
+    dt : float
+        Step, s.
+    F : ndarray, shape (18, 18)
+        Receives the transition.
+    Q : ndarray, shape (18, 18)
+        Receives the process noise.
     """
     d = A.shape[0]
     Ah = A * (0.5 * dt)

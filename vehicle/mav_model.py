@@ -75,7 +75,15 @@ def collective_thrust(c_T: float, n: np.ndarray) -> np.ndarray:
 
 
 def rotor_speed_for_thrust(c_T: float, thrust: np.ndarray | float) -> np.ndarray | float:
-    """The rotor speed n = √(T / c_T) at which one rotor makes ``thrust`` (N), rad/s."""
+    """The rotor speed n = √(T / c_T) at which one rotor makes ``thrust`` (N), rad/s.
+
+    Parameters
+    ----------
+    c_T : float
+        Thrust coefficient, N/(rad/s)².
+    thrust : float or ndarray
+        Thrust of one rotor, N.
+    """
     return np.sqrt(thrust / c_T)
 
 

@@ -122,7 +122,15 @@ _SECTORS = ("front", "front right", "right", "rear right", "rear", "rear left", 
 
 
 class MotorOrderError(ValueError):
-    """A config's rotors do not match an autopilot frame: what was expected, what was found."""
+    """A config's rotors do not match an autopilot frame: what was expected, what was found.
+
+    Parameters
+    ----------
+    expected : str
+        What the frame requires.
+    found : str
+        What the config has.
+    """
 
     def __init__(self, expected: str, found: str) -> None:
         super().__init__(f"{expected}, got {found}")
@@ -131,7 +139,13 @@ class MotorOrderError(ValueError):
 
 
 def describe_angle(angle_deg: float) -> str:
-    """A position for messages: ``"front right (45°)"``, angle clockwise from the nose."""
+    """A position for messages: ``"front right (45°)"``, angle clockwise from the nose.
+
+    Parameters
+    ----------
+    angle_deg : float
+        Clockwise from the nose, degrees.
+    """
     sector = _SECTORS[round(angle_deg / 45.0) % 8]
     return f"{sector} ({angle_deg:g}°)"
 

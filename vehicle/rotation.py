@@ -27,7 +27,13 @@ __all__ = [
 
 
 def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrix [v]×, shape (..., 3, 3), such that [v]× u = v × u."""
+    """Cross-product matrix [v]×, shape (..., 3, 3), such that [v]× u = v × u.
+
+    Parameters
+    ----------
+    v : ndarray, shape (..., 3)
+        Vectors.
+    """
     v = np.asarray(v, dtype=float)
     out = np.zeros((*v.shape[:-1], 3, 3))
     out[..., 0, 1] = -v[..., 2]
@@ -40,7 +46,13 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 
 def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product p ⊗ q of quaternions ``[w, x, y, z]``, shape (..., 4)."""
+    """Hamilton product p ⊗ q of quaternions ``[w, x, y, z]``, shape (..., 4).
+
+    Parameters
+    ----------
+    p, q : ndarray, shape (..., 4)
+        Quaternions [w, x, y, z].
+    """
     p = np.asarray(p, dtype=float)
     q = np.asarray(q, dtype=float)
     pw, pv = p[..., :1], p[..., 1:]
@@ -51,20 +63,38 @@ def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
-    """Conjugate (the inverse of a unit quaternion), shape (..., 4)."""
+    """Conjugate (the inverse of a unit quaternion), shape (..., 4).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        Quaternions [w, x, y, z].
+    """
     q = np.asarray(q, dtype=float)
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def quat_normalize(q: np.ndarray) -> np.ndarray:
-    """Unit quaternion with non-negative scalar part, shape (..., 4)."""
+    """Unit quaternion with non-negative scalar part, shape (..., 4).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        Quaternions [w, x, y, z].
+    """
     q = np.asarray(q, dtype=float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[..., :1] < 0.0, -q, q)
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix R(q), body → world, shape (..., 3, 3). q need not be normalised."""
+    """Rotation matrix R(q), body → world, shape (..., 3, 3). q need not be normalised.
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        Quaternions [w, x, y, z].
+    """
     q = np.asarray(q, dtype=float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = (q[..., i] for i in range(4))
@@ -79,7 +109,13 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Quaternion ``[w, x, y, z]`` (w ≥ 0) of rotation matrices, shape (..., 3, 3) → (..., 4)."""
+    """Quaternion ``[w, x, y, z]`` (w ≥ 0) of rotation matrices, shape (..., 3, 3) → (..., 4).
+
+    Parameters
+    ----------
+    R : ndarray, shape (..., 3, 3)
+        Rotation matrices.
+    """
     R = np.asarray(R, dtype=float)
     flat = R.reshape(-1, 3, 3)
     q = Rotation.from_matrix(flat).as_quat(scalar_first=True)
@@ -87,7 +123,13 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
 
 
 def quat_exp(rotvec: np.ndarray) -> np.ndarray:
-    """Exp: rotation vector (rad, shape (..., 3)) → unit quaternion, shape (..., 4)."""
+    """Exp: rotation vector (rad, shape (..., 3)) → unit quaternion, shape (..., 4).
+
+    Parameters
+    ----------
+    rotvec : ndarray, shape (..., 3)
+        Rotation vectors, rad.
+    """
     rotvec = np.asarray(rotvec, dtype=float)
     angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
     half = 0.5 * angle
@@ -102,6 +144,11 @@ def quat_log(q: np.ndarray) -> np.ndarray:
     """Log: unit quaternion (shape (..., 4)) → rotation vector in rad, shape (..., 3).
 
     The shorter of the two equivalent rotations is returned (angle ≤ π).
+
+    Parameters
+    ----------
+    q : ndarray, shape (..., 4)
+        Unit quaternions [w, x, y, z].
     """
     q = np.asarray(q, dtype=float)
     q = np.where(q[..., :1] < 0.0, -q, q)
@@ -121,7 +168,13 @@ def quat_log(q: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True)
 def multiply_kernel(p, q):
-    """p ⊗ q for single quaternions (4,), for numba code."""
+    """p ⊗ q for single quaternions (4,), for numba code.
+
+    Parameters
+    ----------
+    p, q : ndarray, shape (4,)
+        Quaternions [w, x, y, z].
+    """
     return np.array([
         p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
         p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
@@ -132,7 +185,13 @@ def multiply_kernel(p, q):
 
 @numba.njit(cache=True)
 def exp_kernel(v):
-    """Exp of one rotation vector (3,) → unit quaternion (4,), for numba code."""
+    """Exp of one rotation vector (3,) → unit quaternion (4,), for numba code.
+
+    Parameters
+    ----------
+    v : ndarray, shape (3,)
+        Rotation vector, rad.
+    """
     angle = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     sinc = 0.5 - angle * angle / 48.0 if angle < 0.0001 else np.sin(0.5 * angle) / angle
     return np.array([np.cos(0.5 * angle), sinc * v[0], sinc * v[1], sinc * v[2]])
@@ -140,7 +199,13 @@ def exp_kernel(v):
 
 @numba.njit(cache=True)
 def log_kernel(q):
-    """Log of one unit quaternion (4,) → rotation vector (3,) with angle ≤ π, for numba code."""
+    """Log of one unit quaternion (4,) → rotation vector (3,) with angle ≤ π, for numba code.
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        Unit quaternion [w, x, y, z].
+    """
     sign = -1.0 if q[0] < 0.0 else 1.0
     w = sign * q[0]
     vn = np.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])

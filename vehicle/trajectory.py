@@ -59,12 +59,28 @@ class Trajectory(Protocol):
         ...
 
     def flat_outputs(self, t: np.ndarray) -> FlatOutputs:
-        """Flat outputs at times ``t`` (s, shape (S,))."""
+        """Flat outputs at times ``t`` (s, shape (S,)).
+
+        Parameters
+        ----------
+        t : ndarray, shape (S,)
+            Times, s.
+        """
         ...
 
 
 def polynomial_basis(tau: np.ndarray, n_coeffs: int, derivative: int) -> np.ndarray:
-    """Rows d^k/dτ^k [1, τ, …, τ^(N-1)], shape (S, N), for k = ``derivative``."""
+    """Rows d^k/dτ^k [1, τ, …, τ^(N-1)], shape (S, N), for k = ``derivative``.
+
+    Parameters
+    ----------
+    tau : ndarray, shape (S,)
+        Local times.
+    n_coeffs : int
+        Coefficients per polynomial, N.
+    derivative : int
+        Order k of the derivative.
+    """
     tau = np.atleast_1d(np.asarray(tau, dtype=float))
     j = np.arange(n_coeffs)
     factor = np.array(
@@ -151,7 +167,13 @@ class PiecewisePolynomial:
         return idx, tc - starts[idx], inside
 
     def flat_outputs(self, t: np.ndarray) -> FlatOutputs:
-        """Flat outputs at times ``t`` (s, shape (S,))."""
+        """Flat outputs at times ``t`` (s, shape (S,)).
+
+        Parameters
+        ----------
+        t : ndarray, shape (S,)
+            Times, s.
+        """
         idx, tau, inside = self._locate(t)
         pc = self.position_coeffs[idx]
         yc = self.yaw_coeffs[idx]

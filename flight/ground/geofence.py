@@ -19,7 +19,7 @@ Local ENU corners become latitude/longitude through the vehicle's origin of its 
 (GPS_GLOBAL_ORIGIN, else HOME_POSITION less its local offset). A vehicle that has no
 working fence (parameters missing or refused, no origin) is refused in one line: flying a
 calibration trajectory near the box edges without one is what sent a vehicle 44 m out of a
-4 m box (issue 19); ``--no-fence`` flies without it, on purpose. Every parameter goes
+4 m box; ``--no-fence`` flies without it, on purpose. Every parameter goes
 through the session's `ParameterSession`, which puts them back after the flight. The
 uploaded polygon stays stored on the vehicle (disabled again by the restored FENCE_ENABLE).
 """

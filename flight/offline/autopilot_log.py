@@ -95,7 +95,13 @@ class LoggedFlight:
 
 def microsecond_stamp(boot_time: float) -> Callable[[float], int]:
     """Flight time (s) → the autopilot's timestamp: µs since its boot, ``boot_time`` s before
-    the flight starts (both ArduPilot's ``TimeUS`` and PX4's ``timestamp`` count so)."""
+    the flight starts (both ArduPilot's ``TimeUS`` and PX4's ``timestamp`` count so).
+
+    Parameters
+    ----------
+    boot_time : float
+        Seconds from the autopilot's boot to the flight's start.
+    """
     def stamp(t: float) -> int:
         return round((boot_time + t) * 1e6)
 

@@ -41,7 +41,19 @@ REFERENCE_DIM = 16
 
 @dataclass(frozen=True)
 class ControllerGains:
-    """Controller tuning as closed-loop natural frequencies (rad/s) and damping ratios."""
+    """Controller tuning as closed-loop natural frequencies (rad/s) and damping ratios.
+
+    Attributes
+    ----------
+    position_frequency, position_damping : float
+        Position loop natural frequency (rad/s) and damping ratio.
+    attitude_frequency, attitude_damping : float
+        Attitude loop natural frequency (rad/s) and damping ratio.
+    max_tilt : float
+        Largest commanded tilt, rad.
+    drag_compensation : bool
+        Feed the model's rotor drag forward.
+    """
 
     position_frequency: float = 4.0
     position_damping: float = 1.0
@@ -55,7 +67,19 @@ def reference_samples(
     trajectory: Trajectory, times: np.ndarray, config: VehicleConfig,
     theta: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Controller reference rows at ``times`` (s, shape (S,)), shape (S, 16)."""
+    """Controller reference rows at ``times`` (s, shape (S,)), shape (S, 16).
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The flight.
+    times : ndarray, shape (S,)
+        s.
+    config : VehicleConfig
+        The vehicle.
+    theta : ndarray, shape (6,), optional
+        θ, SI (default: the nominal).
+    """
     flat = trajectory.flat_outputs(np.asarray(times, dtype=float))
     state = flat_to_state(flat, config, theta)
     return np.column_stack(
@@ -174,6 +198,15 @@ class GeometricController:
 
         Returns True when a rotor command was clipped at a limit (or, with the exact
         mixer, yaw torque was given up).
+
+        Parameters
+        ----------
+        x : ndarray, shape (13,)
+            State [p, v_B, q, ω].
+        reference : ndarray, shape (16,)
+            Reference row (`reference_samples`).
+        out : ndarray, shape (k,)
+            Receives the rotor-speed commands, rad/s.
         """
         m = self._mixer
         if m is None:

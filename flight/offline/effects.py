@@ -72,10 +72,24 @@ class TruthEffect:
         return {}
 
     def reset(self, physics_dt: float) -> None:
-        """Forget any internal state before a new flight; ``physics_dt`` is the step, s."""
+        """Forget any internal state before a new flight; ``physics_dt`` is the step, s.
+
+        Parameters
+        ----------
+        physics_dt : float
+            Physics step, s.
+        """
 
     def bind(self, true_theta: np.ndarray, rotor_positions: np.ndarray) -> None:
-        """Learn the truth's θ (6,) and rotor hubs (k, 3), m, before a flight."""
+        """Learn the truth's θ (6,) and rotor hubs (k, 3), m, before a flight.
+
+        Parameters
+        ----------
+        true_theta : ndarray, shape (6,)
+            The truth's θ, SI.
+        rotor_positions : ndarray, shape (k, 3)
+            Rotor hubs, m, body FLU.
+        """
 
     def motor_time_constant(self) -> float | None:
         """The truth's motor time constant, s, if this effect sets it (else None)."""
@@ -84,31 +98,75 @@ class TruthEffect:
     def wrench(
         self, t: float, x: np.ndarray, n: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Extra body force (N, (3,)) and torque (N·m, (3,)) at time t, state x, speeds n."""
+        """Extra body force (N, (3,)) and torque (N·m, (3,)) at time t, state x, speeds n.
+
+        Parameters
+        ----------
+        t : float
+            Time since the flight started, s.
+        x : ndarray, shape (13,)
+            True state [p, v_B, q, ω].
+        n : ndarray, shape (k,)
+            Actual rotor speeds, rad/s.
+        """
         return None
 
     def measure_pose(
         self, t: float, position: np.ndarray, quaternion: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The pose the motion-capture system reports, given the true one."""
+        """The pose the motion-capture system reports, given the true one.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        position : ndarray, shape (3,)
+            True position, m, world ENU.
+        quaternion : ndarray, shape (4,)
+            True attitude [w, x, y, z].
+        """
         return position, quaternion
 
     def logged_rotor_speeds(
         self, t: float, actual: np.ndarray, commanded: np.ndarray
     ) -> np.ndarray:
-        """The rotor speeds the log reports (rad/s, (k,))."""
+        """The rotor speeds the log reports (rad/s, (k,)).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        actual : ndarray, shape (k,)
+            Actual (lagged) rotor speeds, rad/s.
+        commanded : ndarray, shape (k,)
+            Commanded rotor speeds, rad/s.
+        """
         return actual
 
 
 def applies_wrench(effect: TruthEffect) -> bool:
-    """True when ``effect`` adds a force or torque to the truth."""
+    """True when ``effect`` adds a force or torque to the truth.
+
+    Parameters
+    ----------
+    effect : TruthEffect
+        The effect.
+    """
     if isinstance(effect, CatalogEffect):
         return "wrench" in effect.effect.channels
     return type(effect).wrench is not TruthEffect.wrench
 
 
 def motor_time_constant(effects: Sequence[TruthEffect], default: float) -> float:
-    """The truth's motor time constant, s: the last effect that sets one, else ``default``."""
+    """The truth's motor time constant, s: the last effect that sets one, else ``default``.
+
+    Parameters
+    ----------
+    effects : sequence of TruthEffect
+        The truth's effects.
+    default : float
+        The config's motor time constant, s.
+    """
     tau = default
     for effect in effects:
         value = effect.motor_time_constant()
@@ -118,7 +176,13 @@ def motor_time_constant(effects: Sequence[TruthEffect], default: float) -> float
 
 
 def effect_metadata(effect: TruthEffect) -> dict:
-    """How an effect is recorded in a flight's meta.json: name, parameters, hidden."""
+    """How an effect is recorded in a flight's meta.json: name, parameters, hidden.
+
+    Parameters
+    ----------
+    effect : TruthEffect
+        The effect.
+    """
     return {"name": effect.name, "parameters": effect.parameters(), "hidden": effect.hidden}
 
 
@@ -189,7 +253,17 @@ class CatalogEffect(TruthEffect):
         return None
 
     def inputs(self, t: float, x: np.ndarray, n: np.ndarray) -> EffectInputs:
-        """The one-sample `EffectInputs` of time t (s), state x (13,) and speeds n (k,)."""
+        """The one-sample `EffectInputs` of time t (s), state x (13,) and speeds n (k,).
+
+        Parameters
+        ----------
+        t : float
+            Time since the flight started, s.
+        x : ndarray, shape (13,)
+            True state [p, v_B, q, ω].
+        n : ndarray, shape (k,)
+            Actual rotor speeds, rad/s.
+        """
         return _OneSample(np.array([t]), x[None, 0:3], x[None, 6:10], x[None, 3:6],
                           x[None, 10:13], n[None, :], self._theta, self._rotors,
                           _rotation_1x3x3(x[6:10].tolist()))
@@ -231,12 +305,24 @@ class CatalogEffect(TruthEffect):
 
 
 def hidden_effect(effect: ModelEffect) -> CatalogEffect:
-    """A catalogue effect as hidden truth: the model (and the vehicle config) do not know it."""
+    """A catalogue effect as hidden truth: the model (and the vehicle config) do not know it.
+
+    Parameters
+    ----------
+    effect : ModelEffect
+        The catalogue effect with its values.
+    """
     return CatalogEffect(effect, hidden=True)
 
 
 def config_truth_effects(config: VehicleConfig) -> list[CatalogEffect]:
-    """The vehicle config's known effects (``[effects.NAME]``) as truth-side physics."""
+    """The vehicle config's known effects (``[effects.NAME]``) as truth-side physics.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        The vehicle, with its ``[effects.NAME]`` tables.
+    """
     return [CatalogEffect(e, hidden=False) for e in getattr(config, "effects", ())]
 
 
@@ -250,6 +336,8 @@ class ConstantWrench(TruthEffect):
         N, body FLU.
     torque : ndarray, shape (3,)
         N·m, body FLU.
+    name : str
+        The effect's name in ``meta.json``.
     """
 
     force: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -279,6 +367,8 @@ class ProcessNoise(TruthEffect):
     moment_density : float
         N·m·√s, per body axis.
     seed : int
+    name : str
+        The effect's name in ``meta.json``.
     """
 
     force_density: float

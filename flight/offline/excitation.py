@@ -57,6 +57,11 @@ class ExcitationSpec:
 def excitation_trajectory(spec: ExcitationSpec | None = None) -> PiecewisePolynomial:
     """Build the excitation trajectory as polynomial segments.
 
+    Parameters
+    ----------
+    spec : ExcitationSpec, optional
+        Centre, amplitudes, frequencies and duration (default: the built-in figure).
+
     Returns
     -------
     PiecewisePolynomial

@@ -48,7 +48,15 @@ class LogTiming:
     seed: int = 0
 
     def kept_rows(self, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Boolean mask (N,) of the samples at times ``t`` (s) that the logger keeps."""
+        """Boolean mask (N,) of the samples at times ``t`` (s) that the logger keeps.
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Sample times, s.
+        rng : numpy.random.Generator
+            Seeded source of the losses.
+        """
         keep = rng.random(t.size) >= self.drop_probability
         keep[[0, -1]] = True
         span = t[-1] - t[0]
@@ -60,7 +68,15 @@ class LogTiming:
         return keep
 
     def stamps(self, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """The logged stamps (N,) of samples taken at times ``t`` (s, uniform)."""
+        """The logged stamps (N,) of samples taken at times ``t`` (s, uniform).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Sample times, s.
+        rng : numpy.random.Generator
+            Seeded source of the jitter.
+        """
         period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
         error = np.clip(rng.normal(0.0, self.jitter, t.size), -0.4 * period, 0.4 * period)
         stamped = t + error
@@ -74,6 +90,13 @@ def degrade_pose_log(directory: str | Path, timing: LogTiming) -> int:
 
     The sample's values stay those of its true time; only its stamp moves. Rows whose
     rounded stamps coincide are all kept (the reader decides what to do with them).
+
+    Parameters
+    ----------
+    directory : str or Path
+        A flight directory with ``pose.csv``.
+    timing : LogTiming
+        Jitter, losses and gaps to apply.
     """
     directory = Path(directory)
     path = directory / "pose.csv"

@@ -75,6 +75,15 @@ def null_space_mixer(A: np.ndarray, pinv: np.ndarray, n2_min: float,
 
     ``pinv`` is passed in so that the mixer uses the A⁺ of record bit for bit
     (`mavsysid.vehicle.allocation.allocation_pinv`).
+
+    Parameters
+    ----------
+    A : ndarray, shape (4, k)
+        Allocation matrix.
+    pinv : ndarray, shape (k, 4)
+        Its A⁺.
+    n2_min, n2_max : float
+        The n² box, (rad/s)².
     """
     A = np.asarray(A, dtype=float)
     _, _, vt = np.linalg.svd(A)
@@ -93,6 +102,17 @@ def pseudo_inverse_mix(w, pinv, n2_min, n2_max, out):
 
     Thrust, roll and pitch first; yaw torque is given up before anything else, as
     autopilots do, since the yaw authority of rotor moments is small.
+
+    Parameters
+    ----------
+    w : ndarray, shape (4,)
+        Wrench [T, τ_x, τ_y, τ_z], N and N·m.
+    pinv : ndarray, shape (k, 4)
+        A⁺.
+    n2_min, n2_max : float
+        The n² box, (rad/s)².
+    out : ndarray, shape (k,)
+        Receives the rotor speeds, rad/s.
     """
     k = pinv.shape[0]
     base = np.empty(k)
@@ -187,6 +207,19 @@ def least_norm_box_shift(b, null, n2_min, n2_max, tol, z):
     Goldfarb–Idnani dual active set with identity Hessian: from z = 0, repeatedly take the
     most violated box constraint and step (primal, dual, or both) until it is active,
     dropping active constraints whose multipliers would turn negative.
+
+    Parameters
+    ----------
+    b : ndarray, shape (k,)
+        The A⁺ rotor n², (rad/s)².
+    null : ndarray, shape (k, d)
+        Null-space basis N of A.
+    n2_min, n2_max : float
+        The n² box, (rad/s)².
+    tol : float
+        Allowed violation, (rad/s)².
+    z : ndarray, shape (d,)
+        Receives the shift.
     """
     k, d = null.shape
     active = np.empty(d + 1, dtype=np.int64)
@@ -263,6 +296,25 @@ def null_space_mix(w, pinv, null, normals, lower, upper, tol, n2_min, n2_max, ou
 
     Arguments are the fields of a `NullSpaceMixer`. Saturated means yaw torque was given
     up or a rotor command clipped; a reachable wrench is produced exactly.
+
+    Parameters
+    ----------
+    w : ndarray, shape (4,)
+        Wrench [T, τ_x, τ_y, τ_z], N and N·m.
+    pinv : ndarray, shape (k, 4)
+        A⁺.
+    null : ndarray, shape (k, d)
+        Null-space basis of A.
+    normals : ndarray, shape (F, 4)
+        Slab normals of the allocation polytope.
+    lower, upper : ndarray, shape (F,)
+        Slab bounds.
+    tol : ndarray, shape (F,)
+        Slab violation counted as inside.
+    n2_min, n2_max : float
+        The n² box, (rad/s)².
+    out : ndarray, shape (k,)
+        Receives the rotor speeds, rad/s.
     """
     s = _yaw_scale(w, normals, lower, upper, tol)
     if s < 0.0:

@@ -83,6 +83,8 @@ class OnboardPoseEstimate(TruthEffect):
         s, T_c of the Gauss–Markov noise (> 0).
     seed : int
         Seed of the noise generator.
+    name : str
+        The effect's name in ``meta.json``.
     """
 
     delay: float = 0.02

@@ -29,6 +29,7 @@ acknowledgement.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 __all__ = ["LOCKSTEP_FRAME_US", "LOCKSTEP_RESEND", "LOCKSTEP_TIMEOUT", "ClockStats",
@@ -98,11 +99,18 @@ class SimClock:
     lockstep : bool
         Send frames (`frame_due`) and hold ticks for their acknowledgement (from the start;
         see the module docstring).
+    wall : callable, optional
+        The wall clock, s (default `time.perf_counter`; a test passes a simulated one).
+    sleep : callable, optional
+        Sleeps for a number of wall seconds on that clock (default `time.sleep`).
     """
 
-    def __init__(self, dt: float, speedup: float = 1.0, lockstep: bool = False) -> None:
+    def __init__(self, dt: float, speedup: float = 1.0, lockstep: bool = False,
+                 wall: Callable[[], float] = time.perf_counter,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         if not (dt > 0.0 and speedup > 0.0):
             raise ValueError("tick period and speedup must be positive")
+        self._wall, self._sleep = wall, sleep
         self.dt = float(dt)
         self.speedup = float(speedup)
         self._wall_dt = self.dt / self.speedup
@@ -123,7 +131,7 @@ class SimClock:
 
     def start(self) -> None:
         """Start the clock: sim time 0 is now."""
-        self._wall0 = self._started = time.perf_counter()
+        self._wall0 = self._started = self._wall()
 
     @property
     def started(self) -> bool:
@@ -133,7 +141,7 @@ class SimClock:
     def now(self) -> float:
         """Sim time according to the wall clock, s (not the last tick's time)."""
         assert self._wall0 is not None, "start() first"
-        return (time.perf_counter() - self._wall0) * self.speedup
+        return (self._wall() - self._wall0) * self.speedup
 
     @property
     def tick_time(self) -> float:
@@ -148,13 +156,13 @@ class SimClock:
     def frame_sent(self, t_us: int) -> None:
         """Note the frame of sim time ``t_us`` as sent (later ticks wait for its ack)."""
         self._frame_us = t_us
-        self._frame_wall = self._resent_wall = time.perf_counter()
+        self._frame_wall = self._resent_wall = self._wall()
 
     def resend_due(self) -> int | None:
         """The held frame (sim µs) to send again now, once per `LOCKSTEP_RESEND`; or None."""
         if self._frame_us is None or self._acked_us >= self._frame_us:
             return None
-        now = time.perf_counter()
+        now = self._wall()
         if now - self._resent_wall < LOCKSTEP_RESEND:
             return None
         self._resent_wall = now
@@ -163,7 +171,7 @@ class SimClock:
     def heard_peer(self) -> None:
         """A message came from a peer (starts the time-out of the held start)."""
         if self._peer_wall is None:
-            self._peer_wall = time.perf_counter()
+            self._peer_wall = self._wall()
 
     @property
     def starting(self) -> bool:
@@ -191,7 +199,7 @@ class SimClock:
             since = max(self._frame_wall, self._peer_wall)
         else:
             return False
-        if time.perf_counter() - since > LOCKSTEP_TIMEOUT:
+        if self._wall() - since > LOCKSTEP_TIMEOUT:
             # The peer went away, or never was lock-step aware: the wall clock until an
             # acknowledgement comes.
             self.engaged = False
@@ -211,8 +219,8 @@ class SimClock:
             # burst would run sim time faster than speedup × wall.
             self._held = False
             self._wall0 = max(self._wall0,
-                              time.perf_counter() - self.ticks * self._wall_dt)
-        lag = time.perf_counter() - (self._wall0 + self.ticks * self._wall_dt)
+                              self._wall() - self.ticks * self._wall_dt)
+        lag = self._wall() - (self._wall0 + self.ticks * self._wall_dt)
         if lag < 0.0:
             return False
         if lag > self._max_lag:
@@ -228,13 +236,13 @@ class SimClock:
     def sleep_until_due(self) -> None:
         """Sleep until the next tick is due (at most a short slice, to stay responsive)."""
         assert self._wall0 is not None, "start() first"
-        remaining = self._wall0 + self.ticks * self._wall_dt - time.perf_counter()
+        remaining = self._wall0 + self.ticks * self._wall_dt - self._wall()
         if remaining > 0.0:
-            time.sleep(min(remaining, _MAX_SLEEP))
+            self._sleep(min(remaining, _MAX_SLEEP))
 
     def stats(self) -> ClockStats:
         """Timing statistics so far."""
-        wall = 0.0 if self._wall0 is None else time.perf_counter() - self._started
+        wall = 0.0 if self._wall0 is None else self._wall() - self._started
         rate = self.ticks / wall / self.speedup if wall > 0.0 else 0.0
         return ClockStats(ticks=self.ticks, sim_time=self.tick_time, wall_time=wall,
                           mean_tick_rate=rate, max_lag=self._max_lag, late_ticks=self._late,

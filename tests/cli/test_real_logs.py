@@ -1,4 +1,4 @@
-"""Acceptance of issue 17 on real autopilot logs: an honest answer or one clear line.
+"""Real autopilot logs: an honest answer or one clear line.
 
 Every log in ``../shared/real-logs/`` (public PX4 and ArduPilot logs, PROVENANCE.md) with
 every shipped vehicle, through the console script in-process: ``estimate`` and

@@ -1,9 +1,10 @@
 """Tests of the diagnosis workflow: the residual, the candidates, and hidden-effect flights.
 
 Each hidden-effect test flies the simulator with one catalogue effect hidden at the
-issue's magnitude (one seed) and checks the acceptance: the effect is named first, its
-95 % CI contains the truth, the held-out residual RMS on the flagged axes shrinks by at
-least 50 %, and θ re-fitted with the effect is closer to the truth than without.
+magnitude of `tests.support.hidden` (one seed) and checks the acceptance: the effect is
+named first, its 95 % CI contains the truth, the held-out residual RMS on the flagged
+axes shrinks by at least 50 %, and θ re-fitted with the effect is closer to the truth than
+without.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from scipy.signal import savgol_filter
 from mavsysid.errors import InputError, JobFailedError
 from tests.support.hidden import ground_trajectory, hidden_flight
 
-#: The issue's magnitudes (bench/diagnose_accuracy.py uses the same).
+#: The hidden magnitudes (`tests.support.hidden`; bench/diagnose_accuracy.py uses the same).
 CASES = {
     "motor_lag": {"tau": 0.04},
     "pose_delay": {"delay": 0.02},
@@ -215,7 +216,7 @@ def test_wrong_rotor_count_and_bad_theta_are_refused(config, flights):
 
 
 def test_non_uniform_sampling_is_resampled_not_refused(config, flights):
-    """A log whose clock jumps 4 ms is put on a uniform grid (issue 17), and says so; with
+    """A log whose clock jumps 4 ms is put on a uniform grid, and says so; with
     nothing hidden, nothing is named (the refusal without resampling: test_resample.py)."""
     flight = flights((), 0)
     t = flight.t.copy()

@@ -30,7 +30,7 @@ from mavsysid.vehicle.rotation import quat_exp, quat_log, quat_multiply
 
 from mavsysid.errors import InputError
 
-TAU = 0.04  # s, the issue's hidden motor lag
+TAU = 0.04  # s, the hidden motor lag (as in `tests.support.hidden`)
 
 
 def _motion(t: np.ndarray) -> FlightData:
@@ -142,7 +142,7 @@ def _jittered_lag_flight(directory: Path, seed: int) -> FlightData:
 
 @pytest.mark.slow
 def test_hidden_motor_lag_is_named_on_a_jittered_log_with_dropouts(tmp_path):
-    """Acceptance (issue 17): 20 % jitter and dropouts; motor lag named, τ's CI holds 40 ms."""
+    """20 % jitter and dropouts; motor lag named, τ's CI holds 40 ms."""
     config = load_vehicle("firefly")
     flight = _jittered_lag_flight(tmp_path / "lag", seed=3)
     intervals = np.diff(flight.t)

@@ -51,7 +51,7 @@ def test_consistent_innovations_are_not_divergence(seed):
 
 
 def test_implausible_filter_theta_is_divergence():
-    """The issue's diverged filter: c_T 70× too small, c_D −1.9."""
+    """A diverged filter's θ (c_T 70× too small, c_D −1.9) is divergence."""
     t = np.arange(1000) * 0.01
     theta = THETA.copy()
     theta[0] /= 70.0
@@ -117,7 +117,7 @@ def _onboard_pose(flight: FlightData, seed: int, scale: float = 10.0) -> FlightD
 def test_issue_failure_gives_a_good_theta_or_a_refusal(tmp_path: Path, seed, offset):
     """micro_quad, on-board-like pose at 10× noise, motor lag + wind, prior 30–50 % off.
 
-    The filter from this prior diverges (issue 18's failure: c_T 70× off, c_D −1.9).
+    The filter from this prior diverges (c_T 70× off, c_D −1.9 unguarded).
     Either the estimate is close (c_T, j_x, j_y within 5 % and inside 3 σ; c_M, j_z only
     through their ratio, 5 %; c_D, biased by the hidden wind, positive and within 30 %) or
     the refusal is one line; never a far-off θ.
@@ -147,7 +147,7 @@ def test_issue_failure_gives_a_good_theta_or_a_refusal(tmp_path: Path, seed, off
 
 
 def test_vanishing_c_d_is_no_divergence_with_linear_rotor_drag():
-    """The issue's c_D = −2.51e-05 ± 0.00015 s/m: a diverged filter under the paper's
+    """c_D = −2.51e-05 ± 0.00015 s/m: a diverged filter under the paper's
     model, the right answer when rotor drag linear in n carries the drag."""
     t = np.arange(1000) * 0.01
     nis = np.random.default_rng(5).chisquare(MEAS_DIM, t.size)

@@ -1,4 +1,4 @@
-"""0 tracebacks (issue 18): ``estimate`` and ``diagnose`` on every log the simulator makes.
+"""0 tracebacks: ``estimate`` and ``diagnose`` on every log the simulator makes.
 
 For each catalogue effect hidden on the truth side (wind included), and for the realistic
 sensor path (on-board estimator pose, 500 Hz with jitter and dropped samples, coarse
@@ -25,7 +25,7 @@ from mavsysid.vehicle.model_effects import EFFECTS, effect_from_values
 
 from mavsysid.cli.main import main
 from mavsysid.errors import LogFormatError
-from tests.support.hidden import ISSUE_MAGNITUDES, ground_trajectory, hidden_flight
+from tests.support.hidden import HIDDEN_MAGNITUDES, ground_trajectory, hidden_flight
 from tests.support.realistic import realistic_micro_quad_flight
 
 #: s: the shortest flight `diagnose` accepts (10 s) with a margin for dropped samples.
@@ -53,16 +53,16 @@ def _estimate_and_diagnose(capsys: pytest.CaptureFixture[str], pose: Path,
 
 
 def test_every_catalogue_effect_is_covered() -> None:
-    assert set(ISSUE_MAGNITUDES) == set(EFFECTS)
+    assert set(HIDDEN_MAGNITUDES) == set(EFFECTS)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(ISSUE_MAGNITUDES))
+@pytest.mark.parametrize("name", sorted(HIDDEN_MAGNITUDES))
 def test_hidden_effect_flight(name: str, tmp_path: Path,
                               capsys: pytest.CaptureFixture[str]) -> None:
     config = load_vehicle("firefly")
     ground = name == "ground_effect"  # its trajectory has fixed descents over 30 s
-    hidden_flight(config, tmp_path / "f", [effect_from_values(name, ISSUE_MAGNITUDES[name])],
+    hidden_flight(config, tmp_path / "f", [effect_from_values(name, HIDDEN_MAGNITUDES[name])],
                   seed=3, duration=_DURATION,
                   trajectory=ground_trajectory() if ground else None)
     _estimate_and_diagnose(capsys, tmp_path / "f" / "pose.csv", "firefly")

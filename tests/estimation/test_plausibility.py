@@ -113,7 +113,7 @@ def test_vanishing_parameters_of_rotor_drag_linear() -> None:
 
 @pytest.mark.parametrize("sigma_factor", [0.3, 1.0, 1.9])
 def test_c_d_near_zero_is_accepted_with_linear_rotor_drag(sigma_factor: float) -> None:
-    """c_D ≤ 0 within 2 σ of 0 (the issue's −2.51e-05 ± 0.00015 s/m) is refused by
+    """c_D ≤ 0 within 2 σ of 0 (−2.51e-05 ± 0.00015 s/m, as a diverged filter gave) is refused by
     default and accepted when the model lets c_D vanish."""
     sigma = PRIOR_SIGMA.copy()
     i = PARAMETER_NAMES.index("c_D")

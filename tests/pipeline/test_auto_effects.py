@@ -15,7 +15,7 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import effect_from_values
 
 from mavsysid.cli import main
-from tests.support.hidden import ISSUE_MAGNITUDES, hidden_flight
+from tests.support.hidden import HIDDEN_MAGNITUDES, hidden_flight
 
 pytestmark = pytest.mark.slow
 
@@ -34,8 +34,8 @@ def prior(config: VehicleConfig) -> VehicleConfig:
 
 @pytest.fixture(scope="module")
 def wind_flight(tmp_path_factory: pytest.TempPathFactory, config: VehicleConfig) -> FlightData:
-    """30 s with a hidden steady wind of 2 m/s (the issue's magnitude)."""
-    wind = effect_from_values("wind", ISSUE_MAGNITUDES["wind"])
+    """30 s with a hidden steady wind of 2 m/s (`HIDDEN_MAGNITUDES`)."""
+    wind = effect_from_values("wind", HIDDEN_MAGNITUDES["wind"])
     return hidden_flight(config, tmp_path_factory.mktemp("wind"), [wind], seed=3)
 
 

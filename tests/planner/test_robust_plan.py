@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mavsysid.planner.results import PlannerSettings
-from mavsysid.planner.robust_plan import plan_most_confident
+from mavsysid.planner.robust_plan import ConfidentPlan, plan_most_confident
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.flatness import flat_to_state
 
@@ -17,15 +17,21 @@ def settings(**kw) -> PlannerSettings:
     return PlannerSettings(budget=6.0, planning_time=np.inf, max_samples=120, seed=4, **kw)
 
 
+@pytest.fixture(scope="module")
+def confident_plan() -> ConfidentPlan:
+    """The quad_x plan at z = 1.645 and a prior σ of 10 % (planned once for the module)."""
+    return plan_most_confident(load_vehicle("quad_x"), settings(prior_relative_sigma=0.1),
+                               ladder=(1.645,))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("worst", [0, 2])
 def test_the_flight_keeps_its_rotors_in_range_for_theta_within_the_reported_spread(
-        worst: int) -> None:
+        confident_plan: ConfidentPlan, worst: int) -> None:
     """At z = 1.645 and σ = 10 %, the flight's rotor speeds (1 ms samples) stay in range with
     c_T (or c_M) 1.5 σ below the prior, where the unguarded optimum would not need to."""
     cfg = load_vehicle("quad_x")
-    request = settings(prior_relative_sigma=0.1)
-    got = plan_most_confident(cfg, request, ladder=(1.645,))
+    got = confident_plan
     assert got.rotor_confidence == 1.645
     theta = cfg.theta.copy()
     theta[worst] *= 1 - 1.5 * 0.1

@@ -23,13 +23,13 @@ from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.vehicle.trajectory import PiecewisePolynomial, Trajectory
 
-__all__ = ["ISSUE_MAGNITUDES", "ground_trajectory", "hidden_flight"]
+__all__ = ["HIDDEN_MAGNITUDES", "ground_trajectory", "hidden_flight"]
 
-#: Every catalogue effect at the magnitudes of issue 6 for the Firefly (the benches'
-#: hidden truths): motor τ 40 ms, pose delay 20 ms, body drag 5 % of
-#: the weight at 3 m/s, rotor drag linear in n, wind 2 m/s, marker offset 3 cm, CoG
-#: offset 1 cm, thrust −8 % over 30 s, ground effect (ρ = 0.1 m) near the ground.
-ISSUE_MAGNITUDES: dict[str, dict[str, float]] = {
+#: Every catalogue effect at the magnitude the tests and benches hide for the Firefly:
+#: motor τ 40 ms, pose delay 20 ms, body drag 5 % of the weight at 3 m/s, rotor drag
+#: linear in n, wind 2 m/s, marker offset 3 cm, CoG offset 1 cm, thrust −8 % over 30 s,
+#: ground effect (ρ = 0.1 m) near the ground.
+HIDDEN_MAGNITUDES: dict[str, dict[str, float]] = {
     "motor_lag": {"tau": 0.04},
     "pose_delay": {"delay": 0.02},
     "body_drag": {"k": 0.05 * 1.56779 * 9.81 / 9.0},

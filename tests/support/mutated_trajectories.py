@@ -54,7 +54,7 @@ def _widen_box(doc: Doc, rng: np.random.Generator) -> Doc:
 
 
 def _jump(doc: Doc, rng: np.random.Generator) -> Doc:
-    """Widened box in the file and a segment moved far away (the issue's 500 m jump)."""
+    """Widened box in the file and a segment moved 500 m away."""
     i = int(rng.integers(1, len(doc["segments"])))
     doc["segments"][i]["position"][int(rng.integers(3))][0] += float(rng.choice([-500, 500]))
     return _widen_box(doc, rng)

@@ -1,4 +1,4 @@
-"""A simulated micro_quad flight logged the way real small vehicles are (issue 18).
+"""A simulated micro_quad flight logged the way real small vehicles are.
 
 `realistic_micro_quad_flight` flies the built-in excitation with
 

@@ -6,6 +6,7 @@ import hashlib
 import socket
 import time
 
+import numpy as np
 import pytest
 from mavsysid.flight.gc_freeze import frozen_collector
 from mavsysid.flight.ground.link_clock import LinkClock
@@ -118,20 +119,49 @@ class _Every:
         self.next += self.period
 
 
+class _SteppedClock(LinkClock):
+    """A simulated streamer clock: time moves only by the link's own steps.
+
+    Every reading costs ``cost`` s (a loop pass), and a wait the link asks for
+    (`wall`) moves the clock to its end at once and asks the socket for no wall wait;
+    the waits are kept. So the ticker's timing depends on the link's scheduling alone,
+    never on how busy the machine is.
+    """
+
+    def __init__(self, cost: float) -> None:
+        super().__init__()
+        self.t, self.cost, self.waits = 0.0, cost, []
+
+    def now(self) -> float:
+        self.t += self.cost
+        return self.t
+
+    def wall(self, seconds: float) -> float:
+        self.waits.append((self.t, seconds))
+        self.t += max(seconds, 0.0)
+        return 0.0
+
+
 def test_ticker_fires_on_time_while_polling():
-    """poll fires the ticker at its deadlines (spinning the last 2 ms), within a millisecond
-    or two, never early."""
+    """poll fires the ticker at each deadline, never early and within one loop pass, and
+    never waits past a deadline less the spin (a simulated clock: no load can change it)."""
     port = free_udp_port()
     with ScriptedVehicle(port, heartbeat_period=0.01), MavlinkLink(
             f"udp:127.0.0.1:{port}", spin=0.002) as link:
         link.wait_heartbeat(3.0)
-        ticker = _Every(link.clock.now(), 0.02)
+        link.clock = clock = _SteppedClock(cost=1e-5)
+        ticker = _Every(clock.now(), 0.02)
         link.set_ticker(ticker)
-        link.poll(0.5)
+        link.poll(0.49)
         link.set_ticker(None)
-    assert 24 <= len(ticker.fired) <= 26
-    lateness = [t - (ticker.start + 0.02 * i) for i, t in enumerate(ticker.fired)]
-    assert min(lateness) >= -1e-9 and sorted(lateness)[len(lateness) // 2] < 0.002
+    assert len(ticker.fired) == 25
+    deadlines = ticker.start + 0.02 * np.arange(25)
+    lateness = np.array(ticker.fired) - deadlines
+    assert lateness.min() >= 0.0 and lateness.max() <= 3 * clock.cost
+    # Every wait the link asked for ends no later than the next deadline less the spin.
+    for t, seconds in clock.waits:
+        due = deadlines[np.searchsorted(deadlines, t)] if t < deadlines[-1] else np.inf
+        assert t + seconds <= max(due - 0.002, t) + 1e-12
 
 
 def test_signed_link_talks_to_a_signing_vehicle(tmp_path):

@@ -228,8 +228,8 @@ def _box_option(box=BOX) -> str:
 
 @pytest.mark.slow
 def test_stream_refuses_a_bad_file_before_connecting(tmp_path, bases):
-    """`mavsysid stream` with the issue's file (box widened in the file, a 500 m jump): exit
-    3 in one line, no flight directory, nothing listening needed."""
+    """`mavsysid stream` with a file that widens its box and jumps 500 m: exit 3 in one
+    line, no flight directory, nothing listening needed."""
     doc = MUTATIONS["jump"](json.loads(json.dumps(bases[1])), np.random.default_rng(5))
     path = tmp_path / "jump.json"
     path.write_text(json.dumps(doc))

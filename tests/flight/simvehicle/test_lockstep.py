@@ -20,7 +20,7 @@ from mavsysid.formats.poselog import read_pose_log
 
 from tests.support.stream_flights import SimProcess, export_excitation, flight_dir, run_stream
 
-#: Busy processes competing for the cores in the loaded flight (the issue's load).
+#: Busy processes competing for the cores in the loaded flight (more than the 2 cores).
 BUSY = 4
 
 

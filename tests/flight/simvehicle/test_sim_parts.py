@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import struct
-import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -25,23 +24,68 @@ LPN, AQ = M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_ATTITUDE_QUATERN
 ESC1, ESC2 = M.MAVLINK_MSG_ID_ESC_TELEMETRY_1_TO_4, M.MAVLINK_MSG_ID_ESC_TELEMETRY_5_TO_8
 
 
-def test_clock_catches_up_without_drift():
-    """A loop that stalls runs the overdue ticks back to back: ticks = wall × speedup / dt."""
-    clock = SimClock(0.002, speedup=2.0)
+class _SimulatedWall:
+    """A wall clock that moves only when slept on, and by ``cost`` s per reading (a loop
+    pass): the pacing is then the clock's logic alone, whatever the machine's load."""
+
+    def __init__(self, cost: float = 2e-6) -> None:
+        self.t, self.cost = 100.0, cost
+
+    def now(self) -> float:
+        self.t += self.cost
+        return self.t
+
+    def sleep(self, seconds: float) -> None:
+        self.t += seconds
+
+
+def _run_paced(clock: SimClock, wall: _SimulatedWall, seconds: float,
+               stalls: dict[int, float]) -> None:
+    """The sim loop's pacing (as `SimEndpoint` runs it) for ``seconds`` of wall time, with a
+    stall of ``stalls[i]`` wall s after tick i."""
     clock.start()
-    end = time.perf_counter() + 0.3
-    stalled = False
-    while time.perf_counter() < end:
+    end = wall.t + seconds
+    while wall.t < end:
         while clock.due():
             clock.advance()
-            if clock.ticks == 20 and not stalled:
-                stalled = True
-                time.sleep(0.05)  # 50 ms late: 50 ticks overdue at speedup 2
+            wall.sleep(stalls.get(clock.ticks, 0.0))
+        clock.sleep_until_due()
+
+
+def test_clock_catches_up_without_drift():
+    """A loop that stalls runs the overdue ticks back to back: ticks = wall × speedup / dt."""
+    wall = _SimulatedWall()
+    clock = SimClock(0.002, speedup=2.0, wall=wall.now, sleep=wall.sleep)
+    _run_paced(clock, wall, 0.3, {20: 0.05})  # 50 ms late: 50 ticks overdue at speedup 2
+    stats = clock.stats()
+    assert stats.max_lag >= 0.045  # the stall less the 1 ms to the next tick's time
+    assert abs(stats.sim_time - 2.0 * stats.wall_time) < 0.002 * 2
+    assert stats.mean_tick_rate == pytest.approx(500.0, rel=0.01)
+
+
+def test_real_time_pacing_holds_500_hz_without_drift():
+    """At speedup 1, over 2 s with seeded stalls of up to 30 ms: sim time follows the wall
+    clock to within a tick (no drift), 500 Hz ticks, and no tick runs early (a simulated wall
+    clock; ``bench/stream_timing.py`` runs the process in real time)."""
+    rng = np.random.default_rng(7)
+    stalls = {int(i): float(d) for i, d in zip(rng.integers(1, 1000, 20),
+                                                 rng.uniform(0.0, 0.03, 20), strict=True)}
+    wall = _SimulatedWall()
+    clock = SimClock(0.002, wall=wall.now, sleep=wall.sleep)
+    early = []
+    start = wall.t
+    clock.start()
+    while wall.t < start + 2.0:
+        while clock.due():
+            early.append(clock.tick_time - (wall.t - start))
+            clock.advance()
+            wall.sleep(stalls.get(clock.ticks, 0.0))
         clock.sleep_until_due()
     stats = clock.stats()
-    assert stats.max_lag >= 0.045
-    assert abs(stats.sim_time - 2.0 * stats.wall_time) < 0.01
-    assert stats.mean_tick_rate == pytest.approx(500.0, rel=0.03)
+    assert max(early) <= 1e-9  # no tick before its wall time
+    assert abs(stats.sim_time - stats.wall_time) <= 0.002 + 1e-9
+    assert stats.mean_tick_rate == pytest.approx(500.0, rel=0.002)
+    assert stats.max_lag >= 0.02
 
 
 def test_scheduler_due_times_are_multiples_of_the_interval():
