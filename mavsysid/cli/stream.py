@@ -78,9 +78,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-land", action="store_true",
                         help="keep hovering at the end instead of landing")
     parser.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
-                        help="flight box in m, world ENU (default: the vehicle file's [flight] "
-                        "box, else the trajectory's; a box stored in the trajectory never "
-                        "widens the operator's)")
+                        help="the operator's flight box in m, world ENU (default: the "
+                        "[flight] box of --vehicle; one of the two is required); a box stored "
+                        "in the trajectory file can only narrow it")
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
                         help="MAVLink 2 signing: a file holding the passphrase")
     parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
