@@ -110,6 +110,10 @@ class StreamSettings:
         Raise the autopilot limits the plan needs (`autopilot_limits`), not refuse.
     lockstep : bool
         Take the time from ``mavsysid sim --lockstep``'s frames (`LinkClock`; tests).
+    dry_run : bool
+        Connect and run every check, list the box, the fence and the parameters the flight
+        would change, and stop there: nothing armed, no parameter written, no fence
+        uploaded.
     """
 
     connect: str
@@ -137,6 +141,7 @@ class StreamSettings:
     fence_margin: float | None = None
     set_limits: bool = False
     lockstep: bool = False
+    dry_run: bool = False
 
 
 def _embedded_config(plan: TrajectoryFile, source: str) -> VehicleConfig:
@@ -241,7 +246,8 @@ class StreamSession:
             self._forget_unanswered()
             raise
         self.commands = VehicleCommands(self.link, say=None)
-        self.parameters = ParameterSession(self.link)  # restored by the streamer
+        # Restored by the streamer; a dry run only lists what it would set.
+        self.parameters = ParameterSession(self.link, dry_run=settings.dry_run)
         self.stream = SetpointStream(self.link, self.history, settings.rate)
         self.stream.limits = flight_limits(config, box)
         self.guards = FlightGuards(self.link, self.stream, self.recorder)
@@ -274,7 +280,7 @@ class StreamSession:
                         "config_toml": vehicle_to_toml(self.config)},
             "files": {"pose": "pose.csv", "tlog": "flight.tlog"},
             "connection": s.connect, "speedup": s.speedup,
-            "lockstep": s.lockstep,
+            "lockstep": s.lockstep, "dry_run": s.dry_run,
             "signing": s.signing_key is not None,
             "trajectory": {"file": str(path), "kind": plan.kind,
                            "duration": self.trajectory.duration,

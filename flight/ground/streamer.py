@@ -99,6 +99,9 @@ class _Flight:
         try:
             self._connect()
             self._prepare()
+            if self.settings.dry_run:
+                self._dry_run_end()
+                return
             self._take_off()
             self._to_start()
             self._trajectory()
@@ -167,6 +170,16 @@ class _Flight:
         install_safety(self.s, self._pose().position, self.say)
         self.say(before_arming(self.s, self._pose().position))
         self.link.watch_silence = True  # telemetry streams: a second of silence is a loss
+
+    def _dry_run_end(self) -> None:
+        """Every check passed: list what the flight would change, arm nothing."""
+        planned = self.s.parameters.planned
+        self.s.note("dry_run_parameters", {n: {"now": a, "flight": b}
+                                           for n, (a, b) in planned.items()})
+        self.say("dry run: would set " + (", ".join(f"{n} {a:g} → {b:g}" for n, (a, b) in
+                                                    planned.items()) or "no parameter"))
+        self.say("dry run: every check passed; nothing armed, no parameter changed")
+        self.s.note_complete()
 
     def _measure_rates(self, seconds: float) -> dict[str, float]:
         before, t0 = dict(self.recorder.counts), self.link.clock.now()

@@ -30,6 +30,7 @@ __all__ = [
     "SimProcess",
     "export_excitation",
     "flight_dir",
+    "read_all_parameters",
     "read_parameters",
     "read_tlog",
     "run_mavsysid",
@@ -194,6 +195,33 @@ def read_parameters(port: int, names: Sequence[str], timeout: float = 30.0
                 if m is not None:
                     pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
                     values[pid.rstrip("\0")] = float(m.param_value)
+        return values
+    finally:
+        conn.close()
+
+
+def read_all_parameters(port: int, timeout: float = 30.0) -> dict[str, float]:
+    """Every parameter of a vehicle sending to 127.0.0.1:PORT (PARAM_REQUEST_LIST), read
+    with pymavlink alone, as `read_parameters`."""
+    mavutil = load_mavutil()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=254)
+    try:
+        if conn.wait_heartbeat(timeout=timeout) is None:
+            raise AssertionError(f"no heartbeat on 127.0.0.1:{port}")
+        values: dict[str, float] = {}
+        count = None
+        deadline = time.monotonic() + timeout
+        while (count is None or len(values) < count) and time.monotonic() < deadline:
+            conn.mav.param_request_list_send(conn.target_system, conn.target_component)
+            end = time.monotonic() + 2.0
+            while time.monotonic() < end and (count is None or len(values) < count):
+                m = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.2)
+                if m is not None:
+                    pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
+                    values[pid.rstrip("\0")] = float(m.param_value)
+                    count = m.param_count
+        if count is None or len(values) < count:
+            raise AssertionError(f"read {len(values)} of {count} parameters")
         return values
     finally:
         conn.close()

@@ -17,7 +17,9 @@ from tests.support.stream_flights import (
     SimProcess,
     export_excitation,
     flight_dir,
+    read_all_parameters,
     read_parameters,
+    read_tlog,
     run_mavsysid,
     run_stream,
     start_stream,
@@ -58,6 +60,10 @@ def test_aborted_flight_lands_then_restores_every_parameter(tmp_path, trajectory
     assert result.returncode == 3, result.stderr
     err = result.stderr
     assert "aborted to BRAKE" in err and "aborted: mode LAND" in err
+    # Before arming: the operator's box, the fence and the take-off point.
+    shown = next(line for line in err.splitlines() if "take-off point" in line)
+    assert "box x -2..2, y -2..2, z 0.5..2.5 m (--box); fence polygon x -3.5..3.5" in shown
+    assert err.index("take-off point") < err.index("mavsysid stream: armed\n")
     assert err.index("landed and disarmed") < err.index("parameters restored")
     assert "left in force" not in err
     assert len(changed) >= 6 and all(e["restored"] for e in meta["parameters"].values())
@@ -116,3 +122,31 @@ def test_no_vehicle_no_flight_directory(tmp_path, trajectory, capsys):
                  str(logs)])
     assert code == 3 and "heartbeat" in capsys.readouterr().err
     assert not logs.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_dry_run_changes_no_parameter(tmp_path, trajectory):
+    """`stream --dry-run` against `mavsysid sim`: every check, the box, the fence and the
+    parameters it would change are printed; every parameter reads back as before, and
+    nothing was armed or uploaded."""
+    port = free_udp_port()
+    logs = tmp_path / "logs"
+    with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
+                    SPEEDUP, lockstep=False):
+        before = read_all_parameters(port)
+        result = run_stream(trajectory, *_stream_args(port, logs), "--dry-run", cwd=tmp_path,
+                            timeout=120, lockstep=False)
+        after = read_all_parameters(port)
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert "every check passed; nothing armed, no parameter changed" in out
+    assert "box        x -2..2, y -2..2, z 0.5..2.5 m (--box)" in out
+    assert "fence      polygon 1.5 m outside the box" in out
+    assert f"would set  FENCE_ENABLE {before['FENCE_ENABLE']:g} -> 1" in out
+    assert len(before) > 20 and after == before
+    sent = [m for _, m in read_tlog(flight_dir(logs) / "flight.tlog") if m.get_srcSystem() == 255]
+    assert not [m for m in sent if m.get_type() == "COMMAND_LONG" and m.command == 400]
+    assert not [m for m in sent if m.get_type() in ("PARAM_SET", "MISSION_COUNT")]
+    meta = read_meta(flight_dir(logs) / "meta.json")
+    assert meta["dry_run"] is True and meta["dry_run_parameters"]["FENCE_ENABLE"]["flight"] == 1
