@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mavsysid.cli.options import allow_negative_values, parse_numbers
+from mavsysid.cli.options import add_output_folder, allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
@@ -98,8 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="setpoint rate (default: 50)")
     parser.add_argument("--telemetry-rate", type=float, default=50.0, metavar="HZ",
                         help="rate asked for pose, attitude and ESC telemetry (default: 50)")
-    parser.add_argument("--log-dir", type=Path, default=Path("logs"), metavar="DIR",
-                        help="where the flight directory is created (default: ./logs)")
+    add_output_folder(parser, "logs", "folder for the new flight directory")
     parser.add_argument("--no-land", action="store_true",
                         help="keep hovering at the end instead of landing")
     parser.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
