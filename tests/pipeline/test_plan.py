@@ -85,8 +85,9 @@ def test_preview_peaks_agree_with_the_trajectory(speedup):
 def test_preview_sees_saturation_in_a_fast_flight():
     """The figure at its own pace leaves the rotors free; 1.6 times faster it saturates
     them well beyond the warning threshold, and `plan` warns."""
-    from mavsysid.cli.plan import saturation_warning
     from mavsysid.pipeline.plan import SATURATION_WARNING, preview_plan
+
+    from mavsysid.cli.plan import saturation_warning
 
     firefly = load_vehicle("firefly")
     calm, fast = (preview_plan(_excitation(k), firefly) for k in (1.0, 1.6))
