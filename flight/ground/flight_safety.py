@@ -90,7 +90,9 @@ def restore_parameters(session: Any, say: Callable[[str], None]) -> None:
     if keep:
         say("warning: the vehicle still flies: fence and timeouts left in force ("
             + ", ".join(f"{n} was {params.changed[n][0]:g}" for n in keep)
-            + "); restore them once it has landed")
+            + "); once it has landed: mavsysid restore "
+            + f"{getattr(session, 'directory', 'FLIGHT_DIR')} --connect "
+            + f"{getattr(getattr(session, 'settings', None), 'connect', 'LINK')}")
     restored = params.restored
     if restored:
         say("parameters restored: " + ", ".join(f"{n} {o:g}" for n, (o, _f) in

@@ -35,7 +35,7 @@ __all__ = ["DEFAULT_ROTOR_HEADROOM", "add_arguments", "format_preview", "format_
 
 #: `plan`'s rotor headroom unless --rotor-headroom says otherwise: with it the README's plan
 #: command predicts ≤ 1 % rotor saturation on every shipped vehicle (docs/plan-preview.md).
-DEFAULT_ROTOR_HEADROOM = 0.1
+DEFAULT_ROTOR_HEADROOM = 0.15
 
 _DEFAULT_TIME = 30.0
 _KIND_LABELS = {"dopt": "information-gathering planner", "random": "random baseline"}
