@@ -21,8 +21,8 @@ from mavsysid import __version__
 from mavsysid.errors import InputError, JobFailedError, MavsysidError
 
 __all__ = [
-    "DEBUG_ENV", "EXIT_CODES", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "build_parser", "exit_code",
-    "main",
+    "COMMAND_NAMES", "DEBUG_ENV", "EXIT_CODES", "EXIT_INTERNAL", "EXIT_INTERRUPTED",
+    "build_parser", "exit_code", "help_text", "main",
 ]
 
 EXIT_INTERRUPTED = 130
@@ -92,6 +92,19 @@ _COMMANDS = (
      "flight's meta.json lists as changed, with its value before the flight, and read them "
      "back: for a streamer that could not (killed, crashed, link lost)."),
 )
+
+
+#: The commands, in the order ``--help`` lists them.
+COMMAND_NAMES = tuple(name for name, *_ in _COMMANDS)
+
+
+def help_text(command: str | None = None) -> str:
+    """The ``--help`` text of ``command`` (of ``mavsysid`` itself when None)."""
+    parser = build_parser(command)
+    if command is None:
+        return parser.format_help()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices[command].format_help()
 
 
 def _requested_command(argv: Sequence[str]) -> str | None:

@@ -9,20 +9,16 @@ import re
 
 import pytest
 
-from mavsysid.cli.main import _COMMANDS, build_parser
+from mavsysid.cli.main import COMMAND_NAMES, help_text
 from mavsysid.cli.options import OUTPUT_OPTION
 
 GOLDEN = os.path.join(os.path.dirname(__file__), "golden", "help")
-COMMANDS = [None, *(name for name, *_ in _COMMANDS)]
+COMMANDS = [None, *COMMAND_NAMES]
 
 
 def _help(command: str | None, monkeypatch) -> str:
     monkeypatch.setenv("COLUMNS", "100")  # argparse wraps to the terminal's width
-    parser = build_parser(command)
-    if command is None:
-        return parser.format_help()
-    sub = next(a for a in parser._actions if a.dest == "command")
-    return sub.choices[command].format_help()
+    return help_text(command)
 
 
 @pytest.mark.parametrize("command", COMMANDS, ids=[c or "mavsysid" for c in COMMANDS])
