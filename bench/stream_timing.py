@@ -145,7 +145,7 @@ def _run(args: argparse.Namespace) -> None:
         experiment = LatencySteps(args.steps)
         try:
             outcome = run_stream(traj, StreamSettings(connect=f"udp:127.0.0.1:{port}",
-                                                      rate=args.rate, log_dir=tmp / "logs",
+                                                      rate=args.rate, log_dir=tmp / "logs", box=BOX,
                                                       max_tracking_error=3.0,
                                                       heartbeat_timeout=180.0),
                                  say=lambda text: print(f"  {text}", file=sys.stderr),

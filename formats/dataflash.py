@@ -212,6 +212,20 @@ def _field_format(rows: list[Any], name: str) -> str:
     return fmt.format[fmt.colhash[name]]
 
 
+#: Frequent messages whose time stamps place an untimed MODE (ArduCopter before 3.3).
+_CLOCK_TYPES = ("ATT", "IMU", "RCOU", "CTUN")
+
+
+def _row_time(m: Any) -> float | None:
+    """One message's ``TimeUS`` or ``TimeMS``, s since boot; None if it has neither."""
+    fields = m.get_fieldnames()
+    if "TimeUS" in fields:
+        return float(m.TimeUS) * 1e-6
+    if "TimeMS" in fields:
+        return float(m.TimeMS) * 1e-3
+    return None
+
+
 def _message_times(rows: list[Any]) -> np.ndarray:
     """Message times, s since boot, from ``TimeUS`` or (older logs) ``TimeMS``.
 
@@ -477,19 +491,27 @@ def read_dataflash_modes(path: Path) -> ModeChanges | None:
     ModeChanges or None
         Mode changes at ``MODE`` times, s since boot, upper-case mode names (``Mode``
         where the log names it, else pymavlink's name of ``ModeNum``); the last mode
-        holds to the log's end (``end`` inf).
+        holds to the log's end (``end`` inf). ArduCopter before 3.3 logged ``MODE`` with
+        no time field (``"Mh" Mode,ThrCrs``, the mode a number): such a change is placed
+        at the time of the last timed message before it in the file (`_CLOCK_TYPES`),
+        where the autopilot wrote it; 0 before any.
     """
     reader = import_parser("pymavlink.DFReader", path)
     names = import_parser("pymavlink.mavutil", path).mode_mapping_acm
     times, modes = [], []
+    last = 0.0
     with parsing(path, "an ArduPilot DataFlash log"):
         log = reader.DFReader_binary(str(path))
         try:
-            while (m := log.recv_match(type=["MODE"])) is not None:
+            while (m := log.recv_match(type=["MODE", *_CLOCK_TYPES])) is not None:
+                t = _row_time(m)
+                if m.get_type() != "MODE":
+                    last = last if t is None else t
+                    continue
                 mode = getattr(m, "Mode", None)
                 if not isinstance(mode, str):
                     mode = names.get(int(getattr(m, "ModeNum", mode)), "")
-                times.append(m.TimeUS * 1e-6)
+                times.append(last if t is None else t)
                 modes.append(mode.upper())
         finally:
             log.close()

@@ -345,6 +345,20 @@ def _checked_quaternions(path: Path, data: np.ndarray, body: list[str], names: l
     return q / norm[:, None]
 
 
+def _missing_columns(path: Path, kind: str, missing: list[str], names: list[str]) -> str:
+    """One line naming each missing column and the header's column it may have become."""
+    import difflib
+
+    spare = [c for c in names if c not in POSE_COLUMNS and not ROTOR_COLUMN.fullmatch(c)]
+    shown = []
+    for column in missing:
+        close = difflib.get_close_matches(column, spare, n=1, cutoff=0.5) or [
+            c for c in spare if c.lower().replace("_", "") == column]
+        shown.append(f"{column} (found {close[0]!r} instead?)" if close else column)
+    other = f"; other columns: {', '.join(spare)}" if spare else ""
+    return f"{path}: missing {kind} column(s) {', '.join(shown)}{other}"
+
+
 def _locate_columns(path: Path, names: list[str], rotor_count: int | None) -> dict[str, int]:
     """Index in the header of each pose column, then of n1 … nk."""
     seen: set[str] = set()
@@ -355,7 +369,7 @@ def _locate_columns(path: Path, names: list[str], rotor_count: int | None) -> di
         seen.add(c)
     missing = [c for c in POSE_COLUMNS if c not in seen]
     if missing:
-        raise LogFormatError(f"{path}: missing required column(s) {', '.join(missing)}")
+        raise LogFormatError(_missing_columns(path, "required", missing, names))
     found = sorted(int(m.group(1)) for c in names if (m := ROTOR_COLUMN.fullmatch(c)))
     shown = ", ".join(f"n{i}" for i in found) or "none"
     if rotor_count is not None and found != list(range(1, rotor_count + 1)):
@@ -412,7 +426,7 @@ def read_external_pose(path: Path) -> Series:
     names = [c.strip() for c in next(csv.reader([lines[0]]))]
     missing = [c for c in POSE_COLUMNS if c not in names]
     if missing:
-        raise LogFormatError(f"{path}: missing pose column(s) {', '.join(missing)}")
+        raise LogFormatError(_missing_columns(path, "pose", missing, names))
     index = [names.index(c) for c in POSE_COLUMNS]
     rows = [line for line in lines[1:] if line.strip()]
     if not rows:

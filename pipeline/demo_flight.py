@@ -24,6 +24,7 @@ from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.trajectory_file import read_trajectory
 from mavsysid.pipeline.stream import run_stream
 from mavsysid.vehicle.config import VehicleConfig
 
@@ -204,7 +205,9 @@ def fly_over_mavlink(plan_file: Path, directory: Path, vehicle: str, scale: np.n
             raise JobFailedError(f"the simulated vehicle did not start; see {sim.directory}")
         # Both ends are ours: lock-step, so the demo flies the same flight on a slow or
         # busy machine as on an idle one (`mavsysid.flight.simvehicle.clock`).
-        stream = StreamSettings(connect=f"udp:127.0.0.1:{port}", speedup=speedup,
+        # The demo is its own operator: it flies in the box it planned in.
+        box = read_trajectory(plan_file).box
+        stream = StreamSettings(connect=f"udp:127.0.0.1:{port}", speedup=speedup, box=box,
                                 telemetry_rate=TELEMETRY_RATE, log_dir=directory,
                                 lockstep=True, heartbeat_timeout=SIM_START_TIMEOUT)
         outcome = run_stream(plan_file, stream, say=say, progress=progress)

@@ -2,6 +2,10 @@
 paper's random baseline) with progress reports, and say how far a failed search got.
 
 `run_plan` is what ``mavsysid plan`` and the demo call; tests call it directly.
+`preview_plan` is the look before a flight that ``mavsysid plan`` prints: the plan's peaks
+(speed, tilt, body rate, thrust) and the rotor saturation predicted by flying it on the
+offline simulator with the vehicle file's nominal θ. `with_margins` holds part of a
+vehicle's body-rate, yaw-acceleration and thrust envelope back from the planner.
 """
 
 from __future__ import annotations
@@ -9,15 +13,24 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 from mavsysid.planner.plan_request import check_request
 from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.trajectory import Trajectory
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["ProgressCallback", "progress_bar", "run_plan"]
+__all__ = ["SATURATION_WARNING", "PlanPreview", "ProgressCallback", "preview_plan",
+           "progress_bar", "run_plan", "with_margins"]
+
+#: Predicted rotor saturation (share of control ticks) above which `plan` warns: beyond it
+#: the autopilot has no room to correct, and a vehicle whose θ differs saturates more.
+SATURATION_WARNING = 0.01
 
 #: Called with each progress report of a planning run.
 ProgressCallback = Callable[[PlanProgress], None]
@@ -56,7 +69,7 @@ def progress_bar(settings: PlannerSettings) -> Iterator[ProgressCallback]:
 
 def run_plan(
     vehicle: str | Path | VehicleConfig, settings: PlannerSettings, random: bool = False,
-    progress: bool | ProgressCallback = True,
+    progress: bool | ProgressCallback = True, say: Callable[[str], None] | None = None,
 ) -> PlanResult:
     """Check a planning request and plan.
 
@@ -71,6 +84,9 @@ def run_plan(
     progress : bool or callable
         True: a progress bar on stderr (when it is a terminal); False: none; a callable:
         called with each `PlanProgress`.
+    say : callable, optional
+        Receives one line once the request is checked and the search starts (a run can
+        take its whole planning time without a word otherwise).
 
     Raises
     ------
@@ -84,6 +100,10 @@ def run_plan(
     config = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
     # Checked here as well as by the planner, so that a refused request loads no planner.
     check_request(config, settings)
+    if say is not None:
+        limit = (f"{settings.planning_time:g} s" if np.isfinite(settings.planning_time)
+                 else f"{settings.max_samples} samples")
+        say(f"planning a {settings.budget:g} s flight for {config.name} ({limit})")
     if random:
         from mavsysid.planner.baseline import plan_random as planner
     else:
@@ -109,3 +129,80 @@ def run_plan(
         p = last[0]
         raise JobFailedError(f"no feasible trajectory found in {p.elapsed:.1f} s "
                              f"({p.vertices} vertices, {p.edges} edges): {text}") from None
+
+
+def with_margins(config: VehicleConfig, body_rate: float = 0.0,
+                 yaw_acceleration: float = 0.0, thrust: float = 0.0) -> VehicleConfig:
+    """``config`` with a share of its envelope held back from the planner.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+    body_rate, yaw_acceleration : float
+        Share of ``body_rate_max`` / ``yaw_acceleration_max`` left unused, in [0, 1).
+    thrust : float
+        Share of the thrust above hover (``thrust_max_ratio`` - 1) left unused, in [0, 1).
+
+    Raises
+    ------
+    InputError
+        A margin outside [0, 1).
+    """
+    from mavsysid.errors import InputError
+
+    for name, value in (("body-rate", body_rate), ("yaw-acceleration", yaw_acceleration),
+                        ("thrust", thrust)):
+        if not 0.0 <= value < 1.0:
+            raise InputError(f"--{name}-margin {value:g}: expected a share in [0, 1)")
+    lim = config.limits
+    return replace(config, limits=replace(
+        lim, body_rate_max=(1.0 - body_rate) * lim.body_rate_max,
+        yaw_acceleration_max=(1.0 - yaw_acceleration) * lim.yaw_acceleration_max,
+        thrust_max_ratio=1.0 + (1.0 - thrust) * (lim.thrust_max_ratio - 1.0)))
+
+
+@dataclass(frozen=True)
+class PlanPreview:
+    """What a plan asks of the vehicle (`preview_plan`).
+
+    Attributes
+    ----------
+    speed : float
+        Largest speed, m/s.
+    tilt : float
+        Largest lean of the thrust axis from the vertical, rad.
+    body_rate : float
+        Largest body rate ‖ω‖, rad/s.
+    thrust : float
+        Largest collective thrust over hover thrust (m g).
+    saturation : float
+        Share of the offline simulator's control ticks with a rotor command clipped at a
+        limit, flying the plan with the vehicle file's nominal θ and motor lag.
+    tracking_max : float
+        Largest distance of the simulated vehicle from the plan, m.
+    """
+
+    speed: float
+    tilt: float
+    body_rate: float
+    thrust: float
+    saturation: float
+    tracking_max: float
+
+
+def preview_plan(trajectory: Trajectory, config: VehicleConfig) -> PlanPreview:
+    """Peaks of ``trajectory`` (sampled at 100 Hz through the flatness map) and its
+    rotor saturation on the offline simulator with ``config`` (`PlanPreview`)."""
+    from mavsysid.flight.offline.simulator import Simulator
+    from mavsysid.vehicle.flatness import flat_to_state
+
+    t = np.linspace(0.0, trajectory.duration, int(trajectory.duration * 100.0) + 1)
+    state = flat_to_state(trajectory.flat_outputs(t), config)
+    result = Simulator(config).run(trajectory)
+    error = np.linalg.norm(result.states[:, 0:3] - result.reference_position, axis=1)
+    return PlanPreview(
+        speed=float(np.max(np.linalg.norm(state.velocity, axis=1))),
+        tilt=float(np.max(np.arccos(np.clip(state.rotation[:, 2, 2], -1.0, 1.0)))),
+        body_rate=float(np.max(np.linalg.norm(state.body_rates, axis=1))),
+        thrust=float(np.max(state.thrust) / (config.mass * GRAVITY)),
+        saturation=float(result.saturated_fraction), tracking_max=float(np.max(error)))

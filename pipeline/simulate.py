@@ -32,6 +32,7 @@ __all__ = [
     "OfflineFlight",
     "check_rotor_speeds",
     "parse_hidden_effects",
+    "read_truth",
     "run_offline_flight",
 ]
 
@@ -165,3 +166,38 @@ def check_rotor_speeds(trajectory: Trajectory, config: VehicleConfig, what: str)
             f"{np.sqrt(max(low, 0.0)):.0f} to {np.sqrt(high):.0f} rad/s, outside [limits] "
             f"[{lim.rotor_speed_min:g}, {lim.rotor_speed_max:g}] rad/s of this vehicle"
         )
+
+
+def read_truth(path: str | Path) -> np.ndarray:
+    """The true θ a simulator recorded: ``truth.parameters`` of a ``meta.json``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``meta.json``, or a directory holding one: a ``mavsysid simulate`` flight
+        directory or the ``--truth-log`` directory of ``mavsysid sim``.
+
+    Returns
+    -------
+    ndarray, shape (6,)
+        [c_T, c_D, c_M, j_x, j_y, j_z], SI.
+
+    Raises
+    ------
+    InputError
+        No such file, or no ``truth.parameters`` with the six values in it.
+    """
+    from mavsysid.formats.flight_dir import read_meta
+    from mavsysid.vehicle.config import PARAMETER_NAMES
+
+    path = Path(path)
+    meta_path = path / "meta.json" if path.is_dir() else path
+    if not meta_path.exists():
+        raise InputError(f"--truth {path}: no such file (expected a meta.json, or a directory "
+                         "holding one: a simulated flight or `mavsysid sim --truth-log`)")
+    values = read_meta(meta_path).get("truth", {}).get("parameters")
+    if not isinstance(values, dict) or any(
+            not isinstance(values.get(n), int | float) for n in PARAMETER_NAMES):
+        raise InputError(f"--truth {meta_path}: no truth.parameters with "
+                         f"{', '.join(PARAMETER_NAMES)} (not a simulator's meta.json?)")
+    return np.array([float(values[n]) for n in PARAMETER_NAMES])

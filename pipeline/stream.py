@@ -2,6 +2,8 @@
 directory, connection), fly it and return where it was recorded.
 
 `run_stream` is what ``mavsysid stream`` and the demo call; tests call it directly.
+`restore_flight_parameters` (``mavsysid restore``) puts back the parameters a flight's
+``meta.json`` lists, after a streamer that could not (killed, link lost).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from mavsysid.flight.ground.continuation import Continuation
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings, open_session
 from mavsysid.flight.ground.streamer import fly
 
-__all__ = ["StreamOutcome", "run_stream"]
+__all__ = ["RestoreOutcome", "StreamOutcome", "restore_flight_parameters", "run_stream"]
 
 
 @dataclass(frozen=True)
@@ -65,3 +67,130 @@ def run_stream(trajectory: str | Path, settings: StreamSettings,
         say(f"recording into {session.directory}")
         fly(session, say, progress, at_end, continuation)
     return StreamOutcome(session.directory, session.meta)
+
+
+@dataclass(frozen=True)
+class RestoreOutcome:
+    """What `restore_flight_parameters` did.
+
+    Attributes
+    ----------
+    restored : dict
+        name → (value found on the vehicle, original value written back).
+    unchanged : dict
+        name → original value, already in place.
+    read_back : dict
+        name → value read from the vehicle afterwards.
+    """
+
+    restored: dict[str, tuple[float, float]]
+    unchanged: dict[str, float]
+    read_back: dict[str, float]
+
+
+def restore_flight_parameters(directory: str | Path, connect: str,
+                              signing_key: bytes | None = None,
+                              heartbeat_timeout: float = 30.0, land: bool = False,
+                              land_timeout: float = 60.0,
+                              say: Callable[[str], None] | None = None) -> RestoreOutcome:
+    """Put back on the vehicle every parameter a flight's ``meta.json`` lists as changed.
+
+    For a flight that ended without restoring them: a streamer killed (kill -9) or a link
+    lost mid-flight. Each parameter is written to its ``original`` value unless it already
+    holds it, then all are read back; ``meta.json`` records the restore.
+
+    Parameters
+    ----------
+    directory : str or Path
+        The flight directory (its ``meta.json``, ``parameters``).
+    connect : str
+        MAVLink connection to the vehicle (`MavlinkLink`).
+    signing_key : bytes, optional
+        MAVLink 2 signing key.
+    heartbeat_timeout : float
+        How long to wait for the vehicle's heartbeat, s.
+    land : bool
+        An armed vehicle is sent to LAND and its disarm awaited first (else refused).
+    land_timeout : float
+        How long to wait for that disarm, s.
+    say : callable, optional
+        Receives one-line status messages.
+
+    Raises
+    ------
+    InputError
+        No such flight directory, or an unreadable ``meta.json``.
+    JobFailedError
+        No vehicle, a vehicle still armed (without ``land``), or a parameter that could
+        not be written or does not read back as its original value.
+    """
+    from mavsysid.flight.ground.mavlink_link import MavlinkLink
+    from mavsysid.flight.ground.parameter_session import ParameterSession
+    from mavsysid.formats.flight_dir import read_meta, write_meta
+
+    from mavsysid.errors import JobFailedError
+
+    say = say or (lambda _text: None)
+    directory = Path(directory)
+    meta = read_meta(directory / "meta.json")
+    listed = meta.get("parameters") or {}
+    originals = {name: float(entry["original"]) for name, entry in listed.items()
+                 if isinstance(entry, dict) and "original" in entry}
+    if not originals:
+        say(f"{directory / 'meta.json'} lists no changed parameters: nothing to restore")
+        return RestoreOutcome({}, {}, {})
+    link = MavlinkLink(connect, None, signing_key=signing_key)
+    try:
+        link.start_heartbeat()
+        vehicle = link.wait_heartbeat(heartbeat_timeout, say)
+        if vehicle.armed:
+            _land_first(link, land, land_timeout, say)
+        params = ParameterSession(link)
+        before = params.read(list(originals))
+        missing = [n for n in originals if n not in before]
+        if missing:
+            raise JobFailedError(f"the vehicle did not answer for {', '.join(missing)}: "
+                                 "nothing restored")
+        for name in reversed(list(originals)):  # newest first, as the streamer does
+            params.set(name, originals[name])
+        read_back = params.read(list(originals))
+    finally:
+        link.close()
+    wrong = [f"{n} reads {read_back.get(n, float('nan')):g}, not {v:g}"
+             for n, v in originals.items() if not _same_value(read_back.get(n), v)]
+    if wrong:
+        raise JobFailedError("not restored: " + "; ".join(wrong))
+    restored = {n: (before[n], v) for n, v in originals.items() if not _same_value(before[n], v)}
+    unchanged = {n: v for n, v in originals.items() if n not in restored}
+    for name in originals:
+        listed[name]["restored"] = True
+    meta["restored_by"] = {"command": "mavsysid restore", "connection": connect,
+                           "written": sorted(restored), "already_original": sorted(unchanged)}
+    write_meta(directory / "meta.json", meta)
+    return RestoreOutcome(restored, unchanged, read_back)
+
+
+def _land_first(link: Any, land: bool, land_timeout: float,
+                say: Callable[[str], None]) -> None:
+    """An armed vehicle: refused, or (``land``) sent to LAND and its disarm awaited."""
+    from mavsysid.flight.ground.vehicle_commands import VehicleCommands
+
+    from mavsysid.errors import JobFailedError
+
+    if not land:
+        raise JobFailedError("the vehicle is armed: restore once it has landed (or give "
+                             "--land to land it first)")
+    VehicleCommands(link, say=None).set_mode("LAND")
+    say("the vehicle is armed: landing")
+    deadline = link.clock.now() + land_timeout
+    while link.vehicle.armed:
+        if link.clock.now() > deadline:
+            raise JobFailedError(f"still armed {land_timeout:g} s after LAND: nothing "
+                                 "restored")
+        link.poll(0.1)
+    say("landed and disarmed")
+
+
+def _same_value(a: float | None, b: float) -> bool:
+    """Equal as an autopilot stores them (float32)."""
+    return a is not None and abs(a - b) <= 1e-6 * max(1.0, abs(b))

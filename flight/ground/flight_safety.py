@@ -20,8 +20,9 @@ from typing import Any
 
 from mavsysid.flight.ground.geofence import FENCE_MARGIN, SAFETY_PARAMETERS, install_fence
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
+from mavsysid.flight.ground.trajectory_safety import format_box
 
-__all__ = ["install_safety", "restore_parameters"]
+__all__ = ["before_arming", "install_safety", "restore_parameters"]
 
 
 def _record(session: Any) -> dict[str, Any]:
@@ -55,6 +56,22 @@ def install_safety(session: Any, home: Sequence[float], say: Callable[[str], Non
     session.note("fence", record)
 
 
+def before_arming(session: Any, home: Sequence[float]) -> str:
+    """The line the operator reads before the vehicle arms: the box and where it came from,
+    the fence (or none) and the take-off point (``home``, m ENU)."""
+    fence = session.meta.get("fence")
+    if fence:
+        corners = fence["corners_enu_m"]
+        xs, ys = [c[0] for c in corners], [c[1] for c in corners]
+        shown = (f"{fence['kind']} x {min(xs):g}..{max(xs):g}, y {min(ys):g}..{max(ys):g} m, "
+                 f"{fence['alt_max_m']:.1f} m above home")
+    else:
+        shown = "none (--no-fence)"
+    x, y, z = (float(v) for v in home)
+    return (f"box {format_box(session.box)} ({session.box_source}); fence {shown}; "
+            f"take-off point x {x:.2f}, y {y:.2f}, z {z:.2f} m")
+
+
 def restore_parameters(session: Any, say: Callable[[str], None]) -> None:
     """Put back what the flight changed (see the module docstring); never raises."""
     params = getattr(session, "parameters", None)
@@ -73,7 +90,9 @@ def restore_parameters(session: Any, say: Callable[[str], None]) -> None:
     if keep:
         say("warning: the vehicle still flies: fence and timeouts left in force ("
             + ", ".join(f"{n} was {params.changed[n][0]:g}" for n in keep)
-            + "); restore them once it has landed")
+            + "); once it has landed: mavsysid restore "
+            + f"{getattr(session, 'directory', 'FLIGHT_DIR')} --connect "
+            + f"{getattr(getattr(session, 'settings', None), 'connect', 'LINK')}")
     restored = params.restored
     if restored:
         say("parameters restored: " + ", ".join(f"{n} {o:g}" for n, (o, _f) in

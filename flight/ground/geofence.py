@@ -253,7 +253,8 @@ def install_fence(link: MavlinkLink, commands: VehicleCommands, params: Paramete
     if origin is None:
         raise _refused("it sent neither GPS_GLOBAL_ORIGIN nor HOME_POSITION")
     plan = fence_plan(box, margin, origin, home)
-    problem = upload_fence_polygon(link, plan.polygon)
+    # A dry run uploads nothing: the polygon counts as accepted.
+    problem = None if params.dry_run else upload_fence_polygon(link, plan.polygon)
     required, optional = fence_parameters(autopilot, plan, problem is None)
     if problem is not None:
         say(f"warning: the fence polygon was refused ({problem}); using "
@@ -274,7 +275,8 @@ def install_fence(link: MavlinkLink, commands: VehicleCommands, params: Paramete
                 raise _refused(str(error)) from None
             say(f"warning: {error}")
     kind = "polygon" if problem is None else "circle"
-    say(f"geofence: {kind} {margin:g} m outside the box, {plan.alt_max:.1f} m above home")
+    say(f"geofence{' (dry run: not installed)' if params.dry_run else ''}: {kind} "
+        f"{margin:g} m outside the box, {plan.alt_max:.1f} m above home")
     return {"kind": kind, "margin_m": margin, "polygon_deg": [list(p) for p in plan.polygon],
             "corners_enu_m": [list(c) for c in plan.corners], "alt_max_m": plan.alt_max,
             "radius_m": plan.radius, "origin": {"lat": origin.lat, "lon": origin.lon,

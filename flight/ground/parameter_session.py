@@ -52,11 +52,16 @@ class ParameterSession:
         Connected, with the vehicle's heartbeat seen.
     set_timeout : float
         How long `set` waits for the echoed PARAM_VALUE, streamer s (resent every 1 s).
+    dry_run : bool
+        `set` writes nothing: it reads the value before and lists the change in `planned`.
     """
 
-    def __init__(self, link: MavlinkLink, set_timeout: float = 3.0) -> None:
+    def __init__(self, link: MavlinkLink, set_timeout: float = 3.0,
+                 dry_run: bool = False) -> None:
         self.link = link
         self.set_timeout = set_timeout
+        self.dry_run = dry_run
+        self._planned: dict[str, tuple[float, float]] = {}
         self._values: dict[str, tuple[float, int]] = {}  # name → (value, MAV_PARAM_TYPE)
         self._changed: dict[str, tuple[float, float]] = {}  # in the order first set
         self._restored: dict[str, tuple[float, float]] = {}
@@ -144,6 +149,9 @@ class ParameterSession:
             The vehicle has no such parameter, did not echo the change within
             ``set_timeout``, or kept another value (one line naming both values).
         """
+        if self.dry_run:
+            self._plan(name, value)
+            return
         if name not in self._changed:
             before = self.read([name], timeout=self.set_timeout)
             if name not in before:
@@ -156,6 +164,23 @@ class ParameterSession:
         else:
             self._changed[name] = (self._changed[name][0], float(value))
         self._write(name, value)
+
+    def _plan(self, name: str, value: float) -> None:
+        """Dry run: what `set` would change, with the value now; nothing is written."""
+        before = self._planned[name][0] if name in self._planned else self.read(
+            [name], timeout=self.set_timeout).get(name)
+        if before is None:
+            raise JobFailedError(f"parameter {name}: the vehicle did not answer for it "
+                                 f"within {self.set_timeout:g} s (no such parameter?)")
+        if _same(before, value):
+            self._planned.pop(name, None)
+            return
+        self._planned[name] = (before, float(value))
+
+    @property
+    def planned(self) -> dict[str, tuple[float, float]]:
+        """Dry run: name → (value now, value the flight would set), in the order set."""
+        return dict(self._planned)
 
     def _write(self, name: str, value: float) -> None:
         """PARAM_SET until the echo shows ``value``; JobFailedError if it never does."""

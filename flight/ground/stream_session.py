@@ -2,7 +2,8 @@
 
 `open_session` checks the plan (`mavsysid.flight.ground.preflight.check_plan`) before anything is
 created, then makes ``<log_dir>/<UTC time>_<name>/`` with ``flight.tlog`` (both
-directions, `MavlinkLink`), ``pose.csv`` (`TelemetryRecorder`) and ``meta.json``.
+directions, `MavlinkLink`), ``pose.csv`` (`TelemetryRecorder`) and ``meta.json``. When no
+vehicle ever answers (no heartbeat), the session removes the directory as it closes.
 ``meta.json`` is live: while the flight runs it says ``"running": true`` with status
 ``aborted`` (and a reason saying the streamer never finished), rewritten about once a
 second (sample count, ``updated``) and at each milestone (vehicle identified, telemetry
@@ -19,7 +20,9 @@ and act safely; a second signal interrupts immediately.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import shutil
 import signal
 import tempfile
 import threading
@@ -44,7 +47,7 @@ from mavsysid.formats.trajectory_file import TrajectoryFile, read_trajectory
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle, vehicle_to_toml
 
 __all__ = ["KILLED_REASON", "META_PERIOD", "StreamSession", "StreamSettings", "load_plan",
-           "open_session"]
+           "open_session", "plan_box"]
 
 #: The reason meta.json gives while the flight runs: what a reader sees after a kill -9.
 KILLED_REASON = ("the streamer stopped without its final write (killed or crashed); "
@@ -68,7 +71,8 @@ class StreamSettings:
     land : bool
         Land after the trajectory (else keep hovering at its end).
     box : tuple of 6 float or None
-        Flight box [x_min, y_min, z_min, x_max, y_max, z_max], m; None: the trajectory's.
+        The operator's flight box [x_min, y_min, z_min, x_max, y_max, z_max], m; None: the
+        ``[flight] box`` of the vehicle file given (nothing flies without one).
     signing_key : bytes or None
         MAVLink 2 signing key.
     speedup : float
@@ -106,6 +110,10 @@ class StreamSettings:
         Raise the autopilot limits the plan needs (`autopilot_limits`), not refuse.
     lockstep : bool
         Take the time from ``mavsysid sim --lockstep``'s frames (`LinkClock`; tests).
+    dry_run : bool
+        Connect and run every check, list the box, the fence and the parameters the flight
+        would change, and stop there: nothing armed, no parameter written, no fence
+        uploaded.
     """
 
     connect: str
@@ -133,6 +141,7 @@ class StreamSettings:
     fence_margin: float | None = None
     set_limits: bool = False
     lockstep: bool = False
+    dry_run: bool = False
 
 
 def _embedded_config(plan: TrajectoryFile, source: str) -> VehicleConfig:
@@ -157,23 +166,36 @@ def load_plan(path: str | Path, vehicle: str | Path | None,
     vehicle : str, Path or None
         Shipped vehicle name or TOML path; None: the configuration stored in the file.
     box : tuple of 6 float or None
-        Flight box, m; None: the vehicle's ``[flight] box``, else the file's.
+        The operator's flight box, m; None: the ``[flight] box`` of ``vehicle`` (never of
+        the configuration stored in the file). The file's own box only narrows it.
+
+    Returns
+    -------
+    plan, config, box
+        The file, the vehicle and the box in use (see `plan_box` for where it came from).
 
     Raises
     ------
     InputError
-        An unreadable file or vehicle, or no box at all.
+        An unreadable file or vehicle, or no box from the operator.
     JobFailedError
         "flight refused: …": another vehicle's trajectory, a sample outside the box, or
         the vehicle's limits exceeded (`mavsysid.flight.ground.trajectory_safety`).
     """
+    plan, config, box, _source = plan_box(path, vehicle, box)
+    return plan, config, box
+
+
+def plan_box(path: str | Path, vehicle: str | Path | None, box: tuple[float, ...] | None
+             ) -> tuple[TrajectoryFile, VehicleConfig, tuple[float, ...], str]:
+    """`load_plan` and where the box came from (``--box``, the vehicle's, narrowed…)."""
     plan = read_trajectory(path)
     config = load_vehicle(vehicle) if vehicle is not None else _embedded_config(plan, str(path))
-    # The operator's box (--box, else the vehicle's); the file's only if neither is given.
+    # The operator's box (--box, else the chosen vehicle file's); the file's only narrows it.
     box, source = operator_box(box, None if vehicle is None else config.box, plan.box,
                                str(path))
     check_plan(plan.trajectory, plan.vehicle_name, config, box, source).raise_if_refused()
-    return plan, config, tuple(float(b) for b in box)
+    return plan, config, tuple(float(b) for b in box), source
 
 
 class StreamSession:
@@ -183,6 +205,8 @@ class StreamSession:
     ----------
     plan, config, box, settings, directory
         What is flown, by which vehicle, where, how, and where it is recorded.
+    box_source : str
+        Where the box came from (``--box``, the vehicle's ``[flight] box``, narrowed…).
     trajectory : PiecewisePolynomial
     link, commands, history, recorder, stream, guards
         The flight's machinery, wired together.
@@ -190,9 +214,12 @@ class StreamSession:
     """
 
     def __init__(self, path: Path, plan: TrajectoryFile, config: VehicleConfig,
-                 box: tuple[float, ...], settings: StreamSettings) -> None:
+                 box: tuple[float, ...], settings: StreamSettings,
+                 box_source: str = "--box") -> None:
         self.plan, self.config, self.box, self.settings = plan, config, box, settings
+        self.box_source = box_source
         self.trajectory = plan.trajectory
+        self._made_root = not Path(settings.log_dir).exists()
         self.directory = stream_flight_dir(Path(settings.log_dir), Path(path).stem)
         self.history = SetpointHistory()
         self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history)
@@ -216,9 +243,11 @@ class StreamSession:
             self.note_failure(str(error))
             self._write_final()
             restore_scheduling()
+            self._forget_unanswered()
             raise
         self.commands = VehicleCommands(self.link, say=None)
-        self.parameters = ParameterSession(self.link)  # restored by the streamer
+        # Restored by the streamer; a dry run only lists what it would set.
+        self.parameters = ParameterSession(self.link, dry_run=settings.dry_run)
         self.stream = SetpointStream(self.link, self.history, settings.rate)
         self.stream.limits = flight_limits(config, box)
         self.guards = FlightGuards(self.link, self.stream, self.recorder)
@@ -251,11 +280,12 @@ class StreamSession:
                         "config_toml": vehicle_to_toml(self.config)},
             "files": {"pose": "pose.csv", "tlog": "flight.tlog"},
             "connection": s.connect, "speedup": s.speedup,
-            "lockstep": s.lockstep,
+            "lockstep": s.lockstep, "dry_run": s.dry_run,
             "signing": s.signing_key is not None,
             "trajectory": {"file": str(path), "kind": plan.kind,
                            "duration": self.trajectory.duration,
                            "vehicle": plan.vehicle_name, "box": list(self.box),
+                           "box_source": self.box_source,
                            "start": list(plan.start), "predicted_dopt": plan.predicted_dopt},
             "stream": {"setpoint_rate_hz": s.rate, "telemetry_rate_hz": s.telemetry_rate,
                        "max_tracking_error_m": s.max_tracking_error, "land": s.land,
@@ -386,11 +416,23 @@ class StreamSession:
             self._write_final()
         finally:
             restore_scheduling()
+            self._forget_unanswered()
+
+    def _forget_unanswered(self) -> None:
+        """No vehicle ever answered: remove the flight directory (and the log root made
+        for it, when empty), so failed connections leave nothing behind."""
+        link = getattr(self, "link", None)
+        if link is not None and link.vehicle.heartbeats > 0:
+            return
+        shutil.rmtree(self.directory, ignore_errors=True)
+        if self._made_root:
+            with contextlib.suppress(OSError):
+                Path(self.settings.log_dir).rmdir()
 
 
 def open_session(path: str | Path, settings: StreamSettings,
                  vehicle: str | Path | None = None) -> StreamSession:
     """Check the plan, then create the flight directory and connect (see `load_plan`)."""
     parse_connect(settings.connect)  # bad input creates no flight directory
-    plan, config, box = load_plan(path, vehicle, settings.box)
-    return StreamSession(Path(path), plan, config, box, settings)
+    plan, config, box, source = plan_box(path, vehicle, settings.box)
+    return StreamSession(Path(path), plan, config, box, settings, source)

@@ -33,7 +33,11 @@ from mavsysid.flight.ground.continuation import (
     continue_flight,
     stream_segment,
 )
-from mavsysid.flight.ground.flight_safety import install_safety, restore_parameters
+from mavsysid.flight.ground.flight_safety import (
+    before_arming,
+    install_safety,
+    restore_parameters,
+)
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
 from mavsysid.flight.ground.preflight import check_vehicle
 from mavsysid.flight.ground.rotor_watch import RotorWatch
@@ -95,6 +99,9 @@ class _Flight:
         try:
             self._connect()
             self._prepare()
+            if self.settings.dry_run:
+                self._dry_run_end()
+                return
             self._take_off()
             self._to_start()
             self._trajectory()
@@ -161,7 +168,18 @@ class _Flight:
         report.raise_if_refused()
         check_session_limits(self.s, self.say)  # before anything is changed
         install_safety(self.s, self._pose().position, self.say)
+        self.say(before_arming(self.s, self._pose().position))
         self.link.watch_silence = True  # telemetry streams: a second of silence is a loss
+
+    def _dry_run_end(self) -> None:
+        """Every check passed: list what the flight would change, arm nothing."""
+        planned = self.s.parameters.planned
+        self.s.note("dry_run_parameters", {n: {"now": a, "flight": b}
+                                           for n, (a, b) in planned.items()})
+        self.say("dry run: would set " + (", ".join(f"{n} {a:g} → {b:g}" for n, (a, b) in
+                                                    planned.items()) or "no parameter"))
+        self.say("dry run: every check passed; nothing armed, no parameter changed")
+        self.s.note_complete()
 
     def _measure_rates(self, seconds: float) -> dict[str, float]:
         before, t0 = dict(self.recorder.counts), self.link.clock.now()
@@ -285,20 +303,31 @@ class _Flight:
         self.s.note_complete()
 
     def _land(self) -> None:
-        """Stop streaming, LAND, wait for the disarm (a warning after the land timeout)."""
+        """Stop streaming, LAND, wait for the disarm (see `_wait_landed`)."""
         self.guards.max_tracking_error = None
         self.stream.stop()
         self.guards.expect_armed = False
         self._set_mode("LAND")
         self.say("landing")
+        self._wait_landed()
+
+    def _wait_landed(self) -> bool:
+        """Wait until the vehicle disarms (landed): True. False when the operator took over
+        (another mode than the one we set) or the land timeout passed (one line each).
+        A second Ctrl-C ends the wait at once (`StreamSession`)."""
+        ours = self.link.vehicle.custom_mode
         deadline = self.link.clock.now() + self.settings.land_timeout
         while self.link.vehicle.armed:
+            if self.link.vehicle.custom_mode != ours:
+                self.say(f"the operator took over (mode {self.link.vehicle.mode}); not "
+                         "waiting for the landing")
+                return False
             if self.link.clock.now() > deadline:
                 self.say(f"warning: still armed {self.settings.land_timeout:g} s after LAND")
-                break
+                return False
             self.link.poll(0.1)
-        else:
-            self.say("landed and disarmed")
+        self.say("landed and disarmed")
+        return True
 
     # --- failures --------------------------------------------------------------------------
 
@@ -306,14 +335,10 @@ class _Flight:
         return "BRAKE" if self.link.vehicle.autopilot is Autopilot.ARDUPILOT else "HOLD"
 
     def _hold_after_abort(self) -> None:
-        """Lost tracking: let the autopilot hold position in BRAKE / HOLD."""
+        """Lost tracking: let the autopilot stop in BRAKE / HOLD, then land."""
         self.guards.disable()
-        mode = self._safe_mode()
-        try:
-            self.commands.set_mode(mode)
-            self.say(f"aborted to {mode}: the vehicle holds its position")
-        except JobFailedError as error:
-            self.say(f"warning: could not switch to {mode}: {error}")
+        self._stop_then_land(f"aborted to {self._safe_mode()}: the vehicle holds its "
+                             "position", "aborted")
 
     def _interrupted(self) -> None:
         """Ctrl-C: brake (PX4: hold), then land; skipped if never armed."""
@@ -322,16 +347,33 @@ class _Flight:
         if not self.link.vehicle.armed:
             self.say("interrupted; the vehicle is not armed, nothing to do")
             return
+        self._stop_then_land(None, "interrupted")
+
+    def _stop_then_land(self, held: str | None, why: str) -> None:
+        """BRAKE (PX4: HOLD) until stopped, LAND, and wait until it has landed or the
+        operator takes over, so that the parameters are restored on the ground."""
+        try:
+            self._brake_land_wait(held, why)
+        except JobFailedError as error:  # a lost link while landing: report, keep the first
+            self.say(f"warning: {error}")
+
+    def _brake_land_wait(self, held: str | None, why: str) -> None:
         mode = self._safe_mode()
+        modes = self.link.vehicle.autopilot.modes  # type: ignore[union-attr]
         for step in (mode, "LAND"):
             try:
                 self.commands.set_mode(step)
-                self.say(f"interrupted: mode {step}")
             except JobFailedError as error:
                 self.say(f"warning: could not switch to {step}: {error}")
                 continue
+            self.say(held if step == mode and held is not None else f"{why}: mode {step}")
             if step == mode:
                 self._wait_stopped(3.0)
+                if self.link.vehicle.custom_mode != modes[mode]:
+                    self.say(f"the operator took over (mode {self.link.vehicle.mode}); not "
+                             "landing")
+                    return
+        self._wait_landed()
 
     def _wait_stopped(self, seconds: float) -> None:
         deadline = self.link.clock.now() + seconds

@@ -1,8 +1,9 @@
 """Is a trajectory file safe to fly? Checked before connecting, against the vehicle and the box.
 
-The box is the operator's: ``--box``, else the vehicle file's ``[flight] box``, else (only
-when neither is given) the trajectory file's own. A box stored in the file never widens
-the operator's: the trajectory itself must lie inside the box chosen (`operator_box`).
+The box is the operator's: ``--box``, else the ``[flight] box`` of the vehicle file the
+operator chose. Without one nothing flies. A box stored in the trajectory file can only
+narrow it (the two boxes' intersection), never widen or move it; the trajectory itself
+must lie inside the box in use (`operator_box`).
 
 The limits are the vehicle's (`flight_limits`, from the vehicle config the operator chose,
 never from the file's ``limits`` block):
@@ -45,6 +46,7 @@ __all__ = [
     "JOIN_TOLERANCE",
     "check_trajectory",
     "flight_limits",
+    "format_box",
     "operator_box",
 ]
 
@@ -59,31 +61,70 @@ _CHECKED = {"x": "x", "y": "y", "z": "z", "speed": "speed",
             "yaw_rate": "yaw rate", "yaw_acceleration": "yaw acceleration"}
 
 
+def _checked_box(box: Sequence[float], source: str) -> tuple[float, ...]:
+    b = tuple(float(v) for v in box)
+    if len(b) != 6 or not all(np.isfinite(b)) or any(
+            lo >= hi for lo, hi in zip(b[:3], b[3:], strict=True)):
+        raise InputError(f"{source} {','.join(f'{v:g}' for v in b)}: expected "
+                         "x_min,y_min,z_min,x_max,y_max,z_max with each min below its max")
+    return b
+
+
+def format_box(box: Sequence[float]) -> str:
+    """``x -2..2, y -2..2, z 0.5..2.5 m``: a box for a one-line message."""
+    return ", ".join(f"{axis} {box[k]:g}..{box[k + 3]:g}" for k, axis in enumerate("xyz")) \
+        + " m"
+
+
 def operator_box(cli_box: Sequence[float] | None, vehicle_box: Sequence[float] | None,
                  file_box: Sequence[float] | None, path: str) -> tuple[tuple[float, ...], str]:
-    """The box to fly in, m, and where it came from ("--box", the vehicle, the file).
+    """The box to fly in, m, and where it came from.
 
-    ``vehicle_box`` is the ``[flight] box`` of the vehicle file the operator chose (not of
-    the configuration embedded in the trajectory file, which is the file's).
+    The operator's box is ``cli_box`` (``--box``), else ``vehicle_box``: the ``[flight] box``
+    of the vehicle file the operator chose (never the configuration embedded in the
+    trajectory file, which is the file's). ``file_box``, the trajectory file's own, only
+    narrows it: the result is the intersection.
+
+    Parameters
+    ----------
+    cli_box, vehicle_box, file_box : sequence of 6 float or None
+        [x_min, y_min, z_min, x_max, y_max, z_max], m, world ENU.
+    path : str
+        The trajectory file, for messages.
+
+    Returns
+    -------
+    box : tuple of 6 float
+    source : str
+        "--box" or "the vehicle's [flight] box", with "narrowed by the trajectory file's
+        box" when the file's box cut it.
 
     Raises
     ------
     InputError
-        No box anywhere, or a box that is not six numbers with each min below its max.
+        No operator box, a box that is not six numbers with each min below its max, or a
+        file box that does not overlap the operator's.
     """
-    for box, source in ((cli_box, "--box"), (vehicle_box, "the vehicle's [flight] box"),
-                        (file_box, "the trajectory file's box")):
-        if box is None:
-            continue
-        b = tuple(float(v) for v in box)
-        if len(b) != 6 or not all(np.isfinite(b)) or any(
-                lo >= hi for lo, hi in zip(b[:3], b[3:], strict=True)):
-            raise InputError(f"{source} {','.join(f'{v:g}' for v in b)}: expected "
-                             "x_min,y_min,z_min,x_max,y_max,z_max with each min below its max")
-        return b, source
-    raise InputError(f"{path}: the trajectory has no flight box; give one with --box "
-                     "x_min,y_min,z_min,x_max,y_max,z_max (or [flight] box in the vehicle "
-                     "file)")
+    if cli_box is not None:
+        box, source = _checked_box(cli_box, "--box"), "--box"
+    elif vehicle_box is not None:
+        source = "the vehicle's [flight] box"
+        box = _checked_box(vehicle_box, source)
+    else:
+        raise InputError(f"{path}: no flight box from the operator; give --box "
+                         "x_min,y_min,z_min,x_max,y_max,z_max or --vehicle with a [flight] box "
+                         "(a trajectory file's own box can only narrow it)")
+    if file_box is None:
+        return box, source
+    own = _checked_box(file_box, "the trajectory file's box")
+    cut = tuple(max(a, b) for a, b in zip(box[:3], own[:3], strict=True)) + tuple(
+        min(a, b) for a, b in zip(box[3:], own[3:], strict=True))
+    if any(lo >= hi for lo, hi in zip(cut[:3], cut[3:], strict=True)):
+        raise InputError(f"{path}: the trajectory file's box ({format_box(own)}) does not "
+                         f"overlap {source} ({format_box(box)})")
+    if cut != box:
+        source = f"{source} narrowed by the trajectory file's box"
+    return cut, source
 
 
 def flight_limits(config: VehicleConfig, box: Sequence[float]) -> SetpointLimits:

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
+from mavsysid.cli.options import add_output_folder
 from mavsysid.discrepancy.diagnosis import Diagnosis
 from mavsysid.pipeline.demo import DemoResult, DemoSettings, run_demo
 from mavsysid.vehicle.config import PARAMETER_NAMES
@@ -78,8 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speedup", type=float, default=DemoSettings.speedup, metavar="K",
                         help=f"simulated seconds per wall second (default: "
                         f"{DemoSettings.speedup:g})")
-    parser.add_argument("--logs", type=Path, default=Path("logs"),
-                        help="folder for the run folder (default: logs)")
+    add_output_folder(parser, "logs", "folder for the run folder", ("--logs",))
     parser.add_argument("--name", help="run folder name (default: a timestamp)")
     parser.add_argument("--refine-steps", type=int, default=0, metavar="N",
                         help="planner refinement steps (default: 0, the paper's search alone)")
@@ -99,7 +98,7 @@ def main(args: argparse.Namespace) -> int:
 
     settings = DemoSettings(vehicle=args.vehicle, planning_time=args.time, budget=args.budget,
                             iterations=args.iterations, seed=args.seed, speedup=args.speedup,
-                            logs=args.logs, hidden_effects=tuple(args.hidden_effect),
+                            logs=args.log_dir, hidden_effects=tuple(args.hidden_effect),
                             refine_steps=args.refine_steps)
     result = run_demo(settings, say, progress=verbose, name=args.name)
     print(format_summary(result))

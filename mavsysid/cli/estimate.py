@@ -19,22 +19,34 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
 from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.history_table import write_history_csv
 from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
 from mavsysid.estimation.report import format_table, updated_vehicle, write_estimate_json
+from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
-from mavsysid.vehicle.config import save_vehicle
+from mavsysid.pipeline.simulate import read_truth
+from mavsysid.vehicle.config import PARAMETER_NAMES, save_vehicle
 
-__all__ = ["add_arguments", "main"]
+__all__ = ["add_arguments", "format_truth", "main"]
+
+#: ``--truth`` alone: the truth recorded next to the log (a `mavsysid simulate` flight).
+_OWN_TRUTH = "next to the log"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid estimate``."""
     add_log_arguments(parser)
     add_window_arguments(parser)
+    parser.add_argument("--truth", nargs="?", const=_OWN_TRUTH, metavar="PATH",
+                        help="compare with a simulator's true θ: its meta.json or the "
+                        "directory holding it (`mavsysid sim --truth-log DIR`); alone: the "
+                        "log's own directory (`mavsysid simulate`); prints each parameter's "
+                        "error and z-score")
     parser.add_argument("-o", "--output", type=Path, metavar="JSON",
                         help="write the estimate as JSON")
     parser.add_argument("--update-vehicle", type=Path, metavar="TOML",
@@ -65,10 +77,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(wind, motor lag …), estimate θ again with them fitted (slower)")
 
 
+def format_truth(final: ParameterEstimate, truth: np.ndarray) -> str:
+    """Each parameter against the simulator's truth: error and z = error / σ."""
+    lines = ["Against the truth", "  parameter   estimate          σ       true   error %       z"]
+    for j, name in enumerate(PARAMETER_NAMES):
+        value, sigma, true = float(final.value[j]), float(final.sigma[j]), float(truth[j])
+        z = (value - true) / sigma if sigma > 0.0 else float("inf")
+        lines.append(f"  {name:<9} {value:10.3e} {sigma:10.2e} {true:10.3e} "
+                     f"{100.0 * (value - true) / abs(true):+9.2f} {z:+7.2f}")
+    worst = float(np.max(np.abs((final.value - truth) / final.sigma)))
+    lines.append(f"  largest |z| {worst:.2f}" + ("" if worst <= 3.0 else
+                                                "  (beyond 3: the σ does not cover the truth)"))
+    return "\n".join(lines)
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the command; returns the exit code."""
     settings = EstimatorSettings(prior_relative_sigma=args.prior_sigma,
                                  refine=not args.no_refine, fit_effects=not args.fixed_effects)
+    truth = None if args.truth is None else read_truth(
+        args.log.parent if args.truth == _OWN_TRUTH else Path(args.truth))
     show = progress_wanted(args.verbosity, sys.stderr)
     with stage_listener(StageLog("mavsysid estimate", sys.stderr) if show else None):
         report_stage(f"reading {args.log}")
@@ -86,6 +114,8 @@ def main(args: argparse.Namespace) -> int:
         write_estimation_rrd(args.rrd, run.result, run.flight)
     if args.verbosity >= 0:
         print(format_table(run.result, run.config, str(args.log)))
+    if truth is not None:
+        print(format_truth(run.result.final, truth))
     written = [f"{what} {path}" for what, path in (("estimate", args.output),
                ("vehicle", args.update_vehicle), ("recording", args.rrd),
                ("history", args.history), ("report", args.report)) if path is not None]

@@ -6,7 +6,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from mavsysid.cli.options import DEFAULT_BOX, allow_negative_values, parse_numbers
+from mavsysid.cli.options import (
+    DEFAULT_BOX,
+    add_output_folder,
+    allow_negative_values,
+    parse_numbers,
+)
 from mavsysid.errors import InputError
 from mavsysid.experiments.evaluate_job import EvaluationRun, make_specs, run_evaluation, table_notes
 from mavsysid.planner.results import PlannerSettings
@@ -34,10 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="shipped vehicle name or TOML path: the truth (default: firefly)")
     parser.add_argument("--budget", type=float, default=30.0, metavar="S",
                         help="flight-time budget, s (default: 30)")
-    parser.add_argument("--time", type=float, default=30.0, metavar="S",
-                        help="planning time per plan, s (default: 30; ignored with --samples)")
+    parser.add_argument("--time", type=float, metavar="S",
+                        help="planning time per plan, s (default: 30; not with --samples)")
     parser.add_argument("--samples", type=int, metavar="N",
-                        help="planner sample budget: results depend only on the seeds")
+                        help="stop each plan after N samples, with no time limit: the results "
+                        "then depend only on the seeds")
     parser.add_argument("--refine-steps", type=int, metavar="N",
                         help="most refinement steps of the planner (default: the planner's)")
     parser.add_argument("--rotor-headroom", type=float, default=PlannerSettings.rotor_headroom,
@@ -53,9 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seed of experiment 0; experiment i uses seed + i (default: 0)")
     parser.add_argument("--iterations", type=int, default=1,
                         help="plan–fly–estimate rounds per experiment (default: 1)")
-    parser.add_argument("--out", type=Path, default=Path("evaluation"),
-                        help="output folder; finished experiments there are reused "
-                        "(default: evaluation)")
+    add_output_folder(parser, "evaluation", "output folder; finished experiments there are "
+                      "reused", ("--out",))
     parser.add_argument("--executor", choices=("local", "dask"), default="local",
                         help="local process pool (default) or an existing Dask cluster")
     parser.add_argument("--workers", type=int, default=1,
@@ -72,10 +77,14 @@ def main(args: argparse.Namespace) -> int:
     box = parse_numbers(args.box, 6, "--box", "x_min,y_min,z_min,x_max,y_max,z_max")
     if args.workers < 1:
         raise InputError(f"--workers {args.workers}: expected at least 1")
-    specs = make_specs(args.n, args.vehicle, args.budget, args.time, args.samples, box,
+    if args.time is not None and args.samples is not None:
+        raise InputError(f"--time {args.time:g} with --samples {args.samples}: evaluate stops "
+                         "each plan by one of them; give --time or --samples")
+    time = 30.0 if args.time is None else args.time
+    specs = make_specs(args.n, args.vehicle, args.budget, time, args.samples, box,
                        args.seed, args.iterations, args.refine_steps, args.rotor_headroom,
                        args.controller_model)
-    run = run_evaluation(args.out, specs, args.executor, args.workers, args.scheduler,
+    run = run_evaluation(args.log_dir, specs, args.executor, args.workers, args.scheduler,
                          args.rrd, png=not args.no_png, progress=args.verbosity >= 0)
     print(format_summary(run))
     return 0

@@ -21,8 +21,8 @@ from mavsysid import __version__
 from mavsysid.errors import InputError, JobFailedError, MavsysidError
 
 __all__ = [
-    "DEBUG_ENV", "EXIT_CODES", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "build_parser", "exit_code",
-    "main",
+    "COMMAND_NAMES", "DEBUG_ENV", "EXIT_CODES", "EXIT_INTERNAL", "EXIT_INTERRUPTED",
+    "build_parser", "exit_code", "help_text", "main",
 ]
 
 EXIT_INTERRUPTED = 130
@@ -64,7 +64,7 @@ _COMMANDS = (
      "accelerations of the smoothed pose, and report where they disagree; name the "
      "physical effect(s) that explain the difference (forward selection on BIC over a "
      "catalogue of nine), fit them with confidence intervals, and show how much the gap "
-     "shrinks on held-out data (the last 30 %% of the flight)."),
+     "shrinks on held-out data (the last 30 % of the flight)."),
     ("plan", "mavsysid.cli.plan", "plan a maximally informative calibration flight",
      "Plan a calibration flight that minimises the predicted parameter uncertainty "
      "(D-optimality) within a flight-time budget and a flight box, using the vehicle's "
@@ -87,7 +87,24 @@ _COMMANDS = (
      "`mavsysid sim`): check the plan and the vehicle, take off, stream position, velocity, "
      "acceleration and yaw setpoints at a fixed rate, land, and record flight.tlog, pose.csv "
      "and meta.json into a new flight directory."),
+    ("restore", "mavsysid.cli.restore", "put back the parameters a flight changed",
+     "Put back on the vehicle every autopilot parameter (fence, timeouts, limits) that a "
+     "flight's meta.json lists as changed, with its value before the flight, and read them "
+     "back: for a streamer that could not (killed, crashed, link lost)."),
 )
+
+
+#: The commands, in the order ``--help`` lists them.
+COMMAND_NAMES = tuple(name for name, *_ in _COMMANDS)
+
+
+def help_text(command: str | None = None) -> str:
+    """The ``--help`` text of ``command`` (of ``mavsysid`` itself when None)."""
+    parser = build_parser(command)
+    if command is None:
+        return parser.format_help()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices[command].format_help()
 
 
 def _requested_command(argv: Sequence[str]) -> str | None:
@@ -105,6 +122,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         commands' options when None.
     """
     common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--version", action="version", version=f"mavsysid {__version__}")
     common.add_argument("-v", "--verbose", dest="verbosity", action="count",
                         default=argparse.SUPPRESS, help="print more detail")
     common.add_argument("-q", "--quiet", dest="quiet", action="store_true",
@@ -114,7 +132,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="mavsysid", parents=[common],
         description="Plan, fly, estimate and diagnose multirotor system-identification flights.",
     )
-    parser.add_argument("--version", action="version", version=f"mavsysid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     for name, module_name, summary, description in _COMMANDS:

@@ -11,8 +11,11 @@ from pathlib import Path
 from mavsysid.errors import InputError
 from mavsysid.planner.results import PlannerSettings
 
-__all__ = ["DEFAULT_BOX", "add_log_arguments", "add_window_arguments", "allow_negative_values",
-           "parse_numbers"]
+__all__ = ["DEFAULT_BOX", "OUTPUT_OPTION", "add_log_arguments", "add_output_folder",
+           "add_window_arguments", "allow_negative_values", "parse_numbers"]
+
+#: The one name of the output-folder option of every command that writes a folder.
+OUTPUT_OPTION = "--log-dir"
 
 #: The planner's default flight box as the ``--box`` text of the commands.
 DEFAULT_BOX = ",".join(f"{v:g}" for v in PlannerSettings.box)
@@ -23,6 +26,17 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", type=Path, help="flight log: pose.csv, .tlog, .ulg or .bin")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
+
+
+def add_output_folder(parser: argparse.ArgumentParser, default: str, what: str,
+                      old_names: tuple[str, ...] = ()) -> None:
+    """``--log-dir DIR`` (`OUTPUT_OPTION`, into ``args.log_dir``): where the command
+    writes; ``old_names`` stay accepted, hidden from ``--help``."""
+    parser.add_argument(OUTPUT_OPTION, dest="log_dir", type=Path, default=Path(default),
+                        metavar="DIR", help=f"{what} (default: {default})")
+    for name in old_names:
+        parser.add_argument(name, dest="log_dir", type=Path, default=argparse.SUPPRESS,
+                            help=argparse.SUPPRESS)
 
 
 def add_window_arguments(parser: argparse.ArgumentParser) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,12 +19,23 @@ import numpy as np
 from mavsysid.cli.options import DEFAULT_BOX, allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.formats.setpoints_csv import write_setpoints_csv
-from mavsysid.pipeline.plan import run_plan
+from mavsysid.pipeline.plan import (
+    SATURATION_WARNING,
+    PlanPreview,
+    preview_plan,
+    run_plan,
+    with_margins,
+)
 from mavsysid.planner.plan_file import write_trajectory
 from mavsysid.planner.results import PlannerSettings, PlanResult
-from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, load_vehicle
 
-__all__ = ["add_arguments", "format_summary", "main"]
+__all__ = ["DEFAULT_ROTOR_HEADROOM", "add_arguments", "format_preview", "format_summary", "main",
+           "saturation_warning"]
+
+#: `plan`'s rotor headroom unless --rotor-headroom says otherwise: with it the README's plan
+#: command predicts ≤ 1 % rotor saturation on every shipped vehicle (docs/plan-preview.md).
+DEFAULT_ROTOR_HEADROOM = 0.15
 
 _DEFAULT_TIME = 30.0
 _KIND_LABELS = {"dopt": "information-gathering planner", "random": "random baseline"}
@@ -78,10 +90,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--budget", type=float, default=30.0, metavar="S",
                         help="longest flight, stopping included, in s (default: 30)")
     parser.add_argument("--time", type=float, metavar="S",
-                        help=f"planning time in s (default: {_DEFAULT_TIME:g}, or no limit "
-                        "with --samples; 0 with --samples: no limit)")
+                        help=f"planning time in s (default: {_DEFAULT_TIME:g}; with --samples "
+                        "whichever comes first, 0: no limit)")
     parser.add_argument("--samples", type=int, metavar="N",
-                        help="stop after N samples: the result then depends only on the seed")
+                        help="stop after N samples, with no time limit unless --time: the "
+                        "result then depends only on the seed")
     parser.add_argument("--box", default=DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
                         help=f"flight volume in m, world ENU (default: {DEFAULT_BOX})")
     parser.add_argument("--start", metavar="X,Y,Z,YAW",
@@ -92,10 +105,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         f"the last {100 * PlannerSettings.refine_share:.0f}%% of the planning time "
                         f"(default: {PlannerSettings.refine_steps}; 0: paper's search only)")
     parser.add_argument("--rotor-headroom", type=float, metavar="F",
-                        default=PlannerSettings.rotor_headroom,
+                        default=DEFAULT_ROTOR_HEADROOM,
                         help="fraction of the rotor n² range left free at each end, for the "
                         "autopilot and for a vehicle whose θ differs from the prior's "
-                        f"(default: {PlannerSettings.rotor_headroom:g})")
+                        f"(default: {DEFAULT_ROTOR_HEADROOM:g})")
+    for name, what in (("body-rate", "body rate"), ("yaw-acceleration", "yaw acceleration"),
+                       ("thrust", "thrust above hover")):
+        parser.add_argument(f"--{name}-margin", type=float, default=0.0, metavar="F",
+                            help=f"share of the vehicle's {what} limit left unused (default: "
+                            "0; the demo plans with 0.3)")
+    parser.add_argument("--no-preview", action="store_true",
+                        help="skip the offline flight of the plan that predicts its rotor "
+                        "saturation")
     parser.add_argument("--rotor-confidence", type=float, metavar="Z",
                         default=PlannerSettings.rotor_confidence,
                         help="chance-constrained rotor check: each rotor limit holds at the "
@@ -154,8 +175,15 @@ def main(args: argparse.Namespace) -> int:
     for path in written.values():
         if path.is_dir():
             raise InputError(f"{path}: is a directory; expected a file name to write")
-    result = run_plan(args.vehicle, settings, random=args.random,
-                      progress=args.verbosity >= 0)
+    config = with_margins(load_vehicle(args.vehicle), args.body_rate_margin,
+                          args.yaw_acceleration_margin, args.thrust_margin)
+
+    def say(text: str) -> None:
+        if args.verbosity >= 0:
+            print(f"mavsysid plan: {text}", file=sys.stderr, flush=True)
+
+    result = run_plan(config, settings, random=args.random, progress=args.verbosity >= 0,
+                      say=say)
     write_trajectory(args.output, result)
     if args.csv is not None:
         write_setpoints_csv(args.csv, result.trajectory)
@@ -164,4 +192,32 @@ def main(args: argparse.Namespace) -> int:
 
         write_plan_rrd(args.rrd, result)
     print(format_summary(result, written, args.verbosity))
+    if not args.no_preview:
+        if args.verbosity >= 0:
+            print("mavsysid plan: flying the plan on the offline simulator (nominal "
+                  f"{config.name}) to predict rotor saturation", file=sys.stderr, flush=True)
+        preview = preview_plan(result.trajectory, load_vehicle(args.vehicle))
+        if args.verbosity >= 0:
+            print(format_preview(preview))
+        if (warning := saturation_warning(preview)) is not None:
+            print(f"mavsysid plan: warning: {warning}", file=sys.stderr)
     return 0
+
+
+def saturation_warning(preview: PlanPreview) -> str | None:
+    """One line when the predicted rotor saturation is above `SATURATION_WARNING`."""
+    if preview.saturation <= SATURATION_WARNING:
+        return None
+    return (f"rotors predicted saturated in {100 * preview.saturation:.1f} % of control "
+            f"ticks (above {100 * SATURATION_WARNING:g} %): the autopilot has no room to "
+            "correct; raise --rotor-headroom or the margins")
+
+
+def format_preview(preview: PlanPreview) -> str:
+    """The plan's peaks and its predicted rotor saturation, two lines."""
+    return (f"  peaks      speed {preview.speed:.2f} m/s, tilt "
+            f"{np.degrees(preview.tilt):.1f}°, body rate {preview.body_rate:.2f} rad/s, "
+            f"thrust {preview.thrust:.2f} m g\n"
+            f"  preview    rotors saturated in {100 * preview.saturation:.1f} % of control "
+            f"ticks on the offline simulator (nominal θ, motor lag); tracking within "
+            f"{100 * preview.tracking_max:.1f} cm")

@@ -22,6 +22,7 @@ from mavsysid.flight.mavlink_setup import signing_key_from_file
 from mavsysid.flight.simvehicle.endpoint import SimEndpoint, SimSettings
 from mavsysid.pipeline.simulate import parse_hidden_effects
 from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.model_effects import EFFECTS
 
 __all__ = ["add_arguments", "main", "settings_from_args"]
 
@@ -63,8 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="publish the true pose and rotor speeds")
     parser.add_argument("--hidden-effect", action="append", default=[], metavar="SPEC",
                         help="add a model effect to the truth only, as NAME:KEY=VALUE,... "
-                        "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2 (names as in "
-                        "mavsysid simulate)")
+                        "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2; names: "
+                        f"{', '.join(EFFECTS)}")
     parser.add_argument("--fault", action="append", default=[], metavar="FAULT",
                         help="inject a fault (repeatable): deny-arm; mode:NAME@S (a pilot "
                         "switches to mode NAME at sim time S); silent@S (the link goes quiet)")

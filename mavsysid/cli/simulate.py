@@ -13,14 +13,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from mavsysid.cli.options import add_output_folder
 from mavsysid.flight.offline.simulator import SimulationSettings
 from mavsysid.pipeline.simulate import (
     OfflineFlight,
     parse_hidden_effects,
     run_offline_flight,
 )
+from mavsysid.vehicle.model_effects import EFFECTS
 
 __all__ = ["add_arguments", "format_summary", "main"]
+
 
 def format_summary(flight: OfflineFlight, verbosity: int = 0) -> str:
     """The text printed after a flight (``verbosity`` < 0: only the flight directory)."""
@@ -52,8 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the offline-flight commands."""
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
-    parser.add_argument("--logs", default="logs", type=Path,
-                        help="folder for the new flight directory (default: logs)")
+    add_output_folder(parser, "logs", "folder for the new flight directory", ("--logs",))
     parser.add_argument("--name", help="flight directory name (default: a timestamp)")
     parser.add_argument("--duration", type=float,
                         help="built-in excitation duration in s (default: 30)")
@@ -63,8 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hidden-effect", action="append", default=[], metavar="SPEC",
                         help="add a model effect to the truth only, as NAME:KEY=VALUE,... "
                         "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2; names: "
-                        "body_drag, rotor_drag_linear, motor_lag, pose_delay, marker_offset, "
-                        "cog_offset, wind, thrust_drift, ground_effect")
+                        f"{', '.join(EFFECTS)}")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default: 0)")
     parser.add_argument("--physics-rate", type=float, default=1000.0, metavar="HZ",
                         help="truth integration rate, >= 500 Hz (default: 1000)")
@@ -85,7 +86,7 @@ def main(args: argparse.Namespace) -> int:
         motor_lag=not args.no_motor_lag, sensor_noise=not args.no_noise, seed=args.seed,
     )
     hidden = parse_hidden_effects(args.hidden_effect)
-    flight = run_offline_flight(args.vehicle, args.logs, args.name, args.duration, settings,
+    flight = run_offline_flight(args.vehicle, args.log_dir, args.name, args.duration, settings,
                                 hidden, args.trajectory)
     print(format_summary(flight, args.verbosity))
     return 0

@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mavsysid.cli.options import allow_negative_values, parse_numbers
+from mavsysid.cli.options import add_output_folder, allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
@@ -26,7 +26,7 @@ from mavsysid.pipeline.stream import StreamOutcome, run_stream
 if TYPE_CHECKING:
     from mavsysid.pipeline.replanned_stream import ReplanSettings
 
-__all__ = ["add_arguments", "format_summary", "main"]
+__all__ = ["add_arguments", "format_dry_run", "format_summary", "main"]
 
 
 def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
@@ -58,6 +58,31 @@ def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
     return "\n".join(lines)
 
 
+def format_dry_run(outcome: StreamOutcome, verbosity: int = 0) -> str:
+    """The text printed after ``--dry-run``: the box, the fence and what would change."""
+    d, meta = outcome.directory, outcome.meta
+    if verbosity < 0:
+        return str(d)
+    traj, fence = meta["trajectory"], meta.get("fence")
+    box = traj["box"]
+    lines = [f"Dry run of the {traj['duration']:.1f} s trajectory {traj['file']}: every "
+             "check passed; nothing armed, no parameter changed.",
+             f"  box        x {box[0]:g}..{box[3]:g}, y {box[1]:g}..{box[4]:g}, "
+             f"z {box[2]:g}..{box[5]:g} m ({traj.get('box_source', '?')})"]
+    if fence:
+        lines.append(f"  fence      {fence['kind']} {fence['margin_m']:g} m outside the box, "
+                     f"{fence['alt_max_m']:.1f} m above home")
+    else:
+        lines.append("  fence      none (--no-fence)")
+    planned = meta.get("dry_run_parameters", {})
+    for name, values in planned.items():
+        lines.append(f"  would set  {name} {values['now']:g} -> {values['flight']:g}")
+    if not planned:
+        lines.append("  would set  no parameter")
+    lines.append(f"  recorded   {d}")
+    return "\n".join(lines)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid stream``."""
     allow_negative_values(parser)  # "--box -2,-2,0.5,2,2,2.5"
@@ -73,14 +98,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="setpoint rate (default: 50)")
     parser.add_argument("--telemetry-rate", type=float, default=50.0, metavar="HZ",
                         help="rate asked for pose, attitude and ESC telemetry (default: 50)")
-    parser.add_argument("--log-dir", type=Path, default=Path("logs"), metavar="DIR",
-                        help="where the flight directory is created (default: ./logs)")
+    add_output_folder(parser, "logs", "folder for the new flight directory")
     parser.add_argument("--no-land", action="store_true",
                         help="keep hovering at the end instead of landing")
     parser.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
-                        help="flight box in m, world ENU (default: the vehicle file's [flight] "
-                        "box, else the trajectory's; a box stored in the trajectory never "
-                        "widens the operator's)")
+                        help="the operator's flight box in m, world ENU (default: the "
+                        "[flight] box of --vehicle; one of the two is required); a box stored "
+                        "in the trajectory file can only narrow it")
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
                         help="MAVLink 2 signing: a file holding the passphrase")
     parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
@@ -124,6 +148,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "planner's; with --replan-samples keep it small, it is hovered)")
     parser.add_argument("--replan-seed", type=int, default=0, metavar="N",
                         help="with --replan-budget: sampler seed (default: 0)")
+    parser.add_argument("--dry-run", action="store_true",
+                        help="connect and run every check; print the box, the fence and the "
+                        "parameters the flight would change; arm nothing, change nothing")
     parser.add_argument("--set-limits", action="store_true",
                         help="raise the autopilot's position-controller limits (ArduPilot "
                         "PSC_JERK_*, ANGLE_MAX, WPNAV_*, ATC_SLEW_YAW; PX4 MPC_*) that the "
@@ -152,7 +179,7 @@ def _settings(args: argparse.Namespace) -> StreamSettings:
         position_timeout=args.position_timeout, max_tracking_error=args.max_tracking_error,
         link_loss=args.link_loss, prearm_timeout=args.prearm_timeout,
         log_dir=args.log_dir, lockstep=args.lockstep, fence=not args.no_fence,
-        set_limits=args.set_limits)
+        set_limits=args.set_limits, dry_run=args.dry_run)
 
 
 def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
@@ -202,9 +229,12 @@ def main(args: argparse.Namespace) -> int:
         if verbose:
             print(f"mavsysid stream: {text}", file=sys.stderr, flush=True)
 
+    if settings.dry_run and replan is not None:
+        raise InputError("--dry-run flies nothing: it takes no --replan-budget")
     if replan is None:
         outcome = run_stream(args.trajectory, settings, args.vehicle, say, progress=verbose)
-        print(format_summary(outcome, args.verbosity))
+        print(format_dry_run(outcome, args.verbosity) if settings.dry_run
+              else format_summary(outcome, args.verbosity))
         return 0
     from mavsysid.pipeline.replanned_stream import run_replanned_stream
 

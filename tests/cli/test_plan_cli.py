@@ -128,8 +128,10 @@ def test_no_feasible_plan_exits_3_and_writes_nothing(tmp_path, monkeypatch, caps
 
     monkeypatch.setattr(sys.modules["mavsysid.planner.rrbt"], "plan", fail)
     assert main(["plan", "-o", str(tmp_path / "t.json"), "--csv", str(tmp_path / "t.csv")]) == 3
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "no feasible trajectory found" in err
+    lines = capsys.readouterr().err.splitlines()
+    # The status line of the search, then the failure in one line.
+    assert lines[0].startswith("mavsysid plan: planning a 30 s flight for firefly")
+    assert len(lines) == 2 and "no feasible trajectory found" in lines[1]
     assert not any(tmp_path.iterdir())
 
 

@@ -207,3 +207,35 @@ def test_rows_by_column_name_fill_the_rest_with_zero(tmp_path):
     assert (xkf1.Roll, xkf1.PD, xkf1.OH) == (1.5, 6.0, 0)
     with pytest.raises(KeyError, match="Altitude"):
         write_dataflash(tmp_path / "c.bin", _WRITTEN, [("XKF1", {"TimeUS": 1, "Altitude": 2.0})])
+
+
+def test_untimed_mode_of_a_pre_2015_log_takes_the_time_before_it(tmp_path):
+    """ArduCopter 3.2's MODE has no time field ("Mh" Mode,ThrCrs) and its ATT a TimeMS: each
+    mode change is read at the last timed message before it in the file, the order
+    pymavlink reads them in; the mode number becomes pymavlink's name."""
+    from mavsysid.formats.dataflash import read_dataflash_modes
+    from pymavlink import DFReader, mavutil
+
+    formats = {"ATT": (1, "IccccCC", "TimeMS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw"),
+               "MODE": (2, "Mh", "Mode,ThrCrs")}
+    rng = np.random.default_rng(3)
+    stamps = np.cumsum(rng.integers(5, 50, 200))  # ms since boot
+    switch = {20: 0, 90: 4, 150: 9}  # after the i-th ATT: STABILIZE, GUIDED, LAND
+    rows: list[tuple[str, tuple[Any, ...]]] = []
+    for i, ms in enumerate(stamps):
+        rows.append(("ATT", (int(ms), 0, 0, 0, 0, 0, 0)))
+        if i in switch:
+            rows.append(("MODE", (switch[i], 0)))
+    path = tmp_path / "old.bin"
+    write_dataflash(path, formats, rows)
+    modes = read_dataflash_modes(path)
+    assert modes is not None
+    assert modes.t.tolist() == pytest.approx([stamps[i] * 1e-3 for i in switch])
+    names = mavutil.mode_mapping_acm
+    assert modes.modes == tuple(names[m].upper() for m in switch.values())
+    # pymavlink reads the same messages, MODE after the ATT it follows.
+    log = DFReader.DFReader_binary(str(path))
+    kinds = []
+    while (m := log.recv_match(type=["ATT", "MODE"])) is not None:
+        kinds.append(m.get_type())
+    assert [kinds[k - 1] for k, kind in enumerate(kinds) if kind == "MODE"] == ["ATT"] * 3

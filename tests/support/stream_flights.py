@@ -30,7 +30,10 @@ __all__ = [
     "SimProcess",
     "export_excitation",
     "flight_dir",
+    "read_all_parameters",
+    "read_parameters",
     "read_tlog",
+    "run_mavsysid",
     "run_stream",
     "start_stream",
     "wait_for",
@@ -105,9 +108,19 @@ class SimProcess:
         self.stop()
 
 
+def _operator_box(args: Sequence[str]) -> tuple[str, ...]:
+    """``--box`` with the tests' `BOX`, unless the arguments give a box or a vehicle file
+    (whose ``[flight] box`` is then the operator's)."""
+    if "--box" in args or "--vehicle" in args:
+        return ()
+    return ("--box", ",".join(f"{b:g}" for b in BOX))
+
+
 def run_stream(trajectory: Path, *args: str, cwd: Path, timeout: float = 180.0,
                lockstep: bool = True) -> subprocess.CompletedProcess[str]:
-    """``mavsysid stream TRAJECTORY ARGS`` to completion, output captured (lock-step)."""
+    """``mavsysid stream TRAJECTORY ARGS`` to completion, output captured (lock-step; the
+    operator's box is `BOX` unless ARGS give ``--box`` or ``--vehicle``)."""
+    args = (*args, *_operator_box(args))
     args = (*args, "--lockstep") if lockstep else args
     return subprocess.run(_mavsysid("stream", str(trajectory), *args), capture_output=True,
                           text=True, env=_ENV, cwd=cwd, timeout=timeout, check=False)
@@ -115,7 +128,9 @@ def run_stream(trajectory: Path, *args: str, cwd: Path, timeout: float = 180.0,
 
 def start_stream(trajectory: Path, *args: str, cwd: Path,
                  lockstep: bool = True) -> subprocess.Popen[str]:
-    """``mavsysid stream TRAJECTORY ARGS`` started (lock-step); stderr to ``cwd/stream.err``."""
+    """``mavsysid stream TRAJECTORY ARGS`` started (lock-step, box as in `run_stream`);
+    stderr to ``cwd/stream.err``."""
+    args = (*args, *_operator_box(args))
     args = (*args, "--lockstep") if lockstep else args
     err = open(cwd / "stream.err", "w")  # noqa: SIM115 - the child keeps it open
     return subprocess.Popen(_mavsysid("stream", str(trajectory), *args), stdout=subprocess.PIPE,
@@ -148,3 +163,65 @@ def read_tlog(path: Path) -> list[tuple[float, Any]]:
             out.append((m._timestamp, m))
     log.close()
     return out
+
+
+def run_mavsysid(*args: str, cwd: Path, timeout: float = 120.0
+                 ) -> subprocess.CompletedProcess[str]:
+    """``mavsysid ARGS`` to completion, output captured."""
+    return subprocess.run(_mavsysid(*args), capture_output=True, text=True, env=_ENV, cwd=cwd,
+                          timeout=timeout, check=False)
+
+
+def read_parameters(port: int, names: Sequence[str], timeout: float = 30.0
+                    ) -> dict[str, float]:
+    """Parameter values read with pymavlink alone from a vehicle sending to 127.0.0.1:PORT
+    (``mavsysid sim --connect udpout:127.0.0.1:PORT``), independently of mavsysid's
+    ground station; an ArduPilot-style vehicle (values carried as floats)."""
+    mavutil = load_mavutil()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=254)
+    try:
+        if conn.wait_heartbeat(timeout=timeout) is None:
+            raise AssertionError(f"no heartbeat on 127.0.0.1:{port}")
+        values: dict[str, float] = {}
+        deadline = time.monotonic() + timeout
+        while len(values) < len(names) and time.monotonic() < deadline:
+            for name in names:
+                if name not in values:
+                    conn.mav.param_request_read_send(conn.target_system, conn.target_component,
+                                                     name.encode("ascii"), -1)
+            end = time.monotonic() + 1.0
+            while time.monotonic() < end and len(values) < len(names):
+                m = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.2)
+                if m is not None:
+                    pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
+                    values[pid.rstrip("\0")] = float(m.param_value)
+        return values
+    finally:
+        conn.close()
+
+
+def read_all_parameters(port: int, timeout: float = 30.0) -> dict[str, float]:
+    """Every parameter of a vehicle sending to 127.0.0.1:PORT (PARAM_REQUEST_LIST), read
+    with pymavlink alone, as `read_parameters`."""
+    mavutil = load_mavutil()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=254)
+    try:
+        if conn.wait_heartbeat(timeout=timeout) is None:
+            raise AssertionError(f"no heartbeat on 127.0.0.1:{port}")
+        values: dict[str, float] = {}
+        count = None
+        deadline = time.monotonic() + timeout
+        while (count is None or len(values) < count) and time.monotonic() < deadline:
+            conn.mav.param_request_list_send(conn.target_system, conn.target_component)
+            end = time.monotonic() + 2.0
+            while time.monotonic() < end and (count is None or len(values) < count):
+                m = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.2)
+                if m is not None:
+                    pid = m.param_id if isinstance(m.param_id, str) else m.param_id.decode()
+                    values[pid.rstrip("\0")] = float(m.param_value)
+                    count = m.param_count
+        if count is None or len(values) < count:
+            raise AssertionError(f"read {len(values)} of {count} parameters")
+        return values
+    finally:
+        conn.close()

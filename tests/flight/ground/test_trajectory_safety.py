@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -148,32 +149,83 @@ def test_refusal_names_quantity_value_limit_and_time(tmp_path, bases, firefly, m
 
 
 def test_file_box_never_widens_the_operators(tmp_path, bases, firefly):
-    """A huge box in the file is ignored when --box or the vehicle's box is given."""
+    """A huge box in the file never widens --box or the vehicle's box: it only narrows."""
     doc = json.loads(json.dumps(bases[1]))
     doc["box"] = [-1000.0, -1000.0, -1000.0, 1000.0, 1000.0, 1000.0]
     small = (-1.0, -1.0, 0.5, 1.0, 1.0, 2.5)  # the figure spans x ±1.3
     assert operator_box(small, BOX, doc["box"], "f") == (small, "--box")
     assert operator_box(None, small, doc["box"], "f")[0] == small
-    assert operator_box(None, None, doc["box"], "f")[1] == "the trajectory file's box"
+    with pytest.raises(InputError, match="no flight box from the operator"):
+        operator_box(None, None, doc["box"], "f")
+    narrow = (-0.5, -3.0, 1.0, 3.0, 0.5, 2.0)
+    box, source = operator_box(small, None, narrow, "f")
+    assert box == (-0.5, -1.0, 1.0, 1.0, 0.5, 2.0) and source.endswith("narrowed by the "
+                                                                        "trajectory file's box")
+    with pytest.raises(InputError, match="does not overlap --box"):
+        operator_box(small, None, (5.0, 5.0, 5.0, 6.0, 6.0, 6.0), "f")
     path = tmp_path / "wide.json"
     path.write_text(json.dumps(doc))
     with pytest.raises(JobFailedError, match="leaves the box"):
         load_plan(path, "firefly", small)
     # A vehicle file with its own box: used when no --box is given.
     vehicle = tmp_path / "boxed.toml"
-    vehicle.write_text(vehicle_to_toml(firefly)
+    vehicle.write_text(vehicle_to_toml(replace(firefly, box=None))
                        + "\n[flight]\nbox = [-1.0, -1.0, 0.5, 1.0, 1.0, 2.5]\n")
     with pytest.raises(JobFailedError,
                        match=r"leaves the box .* \(box: the vehicle's \[flight\] box\)$"):
         load_plan(path, vehicle, None)
+    # The configuration embedded in the trajectory file is the file's: its box is no
+    # operator's box.
+    with pytest.raises(InputError, match="no flight box from the operator"):
+        load_plan(path, None, None)
 
 
-def test_no_box_anywhere_is_bad_input(tmp_path, bases):
+def _inside(inner, outer) -> bool:
+    return all(inner[k] >= outer[k] - 1e-12 for k in range(3)) and all(
+        inner[k] <= outer[k] + 1e-12 for k in range(3, 6))
+
+
+def test_no_file_box_widens_the_operators_box(tmp_path, bases, firefly):
+    """Every mutated file (the mutations above, seeded) under a seeded operator box, given
+    as --box or as the vehicle's [flight] box: the box in use lies inside the operator's,
+    and every setpoint the streamer would send for an accepted file lies inside it too."""
+    rng = np.random.default_rng(23)
+    vehicle = tmp_path / "boxed.toml"
+    accepted = refused = 0
+    for name, text in mutated_files(bases, 2 * len(MUTATIONS), seed=31):
+        try:
+            file_box = json.loads(text).get("box")
+        except (ValueError, AttributeError):
+            file_box = None
+        lo = rng.uniform([-3.0, -3.0, 0.0], [-1.0, -1.0, 0.6])
+        operator = tuple(float(v) for v in (*lo, *(lo + rng.uniform(2.5, 5.0, 3))))
+        by_vehicle = bool(rng.integers(2))
+        if by_vehicle:
+            vehicle.write_text(vehicle_to_toml(replace(firefly, box=operator)))
+        path = tmp_path / f"{name}.json"
+        path.write_text(text)
+        try:
+            plan, _config, box = load_plan(path, vehicle if by_vehicle else "firefly",
+                                           None if by_vehicle else operator)
+        except (InputError, JobFailedError) as error:
+            _one_line(error)
+            refused += 1
+            continue
+        accepted += 1
+        assert _inside(box, operator), (name, box, operator, file_box)
+        sent, stopped = streamed_setpoints(plan.trajectory, firefly, box)
+        assert stopped is None and unsafe(sent, firefly, operator) == [], name
+    assert accepted and refused
+
+
+def test_no_box_anywhere_is_bad_input(tmp_path, bases, firefly):
     doc = dict(bases[1], box=None)
     path = tmp_path / "nobox.json"
     path.write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="has no flight box; give one with --box"):
-        load_plan(path, "firefly", None)
+    vehicle = tmp_path / "unboxed.toml"
+    vehicle.write_text(vehicle_to_toml(replace(firefly, box=None)))
+    with pytest.raises(InputError, match="no flight box from the operator; give --box"):
+        load_plan(path, vehicle, None)
 
 
 def test_an_excursion_between_samples_is_found(firefly):
@@ -292,10 +344,11 @@ def test_vehicle_flight_box_is_validated(tmp_path, firefly, table, fragment):
     """The vehicle's optional [flight] box: six numbers, each min below its max; it
     survives a write and read back."""
     path = tmp_path / "v.toml"
-    path.write_text(vehicle_to_toml(firefly) + f"\n[flight]\n{table}\n")
+    path.write_text(vehicle_to_toml(replace(firefly, box=None)) + f"\n[flight]\n{table}\n")
     with pytest.raises(InputError, match=re.escape(fragment)):
         load_vehicle(path)
-    path.write_text(vehicle_to_toml(firefly) + "\n[flight]\nbox = [-1, -1, 0.5, 1, 1, 2.5]\n")
+    path.write_text(vehicle_to_toml(replace(firefly, box=None))
+                    + "\n[flight]\nbox = [-1, -1, 0.5, 1, 1, 2.5]\n")
     boxed = load_vehicle(path)
     assert boxed.box == (-1.0, -1.0, 0.5, 1.0, 1.0, 2.5)
     path.write_text(vehicle_to_toml(boxed))
