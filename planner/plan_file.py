@@ -40,6 +40,8 @@ def plan_file_for(result: PlanResult) -> dict[str, Any]:
         **{k: getattr(stats, k) for k in ("samples", "vertices", "edges", "beliefs",
                                           "edges_attempted", "beliefs_propagated", "elapsed")},
         "time_to_first_solution": _finite_or_none(stats.time_to_first_solution),
+        "cpu_time": stats.cpu_time, "search_stop": stats.search_stop or None,
+        "shortfall": result.shortfall or None,
         "refinement": {"share": settings.refine_share, "max_steps": settings.refine_steps,
                        "steps": stats.refine_steps, "accepted": stats.refine_accepted},
     }

@@ -9,7 +9,12 @@ from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.kinematic_limits import KinematicLimits
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-__all__ = ["PlanProgress", "PlanResult", "PlannerGraph", "PlannerSettings", "PlannerStats"]
+__all__ = ["BUSY_CORE_SHARE", "PlanProgress", "PlanResult", "PlannerGraph", "PlannerSettings",
+           "PlannerStats"]
+
+#: A planner with less than this share of a core (CPU time over planning time) ran on a
+#: busy machine, and says so.
+BUSY_CORE_SHARE = 0.8
 
 
 @dataclass(frozen=True)
@@ -22,7 +27,9 @@ class PlannerSettings:
         Longest flight, s, including the final stopping segment.
     planning_time : float
         Wall-clock planning time, s (the planner stops at whichever of this and
-        ``max_samples`` comes first).
+        ``max_samples`` comes first). The graph search gets the first
+        1 − ``refine_share`` of it, more (up to half of it) while its best flight uses
+        less than 90 % of the budget.
     max_samples : int or None
         Sample budget: with it (and an unlimited planning time) the result depends only
         on the seed, not on the machine or its load.
@@ -143,7 +150,7 @@ class PlannerStats:
     beliefs_propagated : int
         Belief propagations along edges (kept or pruned).
     elapsed : float
-        Planning wall time, s.
+        Planning time, s, on the planner's clock (the wall clock unless one was given).
     time_to_first_solution : float or None
         Wall time until the first feasible plan, s.
     edge_time, propagation_time : float
@@ -154,6 +161,16 @@ class PlannerStats:
         in the refinement.
     refine_steps, refine_accepted : int
         Refinement perturbations tried and kept (`mavsysid.planner.refine`).
+    cpu_time : float
+        CPU time of the planning thread, s: below ``elapsed`` on a busy machine.
+    search_stop : str
+        What ended the graph search: "samples" (``max_samples``), "time" (its share of the
+        planning time, with a flight shorter than 90 % of the budget), "filled" (its share
+        of the planning time, with a flight that fills the budget); "" if unknown.
+    refusals : dict of str to int
+        Sampled connections refused, by reason: a constraint of
+        `mavsysid.planner.feasibility.CONSTRAINTS`, or "autopilot QUANTITY" for a limit of
+        ``PlannerSettings.autopilot_limits``.
     """
 
     samples: int
@@ -169,6 +186,9 @@ class PlannerStats:
     best_history: np.ndarray
     refine_steps: int = 0
     refine_accepted: int = 0
+    cpu_time: float = 0.0
+    search_stop: str = ""
+    refusals: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -217,6 +237,9 @@ class PlanResult:
     settings : PlannerSettings
     stats : PlannerStats
     graph : PlannerGraph
+    shortfall : str
+        "" when the flight uses at least 90 % of the budget, else one line saying how
+        short it is, why, and what to try (`mavsysid.planner.plan_result.shortfall_note`).
     """
 
     kind: str
@@ -229,3 +252,4 @@ class PlanResult:
     settings: PlannerSettings
     stats: PlannerStats
     graph: PlannerGraph = field(repr=False)
+    shortfall: str = ""

@@ -21,6 +21,7 @@ path with the most distinct segments instead.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 from mavsysid.planner.best_flight import refine_best
@@ -35,18 +36,24 @@ __all__ = ["plan", "search_graph"]
 
 
 def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: str,
-                 progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
-    """Run the graph search with an objective: "dopt" or "random" (most distinct segments)."""
+                 progress: Callable[[PlanProgress], None] | None = None,
+                 clock: Callable[[], float] = time.perf_counter) -> PlanResult:
+    """Run the graph search with an objective: "dopt" or "random" (most distinct segments),
+    timed by ``clock`` (s; the wall clock by default)."""
     check_request(config, settings)
     warm_up(config, settings)
-    search = GraphSearch(config, settings, objective, progress)
+    search = GraphSearch(config, settings, objective, progress, clock)
     search.run()
     return plan_result(search, objective, refine_best(search))
 
 
 def plan(config: VehicleConfig, settings: PlannerSettings | None = None,
-         progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
+         progress: Callable[[PlanProgress], None] | None = None,
+         clock: Callable[[], float] = time.perf_counter) -> PlanResult:
     """Plan the flight within the budget that minimises the predicted D-optimality.
+
+    ``settings.planning_time`` is measured on ``clock`` (s; the wall clock by default).
+    A flight shorter than 90 % of the budget comes with `PlanResult.shortfall` saying why.
 
     Raises
     ------
@@ -55,4 +62,4 @@ def plan(config: VehicleConfig, settings: PlannerSettings | None = None,
     JobFailedError
         No feasible trajectory was found in the planning time.
     """
-    return search_graph(config, settings or PlannerSettings(), "dopt", progress)
+    return search_graph(config, settings or PlannerSettings(), "dopt", progress, clock)
