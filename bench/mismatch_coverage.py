@@ -51,7 +51,7 @@ from mavsysid.estimation.results import Z95, EstimationResult
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
 from mavsysid.pipeline.estimate import check_result
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
-from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
 from bench.diagnose_accuracy import CASES
@@ -83,7 +83,7 @@ def truth_side(config: VehicleConfig, truth: str) -> tuple[np.ndarray, list[Mode
 
 def hover_speed(config: VehicleConfig, c_T: float) -> float:
     """n_h = √(m g / (rotors · c_T)), rad/s."""
-    return math.sqrt(config.mass * GRAVITY / (config.rotor_count * c_T))
+    return float(rotor_speed_for_thrust(c_T, config.hover_thrust / config.rotor_count))
 
 
 def scored(result: EstimationResult, config: VehicleConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -48,12 +48,13 @@ from scipy.signal import butter, filtfilt
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from mavsysid.estimation.readers.motor_curve import (  # noqa: E402
+from mavsysid.flight.mavlink_setup import load_mavutil  # noqa: E402
+from mavsysid.formats.motor_curve import (  # noqa: E402
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
 )
-from mavsysid.flight.mavlink_setup import load_mavutil  # noqa: E402
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle  # noqa: E402
+from mavsysid.vehicle.mav_model import collective_thrust, rotor_thrust  # noqa: E402
 
 #: The shared SITL build beside the checkout (``../shared/sitl``; a worktree one level deeper).
 SITL_DIR = next((d for d in (REPO.parent / "shared" / "sitl", REPO.parents[1] / "shared" / "sitl")
@@ -347,7 +348,7 @@ def hover_balance(found: dict[str, list[Any]], flight: Flight, vehicle: VehicleC
           f"{vehicle.mass * specific:.3f} N (IMU, {sel.sum()} samples)")
 
     def line(label: str, n: np.ndarray) -> None:
-        thrust = c_T * rho * np.sum(n**2, axis=1)
+        thrust = collective_thrust(c_T * rho, n)
         print(f"  {label:34s} n = {np.array2string(np.mean(n, axis=0), precision=1)} rad/s; "
               f"Σ c_T n² = {np.mean(thrust):.3f} N (sd {np.std(thrust):.3f}): "
               f"/ m g = {np.mean(thrust) / weight:.4f}, / m |f| = "
@@ -400,7 +401,7 @@ def yaw_balance(found: dict[str, list[Any]], flight: Flight, vehicle: VehicleCon
     n = rotor_speed_from_throttle(c, vehicle.limits.rotor_speed_max, vehicle.motor.thrust_expo)
     pos = [row for row in found.get("POS", []) if within(seconds([row]), flight.yaw)[0]]
     rho = air_density(float(np.mean(columns(pos, "Alt")))) if pos else air_density(490.0)
-    thrust = p.c_T * rho / air_density(REFERENCE_ALTITUDE) * n**2
+    thrust = rotor_thrust(p.c_T * rho / air_density(REFERENCE_ALTITUDE), n)
     eps = vehicle.rotor_directions
     arm2 = np.sum(vehicle.rotor_positions[:, :2] ** 2, axis=1)
     j_z, rate = p.J[2], 400.0

@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.formats.poselog import read_pose_log
-from mavsysid.formats.poselog_writer import write_pose_log
+from mavsysid.formats.poselog import read_pose_log, write_pose_log
 from mavsysid.pipeline.simulate import run_offline_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers.tlog import read_tlog as estimation_read_tlog
+from mavsysid.estimation.readers import READERS
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.poselog import read_pose_log
@@ -115,7 +115,7 @@ def test_tlog_holds_both_directions(ardupilot_flight):
     assert len(local) == pytest.approx(meta["samples"], abs=5)
     stamps = [t for t, _ in records]
     assert stamps == sorted(stamps)
-    streams = estimation_read_tlog(directory / "flight.tlog", load_vehicle("firefly"))
+    streams = READERS[".tlog"](directory / "flight.tlog", load_vehicle("firefly"))
     assert streams.pose is not None and streams.rotors
 
 
