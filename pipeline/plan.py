@@ -13,7 +13,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from mavsysid.planner.plan_request import check_request
-from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
+from mavsysid.planner.plan_result import PlanProgress, PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 from mavsysid.vehicle.kinematic_limits import KinematicLimits
 

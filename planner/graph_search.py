@@ -29,8 +29,8 @@ from mavsysid.planner.feasibility import check_segment
 from mavsysid.planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
 from mavsysid.planner.kinematic_check import exceeded_limits
 from mavsysid.planner.move_time import longest_segment, move_duration_range
+from mavsysid.planner.plan_result import PlanProgress
 from mavsysid.planner.refine import StopChoice
-from mavsysid.planner.results import PlannerSettings, PlanProgress
 from mavsysid.planner.search_setup import (
     initial_covariance,
     search_model,
@@ -44,6 +44,7 @@ from mavsysid.planner.segments import (
     connect_free_end,
     stop_segment,
 )
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.planner.yaw_branch import nearest_yaw_branch, wrap_angle
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
-from mavsysid.planner.results import PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES
 
 __all__ = ["plan_file_for", "write_trajectory"]

@@ -22,7 +22,8 @@ from mavsysid.errors import InputError
 from mavsysid.formats.setpoints_csv import write_setpoints_csv
 from mavsysid.pipeline.plan import autopilot_limits, run_plan
 from mavsysid.planner.plan_file import write_trajectory
-from mavsysid.planner.results import BUSY_CORE_SHARE, PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import BUSY_CORE_SHARE, PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
 
 __all__ = ["add_arguments", "format_summary", "main"]

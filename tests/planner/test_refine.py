@@ -17,9 +17,9 @@ from mavsysid.planner.refine import (
     StopChoice,
     split_path,
 )
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
 from mavsysid.planner.segments import VertexState, connect_fixed, to_piecewise
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
 from mavsysid.planner.search_stop import FULL_FLIGHT_SHARE
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 from tests.planner.test_move_time import STOCK
