@@ -3,7 +3,8 @@
 Per seed: starts ``../shared/sitl/arducopter --model x`` (loopback TCP only) with
 ``copter.parm`` and ``vehicle/configs/sitl_quad.parm``, runs ``mavsysid experiment
 --connect tcp:127.0.0.1:PORT --vehicle sitl_quad --budget B --samples N --refine-steps R
---seed S`` (the limits read from SITL, its stock ones), stops SITL by its PID, and prints
+--seed S --prearm-timeout 300`` (the limits read from SITL, its stock ones; a loaded
+machine slows SITL's EKF start), stops SITL by its PID, and prints
 the command's exit code and last line. Then, on the flight's own ``flight.tlog``, per
 parameter against `vehicle/configs/sitl_quad.toml`'s reference (docs/vehicles/sitl_quad.md):
 what ``estimate`` computes before its checks (the EKF and batch refinement, the final
@@ -17,6 +18,7 @@ estimate) and the force and torque balance
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
 import tempfile
@@ -71,13 +73,15 @@ def main() -> None:
                 [sys.executable, "-m", "mavsysid", "experiment", "--connect", sitl.connect,
                  "--vehicle", "sitl_quad", "--budget", f"{args.budget:g}", "--samples",
                  str(args.samples), "--refine-steps", str(args.refine_steps), "--seed",
-                 str(seed), "--log-dir", str(logs)],
+                 str(seed), "--prearm-timeout", "300", "--log-dir", str(logs)],
                 capture_output=True, text=True, check=False)
         last = (done.stderr.strip().splitlines() or [""])[-1]
         print(f"seed {seed}: exit {done.returncode}" + ("" if done.returncode == 0
                                                         else f": {last}"), flush=True)
         flights = [p for p in logs.iterdir() if p.is_dir()] if logs.is_dir() else []
-        if flights and (flights[0] / "flight.tlog").is_file():
+        flown = flights and json.loads((flights[0] / "meta.json").read_text()).get(
+            "status") == "complete"
+        if flown:
             per_parameter(flights[0] / "flight.tlog")
         sys.stdout.flush()
     print(f"flights in {work}")

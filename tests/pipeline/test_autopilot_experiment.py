@@ -38,7 +38,8 @@ def test_experiment_on_sitl_estimates_c_T_within_10_percent(tmp_path):
         done = subprocess.run(
             [sys.executable, "-m", "mavsysid", "experiment", "--connect", sitl.connect,
              "--vehicle", "sitl_quad", "--budget", "20", "--samples", "200",
-             "--refine-steps", "300", "--seed", "1", "--log-dir", str(logs)],
+             "--refine-steps", "300", "--seed", "1", "--prearm-timeout", "300",
+             "--log-dir", str(logs)],
             capture_output=True, text=True, cwd=tmp_path, timeout=1200, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     (flight,) = [p for p in logs.iterdir() if p.is_dir()]
