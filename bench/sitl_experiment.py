@@ -12,7 +12,7 @@ estimate) and the force and torque balance
 (`mavsysid.estimation.wrench_balance.fit_wrench_balance`, with its determination status).
 
     python bench/sitl_experiment.py [--seeds 1 2 3] [--budget 20] [--samples 200]
-        [--refine-steps 300] [--keep DIR]
+        [--refine-steps 300] [--keep DIR] [--wait-ready]
 """
 
 from __future__ import annotations
@@ -30,6 +30,32 @@ sys.path.insert(0, str(REPO))
 from tests.support.sitl import running_sitl  # noqa: E402
 
 SITL_PARMS = REPO / "vehicle" / "configs" / "sitl_quad.parm"
+#: MAV_SYS_STATUS_PREARM_CHECK.
+_PREARM_BIT = 0x10000000
+
+
+def wait_ready_to_arm(connect: str, timeout: float = 600.0) -> float:
+    """Wall seconds until SITL's SYS_STATUS says its pre-arm checks pass, asked for one
+    message at a time (MAV_CMD_REQUEST_MESSAGE), so no stream rate is left set on the link."""
+    import time
+
+    from pymavlink import mavutil
+
+    start = time.monotonic()
+    link = mavutil.mavlink_connection(connect, source_system=250, retries=5)
+    try:
+        link.wait_heartbeat(timeout=60)
+        while time.monotonic() - start < timeout:
+            link.mav.command_long_send(1, 0, mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                                       mavutil.mavlink.MAVLINK_MSG_ID_SYS_STATUS,
+                                       0, 0, 0, 0, 0, 0)
+            status = link.recv_match(type="SYS_STATUS", blocking=True, timeout=2.0)
+            if status is not None and status.onboard_control_sensors_health & _PREARM_BIT:
+                return time.monotonic() - start
+            time.sleep(2.0)
+    finally:
+        link.close()
+    raise SystemExit(f"SITL on {connect} not ready to arm after {timeout:g} s")
 
 
 def per_parameter(log: Path) -> None:
@@ -63,12 +89,18 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=200)
     parser.add_argument("--refine-steps", type=int, default=300)
     parser.add_argument("--keep", type=Path, help="keep the flights here")
+    parser.add_argument("--wait-ready", action="store_true",
+                        help="start the experiment once SITL's pre-arm checks pass, as an "
+                        "operator connects to a vehicle booted a while ago")
     args = parser.parse_args()
     work = args.keep or Path(tempfile.mkdtemp(prefix="sitl-experiment-"))
     for seed in args.seeds:
         logs = work / f"seed{seed}" / "logs"
         with running_sitl(work / f"seed{seed}" / "sitl", defaults=[SITL_PARMS],
                           model="x") as sitl:
+            if args.wait_ready:
+                print(f"seed {seed}: SITL ready to arm after "
+                      f"{wait_ready_to_arm(sitl.connect):.0f} s", flush=True)
             done = subprocess.run(
                 [sys.executable, "-m", "mavsysid", "experiment", "--connect", sitl.connect,
                  "--vehicle", "sitl_quad", "--budget", f"{args.budget:g}", "--samples",
