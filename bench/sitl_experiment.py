@@ -27,37 +27,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from tests.support.sitl import running_sitl  # noqa: E402
+from tests.support.sitl import running_sitl, wait_ready_to_arm  # noqa: E402
 
 SITL_PARMS = REPO / "vehicle" / "configs" / "sitl_quad.parm"
-#: MAV_SYS_STATUS_PREARM_CHECK.
-_PREARM_BIT = 0x10000000
-
-
-def wait_ready_to_arm(connect: str, timeout: float = 600.0) -> float:
-    """Wall seconds until SITL's SYS_STATUS says its pre-arm checks pass, asked for one
-    message at a time (MAV_CMD_REQUEST_MESSAGE), so no stream rate is left set on the link."""
-    import time
-
-    from pymavlink import mavutil
-
-    start = time.monotonic()
-    link = mavutil.mavlink_connection(connect, source_system=250, retries=5)
-    try:
-        link.wait_heartbeat(timeout=60)
-        while time.monotonic() - start < timeout:
-            link.mav.command_long_send(1, 0, mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
-                                       mavutil.mavlink.MAVLINK_MSG_ID_SYS_STATUS,
-                                       0, 0, 0, 0, 0, 0)
-            status = link.recv_match(type="SYS_STATUS", blocking=True, timeout=2.0)
-            if status is not None and status.onboard_control_sensors_health & _PREARM_BIT:
-                return time.monotonic() - start
-            time.sleep(2.0)
-    finally:
-        link.close()
-    raise SystemExit(f"SITL on {connect} not ready to arm after {timeout:g} s")
-
-
 def per_parameter(log: Path) -> None:
     """The final estimate and the balance on ``log``, each parameter against the reference."""
     from mavsysid.estimation.estimator import estimate_parameters

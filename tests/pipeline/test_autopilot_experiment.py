@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from mavsysid.vehicle.config import load_vehicle
 
-from tests.support.sitl import require_sitl, running_sitl
+from tests.support.sitl import require_sitl, running_sitl, wait_ready_to_arm
 
 pytestmark = [pytest.mark.slow, pytest.mark.peers]
 
@@ -35,11 +35,13 @@ def test_experiment_on_sitl_estimates_c_T_within_10_percent(tmp_path):
     require_sitl()
     logs = tmp_path / "logs"
     with running_sitl(tmp_path / "sitl", defaults=[SITL_PARMS], model="x") as sitl:
+        # An operator meets a vehicle booted a while ago; the streamer's pre-arm wait
+        # judges a single SYS_STATUS, so a freshly booted SITL would be refused.
+        wait_ready_to_arm(sitl.connect)
         done = subprocess.run(
             [sys.executable, "-m", "mavsysid", "experiment", "--connect", sitl.connect,
              "--vehicle", "sitl_quad", "--budget", "20", "--samples", "200",
-             "--refine-steps", "300", "--seed", "1", "--prearm-timeout", "300",
-             "--log-dir", str(logs)],
+             "--refine-steps", "300", "--seed", "1", "--log-dir", str(logs)],
             capture_output=True, text=True, cwd=tmp_path, timeout=1200, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     (flight,) = [p for p in logs.iterdir() if p.is_dir()]
