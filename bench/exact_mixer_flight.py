@@ -28,8 +28,8 @@ from mavsysid.flight.offline.null_space_mixer import (
     pseudo_inverse_mix,
 )
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.allocation import allocation_matrix, allocation_pinv
 from mavsysid.vehicle.config import load_vehicle
 

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 

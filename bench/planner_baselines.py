@@ -63,8 +63,8 @@ from mavsysid.experiments.experiment import (
 from mavsysid.experiments.replanned_flight import OPENING_BUDGET, replan_flight
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import effect_from_values
 

@@ -25,9 +25,10 @@ from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.planner.baseline import plan_random
 from mavsysid.planner.belief import propagate_final
-from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.planner.rrbt import plan
 from mavsysid.planner.search_setup import initial_covariance
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.linearization import ErrorStateModel
 from scipy.stats import bootstrap

@@ -22,9 +22,10 @@ import numpy as np
 from mavsysid.planner.best_flight import refine_best
 from mavsysid.planner.graph_search import GraphSearch
 from mavsysid.planner.plan_request import check_request
-from mavsysid.planner.plan_result import plan_result
-from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import PlanResult
+from mavsysid.planner.rrbt import search_result
 from mavsysid.planner.search_setup import warm_up
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 
@@ -34,7 +35,7 @@ def plan_with(config, settings: PlannerSettings, gradient: bool) -> PlanResult:
     warm_up(config, settings)
     search = GraphSearch(config, settings, "dopt", None)
     search.run()
-    return plan_result(search, "dopt", refine_best(search, gradient=gradient))
+    return search_result(search, "dopt", refine_best(search, gradient=gradient))
 
 
 def time_to_90(history: np.ndarray) -> float:

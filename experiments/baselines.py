@@ -23,9 +23,9 @@ from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajec
 from mavsysid.planner.baseline import plan_random
 from mavsysid.planner.feasibility import check_segment
 from mavsysid.planner.kinematic_check import exceeded_limits
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
 from mavsysid.planner.segments import Segment
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 

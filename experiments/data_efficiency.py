@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.planner.belief import edge_samples, propagate_steps
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.search_setup import initial_covariance
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import ErrorStateModel
 from mavsysid.vehicle.trajectory import Trajectory

@@ -32,7 +32,7 @@ from mavsysid.experiments.evaluation_intervals import (
 )
 from mavsysid.experiments.experiment import KINDS, ExperimentSpec, controller_config
 from mavsysid.planner.feasibility import check_rotor_headroom
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 from tqdm import tqdm
 

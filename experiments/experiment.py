@@ -35,8 +35,9 @@ from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.data_efficiency import seconds_to_relative_sigma
 from mavsysid.flight.offline.simulator import SimulationResult, SimulationSettings, Simulator
 from mavsysid.planner.baseline import plan_random
-from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 from mavsysid.vehicle.linearization import initial_state_sigma
 
@@ -82,7 +83,7 @@ class ExperimentSpec:
     refine_steps : int or None
         Most refinement steps of the D-optimal planner (None: the planner's default).
     rotor_headroom : float
-        The planners' rotor headroom (`mavsysid.planner.results.PlannerSettings.rotor_headroom`).
+        The planners' rotor headroom (`mavsysid.planner.settings.PlannerSettings.rotor_headroom`).
     controller_model : {"truth", "prior"}
         θ of the simulated flight controller's model: the truth (the paper's RotorS
         controller; a tuned autopilot) or the model the flight was planned with.

@@ -38,8 +38,9 @@ from mavsysid.pipeline.replanned_stream import (
     relative_covariance,
 )
 from mavsysid.planner.plan_request import rotor_clearance
-from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.planner.robust_plan import plan_most_confident
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 

@@ -42,7 +42,8 @@ from mavsysid.pipeline.demo_flight import (
 from mavsysid.pipeline.plan import run_plan
 from mavsysid.pipeline.simulate import parse_hidden_effects
 from mavsysid.planner.plan_file import write_trajectory
-from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 
 from mavsysid.errors import InputError

@@ -1,5 +1,6 @@
 """One planning job: check the request, run the information-gathering planner (or the
-paper's random baseline) with progress reports, and say how far a failed search got.
+paper's random baseline) with progress reports, and say how far a failed search got; and
+the autopilot limits it plans within, from a parameter dump or read from the vehicle.
 
 `run_plan` is what ``mavsysid plan`` and the demo call; tests call it directly.
 `preview_plan` is the look before a flight that ``mavsysid plan`` prints: the plan's peaks
@@ -18,22 +19,86 @@ from pathlib import Path
 
 import numpy as np
 from mavsysid.planner.plan_request import check_request
-from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
+from mavsysid.planner.plan_result import PlanProgress, PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.kinematic_limits import KinematicLimits
 from mavsysid.vehicle.trajectory import Trajectory
 
-from mavsysid.errors import JobFailedError
+from mavsysid.errors import InputError, JobFailedError
 
-__all__ = ["SATURATION_WARNING", "PlanPreview", "ProgressCallback", "preview_plan",
-           "progress_bar", "run_plan", "with_margins"]
+__all__ = ["SATURATION_WARNING", "PlanPreview", "ProgressCallback", "autopilot_limits",
+           "preview_plan", "progress_bar", "run_plan", "with_margins"]
 
 #: Predicted rotor saturation (share of control ticks) above which `plan` warns: beyond it
 #: the autopilot has no room to correct, and a vehicle whose θ differs saturates more.
 SATURATION_WARNING = 0.01
 
+#: `mavsysid.flight.autopilot_modes.Autopilot` names as the autopilots spell themselves.
+_AUTOPILOT_NAMES = {"ARDUPILOT": "ArduPilot", "PX4": "PX4"}
 #: Called with each progress report of a planning run.
 ProgressCallback = Callable[[PlanProgress], None]
+
+
+def autopilot_limits(source: str | Path, signing_key: bytes | None = None,
+                     heartbeat_timeout: float = 30.0, say: Callable[[str], None] | None = None
+                     ) -> tuple[str, KinematicLimits]:
+    """The envelope of the autopilot that will fly a plan (``plan --autopilot-limits``).
+
+    Parameters
+    ----------
+    source : str or Path
+        A parameter dump (`mavsysid.formats.parameter_file`), or a MAVLink link to the
+        vehicle (``tcp:HOST:PORT``, ``udp:HOST:PORT``, ``udpout:HOST:PORT``,
+        ``serial:DEVICE[:BAUD]``, a ``/dev/…`` device; a regular file of that name is read
+        as a file): its limits are then read live, as `mavsysid stream` reads them.
+    signing_key : bytes, optional
+        MAVLink 2 signing key for a vehicle that signs.
+    heartbeat_timeout : float
+        Wall seconds to wait for the vehicle's first heartbeat.
+    say : callable, optional
+        Receives one-line progress messages while connecting.
+
+    Returns
+    -------
+    tuple
+        Where the limits came from and what they are, in words (one line), and the envelope
+        (`mavsysid.flight.ground.autopilot_limits.limits_from_parameters`: correction limits
+        included, so that the plan flies with no note).
+
+    Raises
+    ------
+    InputError
+        An unreadable dump, or one without one autopilot's limits (one line naming it); a
+        signing key with a dump.
+    JobFailedError
+        No vehicle answered on the link, or it reported none of its limits.
+    """
+    # The ground station's limit tables (and the MAVLink set-up they import) only here.
+    from mavsysid.flight.ground.autopilot_limits import limits_from_parameters, limits_text
+    from mavsysid.flight.ground.vehicle_contact import vehicle_limit_values
+    from mavsysid.flight.mavlink_setup import parse_connect
+    from mavsysid.formats.parameter_file import read_parameter_file
+
+    text = str(source)
+    is_link = False
+    if not Path(text).is_file():
+        try:
+            parse_connect(text)
+            is_link = True
+        except InputError:
+            pass  # not a link: read as a file, which says what is wrong with it
+    if signing_key is not None and not is_link:
+        raise InputError(f"--signing-key: only with --autopilot-limits LINK, got the file {text}")
+    if is_link:
+        autopilot, values = vehicle_limit_values(text, signing_key, heartbeat_timeout, say)
+        limits = limits_from_parameters(values, text)[1]
+        where = f"the {_AUTOPILOT_NAMES[autopilot.name]} vehicle on {text}"
+    else:
+        autopilot, limits = limits_from_parameters(read_parameter_file(text), text)
+        where = f"the {_AUTOPILOT_NAMES[autopilot.name]} parameters in {text}"
+    return f"{where}: {limits_text(limits)}", limits
 
 
 @contextmanager

@@ -44,8 +44,8 @@ from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.formats.trajectory_file import read_trajectory
 from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.robust_plan import plan_most_confident
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError, JobFailedError

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
+from mavsysid.planner.plan_result import PlanProgress, PlanResult
 from mavsysid.planner.rrbt import search_graph
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 
 __all__ = ["plan_random"]

@@ -3,12 +3,11 @@ planning time (`mavsysid.planner.refine`, beyond the paper)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from mavsysid.planner.belief import apply_transfer, identity_transfer
 from mavsysid.planner.feasibility import segment_slack
 from mavsysid.planner.gradient_refine import GradientRefiner
+from mavsysid.planner.graph_search import GraphSearch
 from mavsysid.planner.refine import (
     FlightPricing,
     PathRefiner,
@@ -16,10 +15,8 @@ from mavsysid.planner.refine import (
     StopChoice,
     split_path,
 )
+from mavsysid.planner.search_stop import FULL_FLIGHT_SHARE
 from mavsysid.planner.yaw_branch import shift_segment_yaw, shift_vertex_yaw
-
-if TYPE_CHECKING:
-    from mavsysid.planner.graph_search import GraphSearch
 
 __all__ = ["best_path", "refine_best"]
 
@@ -72,7 +69,7 @@ def refine_best(search: GraphSearch, gradient: bool = False) -> RefinablePath | 
     es = PathRefiner(path, search.feasible,
                      lambda state: search.stop_at(state, with_transfer=False), pricing,
                      search.box, settings.budget, np.random.default_rng([settings.seed, 1]),
-                     search.config.limits.segment_time_max)
+                     search.longest_segment, FULL_FLIGHT_SHARE * settings.budget)
     refiner: PathRefiner | GradientRefiner = es
     if gradient:
         # The barrier keeps gradient steps off the rotor and body-rate limits, where the

@@ -10,6 +10,7 @@ pruning with the paper's modular comparison (Eq. compare).
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable
 
 import numpy as np
@@ -27,33 +28,28 @@ from mavsysid.planner.belief import (
 from mavsysid.planner.feasibility import check_segment
 from mavsysid.planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
 from mavsysid.planner.kinematic_check import exceeded_limits
+from mavsysid.planner.move_time import longest_segment, move_duration_range
+from mavsysid.planner.plan_result import PlanProgress
 from mavsysid.planner.refine import StopChoice
-from mavsysid.planner.results import PlannerSettings, PlanProgress
 from mavsysid.planner.search_setup import (
     initial_covariance,
     search_model,
     segment_trajectory,
 )
+from mavsysid.planner.search_stop import search_stop, search_time_is_up
 from mavsysid.planner.segments import (
     Segment,
     VertexState,
     connect_fixed,
     connect_free_end,
-    duration_range,
     stop_segment,
 )
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.planner.yaw_branch import nearest_yaw_branch, wrap_angle
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel
 
-__all__ = ["FULL_FLIGHT_SHARE", "SEARCH_SHARE_MAX", "GraphSearch", "search_time_is_up"]
-
-#: The search runs past its share of the planning time while its best flight uses less
-#: than this share of the budget: with 10 % of 5 s the search sometimes stopped at a 7.6 s
-#: flight of a 30 s budget (4× worse D-opt), which no refinement of that path can lengthen.
-FULL_FLIGHT_SHARE = 0.9
-#: … but never past this share of the planning time, so the refinement keeps the rest.
-SEARCH_SHARE_MAX = 0.5
+__all__ = ["GraphSearch"]
 
 #: Stops end at least this far inside the box, m.
 _STOP_MARGIN = 0.2
@@ -62,32 +58,12 @@ _PROGRESS_PERIOD = 0.25
 _NEAREST_TRIES = 5
 
 
-def search_time_is_up(elapsed: float, deadline: float, planning_time: float,
-                      best_flight: float | None, budget: float) -> bool:
-    """Whether the graph search must stop (timed planning).
-
-    Parameters
-    ----------
-    elapsed, deadline, planning_time : float
-        Time since the search began, its share of the planning time, and the whole
-        planning time, s.
-    best_flight : float or None
-        Duration of the best candidate flight so far, s (None: none yet).
-    budget : float
-        The flight's time budget, s.
-    """
-    if elapsed < deadline:
-        return False
-    if deadline >= SEARCH_SHARE_MAX * planning_time or elapsed >= SEARCH_SHARE_MAX * planning_time:
-        return True
-    return best_flight is not None and best_flight >= FULL_FLIGHT_SHARE * budget
-
-
 class GraphSearch:
     """Graph, beliefs and the best candidate of one planning run."""
 
     def __init__(self, config: VehicleConfig, settings: PlannerSettings, objective: str,
-                 progress: Callable[[PlanProgress], None] | None) -> None:
+                 progress: Callable[[PlanProgress], None] | None,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
         self.config, self.settings, self.objective = config, settings, objective
         self.progress = progress
         self.theta = config.theta
@@ -99,12 +75,18 @@ class GraphSearch:
         self.samples = self.edges_attempted = self.edges = self.propagations = 0
         self.edge_time = self.propagation_time = self.transfer_time = 0.0
         self.refined_steps = self.refined_accepted = 0
+        #: Sampled connections refused, by reason (`refusal`); what ended the search
+        #: (`mavsysid.planner.search_stop.search_stop`).
+        self.refusals: Counter[str] = Counter()
+        self.stopped_by = ""
         #: F and Q of the segments last priced by `propagate_segments`, by id.
         self._steps: dict[int, tuple[Segment, np.ndarray, np.ndarray]] = {}
         self.best: tuple[float, Belief] | None = None
         self.history: list[tuple[float, float]] = []
         self.first_solution: float | None = None
-        self.t0 = time.perf_counter()
+        self.clock = clock
+        self.t0 = clock()
+        self.cpu0 = time.thread_time()
         self._last_progress = -np.inf
         self._log_scale = float(np.sum(np.log(self.model.theta_scale)))
         self.sigma0 = initial_covariance(self.model, config, settings)
@@ -117,7 +99,12 @@ class GraphSearch:
     # -- budget and termination -----------------------------------------------------------
 
     def elapsed(self) -> float:
-        return time.perf_counter() - self.t0
+        """Planning time so far, s, on the search's clock (wall time by default)."""
+        return self.clock() - self.t0
+
+    def cpu_time(self) -> float:
+        """CPU time of this thread since planning began, s."""
+        return time.thread_time() - self.cpu0
 
     def out_of_time(self) -> bool:
         """Past the search phase's share of the planning time (`search_time_is_up`)."""
@@ -133,8 +120,12 @@ class GraphSearch:
         return float(belief.cost + self.vertices[belief.vertex].stop_time)
 
     def done(self) -> bool:
+        """Whether the search stops now; what stops it goes to `stopped_by`."""
         s = self.settings
-        return self.out_of_time() or (s.max_samples is not None and self.samples >= s.max_samples)
+        samples_done = s.max_samples is not None and self.samples >= s.max_samples
+        self.stopped_by = search_stop(samples_done, not samples_done and self.out_of_time(),
+                                      self.best_flight_time(), s.budget)
+        return bool(self.stopped_by)
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -142,13 +133,18 @@ class GraphSearch:
         lo, hi = self.box[:3], self.box[3:]
         return np.array([*self.rng.uniform(lo, hi), self.rng.uniform(-np.pi, np.pi)])
 
-    def sample_duration(self, a: VertexState, b_position: np.ndarray, budget_left: float):
-        lim = self.config.limits
-        rng = duration_range(float(np.linalg.norm(b_position - a.position[0])), lim.speed_max,
-                             budget_left, lim.segment_time_max)
-        if rng is None:
-            return None
-        return float(self.rng.uniform(*rng))
+    def longest_segment(self, a: VertexState, b: VertexState) -> float:
+        """The longest duration a segment a → b may have, s (`move_time.longest_segment`)."""
+        return longest_segment(a, b.position[0], float(b.yaw[0]), self.config.limits,
+                               self.settings.autopilot_limits)
+
+    def sample_duration(self, a: VertexState, b_position: np.ndarray, b_yaw: float,
+                        budget_left: float) -> float | None:
+        """A duration for the segment a → (b_position, b_yaw), or None when none fits
+        (`move_time.move_duration_range`)."""
+        rng = move_duration_range(a, b_position, b_yaw, budget_left, self.config.limits,
+                                  self.settings.autopilot_limits)
+        return None if rng is None else float(self.rng.uniform(*rng))
 
     def transfer_of(self, segment: Segment) -> EdgeTransfer:
         states, n, dt = edge_samples(segment_trajectory(segment), self.config, self.theta,
@@ -175,14 +171,30 @@ class GraphSearch:
             return steps_transfer(self.search_model, hit[1], hit[2])
         return self.transfer_of(segment)
 
-    def feasible(self, segment: Segment) -> bool:
+    def refusal(self, segment: Segment) -> str:
+        """Why ``segment`` is infeasible ("" when it is feasible): a constraint of
+        `check_segment`, or "autopilot QUANTITY" for an autopilot limit."""
+        result = check_segment(segment, self.config, self.box,
+                               rotor_headroom=self.settings.rotor_headroom,
+                               rotor_check=self.settings.rotor_check,
+                               theta_covariance=self.theta_covariance,
+                               rotor_confidence=self.settings.rotor_confidence)
+        if not result.feasible:
+            return result.reason
         limits = self.settings.autopilot_limits
-        return check_segment(segment, self.config, self.box,
-                             rotor_headroom=self.settings.rotor_headroom,
-                             rotor_check=self.settings.rotor_check,
-                             theta_covariance=self.theta_covariance,
-                             rotor_confidence=self.settings.rotor_confidence).feasible and (
-            limits is None or not exceeded_limits(segment, limits))
+        over = "" if limits is None else exceeded_limits(segment, limits)
+        return f"autopilot {over}" if over else ""
+
+    def feasible(self, segment: Segment) -> bool:
+        """Whether ``segment`` keeps the vehicle's constraints and the autopilot's limits."""
+        return not self.refusal(segment)
+
+    def connects(self, segment: Segment) -> bool:
+        """`feasible` for a sampled connection, counting the refusals."""
+        why = self.refusal(segment)
+        if why:
+            self.refusals[why] += 1
+        return not why
 
     def stop_at(self, state: VertexState, with_transfer: bool = True) -> StopChoice | None:
         """The shortest feasible stopping segment from ``state``; None if there is none.
@@ -214,9 +226,9 @@ class GraphSearch:
     def edge_transfer(self, edge: Edge) -> EdgeTransfer:
         """The edge's transfer, computed the first time a belief crosses it (many never are)."""
         if edge._transfer is None:
-            start = time.perf_counter()
+            start = self.clock()
             edge._transfer = self.transfer_of(edge.segment)
-            self.transfer_time += time.perf_counter() - start
+            self.transfer_time += self.clock() - start
         return edge._transfer
 
     def add_edge(self, src: int, dst: int, segment: Segment) -> Edge:
@@ -228,12 +240,12 @@ class GraphSearch:
     def try_fixed(self, src: int, dst: int, budget_left: float) -> Edge | None:
         a, b = self.vertices[src].state, nearest_yaw_branch(
             self.vertices[dst].state, float(self.vertices[src].state.yaw[0]))
-        duration = self.sample_duration(a, b.position[0], budget_left)
+        duration = self.sample_duration(a, b.position[0], float(b.yaw[0]), budget_left)
         if duration is None:
             return None
         self.edges_attempted += 1
         segment = connect_fixed(a, b, duration)
-        return self.add_edge(src, dst, segment) if self.feasible(segment) else None
+        return self.add_edge(src, dst, segment) if self.connects(segment) else None
 
     # -- beliefs --------------------------------------------------------------------------
 
@@ -283,7 +295,7 @@ class GraphSearch:
 
     def propagate(self, queue: list[Belief]) -> None:
         """Phase 2: push open beliefs through the edges they have not crossed yet."""
-        start = time.perf_counter()
+        start = self.clock()
         transfers0 = self.transfer_time
         budget = self.settings.budget
         while queue and not self.out_of_time():
@@ -303,7 +315,7 @@ class GraphSearch:
                     queue.append(new)
             b.expanded = len(edges)
             self.report()
-        self.propagation_time += time.perf_counter() - start - (self.transfer_time - transfers0)
+        self.propagation_time += self.clock() - start - (self.transfer_time - transfers0)
 
     def report(self, force: bool = False) -> None:
         now = self.elapsed()
@@ -326,7 +338,7 @@ class GraphSearch:
         """
         self.samples += 1
         pose = self.sample_pose()
-        start = time.perf_counter()
+        start = self.clock()
         positions = np.array([v.state.position[0] for v in self.vertices])
         order = np.argsort(np.linalg.norm(positions - pose[:3], axis=1))
         queue: list[Belief] = []
@@ -338,20 +350,20 @@ class GraphSearch:
                 continue
             tries += 1
             near_state = self.vertices[nearest].state
-            duration = self.sample_duration(near_state, pose[:3],
+            yaw0 = float(near_state.yaw[0])
+            yaw = yaw0 + wrap_angle(float(pose[3]) - yaw0)
+            duration = self.sample_duration(near_state, pose[:3], yaw,
                                             self.settings.budget - min(open_costs))
             if duration is not None:
                 self.edges_attempted += 1
-                yaw0 = float(near_state.yaw[0])
-                yaw = yaw0 + wrap_angle(float(pose[3]) - yaw0)
                 segment = connect_free_end(near_state, pose[:3], yaw, duration)
-                if self.feasible(segment):
+                if self.connects(segment):
                     queue = self._connect_all(nearest, self.add_vertex(segment.end_state()),
                                               segment)
                     break
             if tries == _NEAREST_TRIES:
                 break
-        self.edge_time += time.perf_counter() - start
+        self.edge_time += self.clock() - start
         return queue
 
     def _connect_all(self, nearest: int, new: int, segment: Segment) -> list[Belief]:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
-from mavsysid.planner.results import PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES
 
 __all__ = ["plan_file_for", "write_trajectory"]
@@ -40,6 +40,8 @@ def plan_file_for(result: PlanResult) -> dict[str, Any]:
         **{k: getattr(stats, k) for k in ("samples", "vertices", "edges", "beliefs",
                                           "edges_attempted", "beliefs_propagated", "elapsed")},
         "time_to_first_solution": _finite_or_none(stats.time_to_first_solution),
+        "cpu_time": stats.cpu_time, "search_stop": stats.search_stop or None,
+        "shortfall": result.shortfall or None,
         "refinement": {"share": settings.refine_share, "max_steps": settings.refine_steps,
                        "steps": stats.refine_steps, "accepted": stats.refine_accepted},
     }

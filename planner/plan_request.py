@@ -14,8 +14,8 @@ import math
 import numpy as np
 from mavsysid.planner.feasibility import check_rotor_headroom, check_vertex_state
 from mavsysid.planner.kinematic_check import check_limits
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.segments import VertexState
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.thrust_envelope import thrust_envelope
 

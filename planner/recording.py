@@ -33,7 +33,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 from mavsysid.formats.rerun_file import atomic_recording
-from mavsysid.planner.results import PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES
 from scipy.spatial.transform import Rotation
 

@@ -154,19 +154,29 @@ class PathRefiner:
     budget : float
         Longest flight, s.
     rng : numpy.random.Generator
-    segment_time_max : float, optional
-        Longest segment, s (the planner limit `Limits.segment_time_max`).
+    segment_time_max : float or callable, optional
+        Longest segment, s (the planner limit `Limits.segment_time_max`), or (start, end
+        vertex) → the longest segment between them
+        (`mavsysid.planner.graph_search.GraphSearch.longest_segment`).
+    shortest_flight : float, optional
+        Flight time, stop included, below which no change is kept, s (at most the
+        starting flight's): the budget is the flight asked for, and sharper but shorter
+        manoeuvres would otherwise trade it away.
     """
 
     def __init__(self, path: RefinablePath, feasible: Callable[[Segment], bool],
                  stop_at: Callable[[VertexState], StopChoice | None], pricing: FlightPricing,
                  box: np.ndarray, budget: float, rng: np.random.Generator,
-                 segment_time_max: float = np.inf) -> None:
+                 segment_time_max: float | Callable[[VertexState, VertexState], float] = np.inf,
+                 shortest_flight: float = 0.0) -> None:
         self.path = path
         self.feasible, self.stop_at, self.pricing = feasible, stop_at, pricing
         self.lo, self.hi = box[:3] + _BOX_MARGIN, box[3:] - _BOX_MARGIN
         self.budget = budget
-        self.segment_time_max = segment_time_max
+        self.shortest_flight = min(shortest_flight, path.duration)
+        self.longest: Callable[[VertexState, VertexState], float] = (
+            segment_time_max if callable(segment_time_max)
+            else lambda _a, _b, t=float(segment_time_max): t)
         self.rng = rng
         self.step_size = 0.3
         self.steps = self.accepted = 0
@@ -229,20 +239,20 @@ class PathRefiner:
         the limits.
 
         Only the segments ``changed`` (contiguous indices) are re-solved, and the stop
-        only when the last vertex moved. None when a changed segment is longer than
-        `Limits.segment_time_max`, the flight longer than the budget, a changed segment
-        or the stop infeasible (``check`` False skips the feasibility checks: for
-        finite-difference probes of a kept flight).
+        only when the last vertex moved. None when a changed segment is longer than its
+        longest (``segment_time_max``), the flight longer than the budget or shorter than
+        ``shortest_flight``, a changed segment or the stop infeasible (``check`` False skips
+        the feasibility checks: for finite-difference probes of a kept flight).
         """
         path, k = self.path, len(self.path.segments)
-        if any(durations[j] > self.segment_time_max for j in changed):
+        if any(durations[j] > self.longest(vertices[j], vertices[j + 1]) for j in changed):
             return None
         stop = path.stop
         if vertices[k] is not path.vertices[k]:
             stop = self.stop_at(vertices[k])
             if stop is None:
                 return None
-        if sum(durations) + stop.duration > self.budget:
+        if not self.shortest_flight <= sum(durations) + stop.duration <= self.budget:
             return None
         segments = list(path.segments)
         for j in changed:

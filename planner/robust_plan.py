@@ -13,8 +13,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
-from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
+from mavsysid.planner.plan_result import PlanProgress, PlanResult
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import JobFailedError

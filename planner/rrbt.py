@@ -17,36 +17,59 @@ The search itself is `mavsysid.planner.graph_search.GraphSearch`. It gets the fi
 is checked first (`mavsysid.planner.plan_request`). The search core is shared with
 the random baseline (`mavsysid.planner.baseline`), which keeps the same graph and picks the
 path with the most distinct segments instead.
+
+`search_result` turns the search and its chosen path into the `PlanResult`: the trajectory
+with its stop, σ over time along it, the search statistics and the graph.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
+import numpy as np
+from mavsysid.planner.belief import edge_samples, propagate_steps
 from mavsysid.planner.best_flight import refine_best
+from mavsysid.planner.graph import logdet
 from mavsysid.planner.graph_search import GraphSearch
 from mavsysid.planner.plan_request import check_request
-from mavsysid.planner.plan_result import plan_result
-from mavsysid.planner.results import PlannerSettings, PlanProgress, PlanResult
-from mavsysid.planner.search_setup import warm_up
+from mavsysid.planner.plan_result import (
+    PlannerGraph,
+    PlannerStats,
+    PlanProgress,
+    PlanResult,
+    shortfall_note,
+)
+from mavsysid.planner.refine import RefinablePath
+from mavsysid.planner.search_setup import initial_covariance, segment_trajectory, warm_up
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-__all__ = ["plan", "search_graph"]
+from mavsysid.errors import JobFailedError
+
+__all__ = ["plan", "search_graph", "search_result"]
 
 
 def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: str,
-                 progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
-    """Run the graph search with an objective: "dopt" or "random" (most distinct segments)."""
+                 progress: Callable[[PlanProgress], None] | None = None,
+                 clock: Callable[[], float] = time.perf_counter) -> PlanResult:
+    """Run the graph search with an objective: "dopt" or "random" (most distinct segments),
+    timed by ``clock`` (s; the wall clock by default)."""
     check_request(config, settings)
     warm_up(config, settings)
-    search = GraphSearch(config, settings, objective, progress)
+    search = GraphSearch(config, settings, objective, progress, clock)
     search.run()
-    return plan_result(search, objective, refine_best(search))
+    return search_result(search, objective, refine_best(search))
 
 
 def plan(config: VehicleConfig, settings: PlannerSettings | None = None,
-         progress: Callable[[PlanProgress], None] | None = None) -> PlanResult:
+         progress: Callable[[PlanProgress], None] | None = None,
+         clock: Callable[[], float] = time.perf_counter) -> PlanResult:
     """Plan the flight within the budget that minimises the predicted D-optimality.
+
+    ``settings.planning_time`` is measured on ``clock`` (s; the wall clock by default).
+    A flight shorter than 90 % of the budget comes with `PlanResult.shortfall` saying why.
 
     Raises
     ------
@@ -55,4 +78,59 @@ def plan(config: VehicleConfig, settings: PlannerSettings | None = None,
     JobFailedError
         No feasible trajectory was found in the planning time.
     """
-    return search_graph(config, settings or PlannerSettings(), "dopt", progress)
+    return search_graph(config, settings or PlannerSettings(), "dopt", progress, clock)
+
+
+def search_result(search: GraphSearch, kind: str, path: RefinablePath | None) -> PlanResult:
+    """The chosen flight: the (refined) best path plus its stop, with σ over time."""
+    if path is None:
+        raise JobFailedError(
+            f"no feasible trajectory found in {search.elapsed():.1f} s of planning "
+            f"({search.samples} samples, {len(search.vertices)} vertices, {search.edges} edges)")
+    segments = list(path.segments)
+    if path.stop.segment is not None:
+        segments.append(path.stop.segment)
+    trajectory = PiecewisePolynomial(
+        np.array([s.duration for s in segments]),
+        np.array([s.position_coeffs for s in segments]),
+        np.array([s.yaw_coeffs for s in segments]))
+    model, theta, rate = search.model, search.theta, search.settings.measurement_rate
+    sigma = initial_covariance(model, search.config, search.settings)
+    times, sig = [0.0], [np.sqrt(np.diag(model.parameter_covariance_si(sigma)))]
+    t_offset = 0.0
+    for segment in segments:
+        states, n, dt = edge_samples(segment_trajectory(segment), search.config, theta, rate)
+        history = propagate_steps(model, sigma, states, n, theta, dt)
+        sigma = history[-1]
+        si = model.parameter_covariance_si(history[1:])
+        sig.extend(np.sqrt(np.diagonal(si, axis1=1, axis2=2)))
+        times.extend(t_offset + dt * np.arange(1, len(history)))
+        t_offset += segment.duration
+    final_cov = model.parameter_covariance_si(sigma)
+    stats = PlannerStats(
+        samples=search.samples, vertices=len(search.vertices), edges=search.edges,
+        beliefs=sum(len(v.beliefs) for v in search.vertices),
+        edges_attempted=search.edges_attempted, beliefs_propagated=search.propagations,
+        elapsed=search.elapsed(), time_to_first_solution=search.first_solution,
+        edge_time=search.edge_time + search.transfer_time,
+        propagation_time=search.propagation_time,
+        best_history=np.array(search.history, dtype=float).reshape(-1, 2),
+        refine_steps=search.refined_steps, refine_accepted=search.refined_accepted,
+        cpu_time=search.cpu_time(), search_stop=search.stopped_by,
+        refusals=dict(search.refusals))
+    assert search.best is not None
+    search_path = [0] + [e.dst for e in search.best[1].path_edges()]
+    edge_list = [e for v in search.vertices for e in v.out_edges]
+    graph = PlannerGraph(
+        vertices=np.array([v.state.pose for v in search.vertices]),
+        edges=np.array([(e.src, e.dst) for e in edge_list], dtype=int).reshape(-1, 2),
+        edge_paths=[e.segment.flat_outputs(np.linspace(0.0, e.segment.duration, 12)).position
+                    for e in edge_list],
+        path=search_path)
+    return PlanResult(
+        kind=kind, trajectory=trajectory,
+        predicted_dopt=float(np.exp(logdet(final_cov) / 6.0)),
+        predicted_covariance=final_cov, sigma_times=np.array(times),
+        predicted_sigma=np.array(sig), config=search.config, settings=search.settings,
+        stats=stats, graph=graph,
+        shortfall=shortfall_note(trajectory.duration, search.settings, stats))

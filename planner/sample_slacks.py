@@ -2,7 +2,7 @@
 
 Used by the segment check of `mavsysid.planner.feasibility`; the rotor slabs may carry a
 chance margin (`slab_spread`), the first-order spread of a slab value under the prior
-covariance of θ (`mavsysid.planner.results.PlannerSettings.rotor_confidence`).
+covariance of θ (`mavsysid.planner.settings.PlannerSettings.rotor_confidence`).
 """
 
 from __future__ import annotations

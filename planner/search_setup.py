@@ -14,8 +14,8 @@ from mavsysid.planner.belief import (
     propagate_final,
 )
 from mavsysid.planner.feasibility import check_segment
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.segments import Segment, VertexState, connect_free_end
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
 from mavsysid.vehicle.trajectory import PiecewisePolynomial

@@ -446,7 +446,7 @@ NOT_YET_DOCUMENTED: frozenset[str] = frozenset({
     "mavsysid.planner.refine.RefinablePath.__init__",
     "mavsysid.planner.refine.StopChoice.__init__",
     "mavsysid.planner.refine.split_path",
-    "mavsysid.planner.results.PlanProgress.__init__",
+    "mavsysid.planner.plan_result.PlanProgress.__init__",
     "mavsysid.planner.robust_plan.ConfidentPlan.__init__",
     "mavsysid.planner.robust_plan.plan_most_confident",
     "mavsysid.planner.rrbt.plan",

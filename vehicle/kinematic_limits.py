@@ -19,7 +19,7 @@ import numpy as np
 from mavsysid.vehicle.polynomial_extremes import segment_extremes
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-__all__ = ["KINEMATIC_FIELDS", "KinematicLimits", "KinematicPeaks", "exceeded",
+__all__ = ["KINEMATIC_FIELDS", "KINEMATIC_WORDS", "KinematicLimits", "KinematicPeaks", "exceeded",
            "kinematic_peaks", "polynomial_peaks"]
 
 
@@ -57,6 +57,13 @@ class KinematicPeaks:
 
 #: The quantities of `KinematicPeaks` / `KinematicLimits`, in their order.
 KINEMATIC_FIELDS = tuple(f.name for f in fields(KinematicPeaks))
+#: Each quantity in words, for messages.
+KINEMATIC_WORDS = {
+    "speed_xy": "horizontal speed", "climb": "climb rate", "descent": "descent rate",
+    "accel_xy": "horizontal acceleration", "accel_up": "upward acceleration",
+    "accel_down": "downward acceleration", "jerk_xy": "horizontal jerk",
+    "jerk_z": "vertical jerk", "jerk": "jerk", "tilt": "lean angle",
+    "yaw_rate": "yaw rate", "yaw_acceleration": "yaw acceleration"}
 #: Each peak as (quantity of `segment_extremes`, sign): climb/descent and the vertical
 #: accelerations are the two signs of one signed quantity.
 _EXTREME_OF = {name: (name, 1.0) for name in KINEMATIC_FIELDS} | {

@@ -35,7 +35,12 @@ from typing import Any
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.parameter_session import ParameterSession
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.kinematic_limits import KinematicLimits, KinematicPeaks, kinematic_peaks
+from mavsysid.vehicle.kinematic_limits import (
+    KINEMATIC_WORDS,
+    KinematicLimits,
+    KinematicPeaks,
+    kinematic_peaks,
+)
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import InputError, JobFailedError
@@ -43,7 +48,7 @@ from mavsysid.errors import InputError, JobFailedError
 __all__ = ["ARDUPILOT_LIMITS", "MARGIN", "PX4_LIMITS", "LimitParameter", "Requirement",
            "apply_autopilot_limits", "check_session_limits", "continuation_limit_refusals",
            "kinematic_limits", "limit_parameters", "limits_from_parameters", "limits_in_effect",
-           "parameter_names", "raised_values", "refusal", "requirements"]
+           "limits_text", "parameter_names", "raised_values", "refusal", "requirements"]
 
 #: Raised limits leave this much above the plan's peak (relative).
 MARGIN = 0.2
@@ -192,7 +197,9 @@ def limits_from_parameters(values: Mapping[str, float], source: str
         wanted = ", ".join(p.name for p in ARDUPILOT_LIMITS[:3] + PX4_LIMITS[:2])
         raise InputError(f"{source}: " + ("holds both ArduPilot and PX4 limit parameters"
                          if mine else f"holds none of the autopilot's position-controller "
-                         f"limits ({wanted}, …)"))
+                         f"limits ({wanted}, …); a defaults file leaves them unset: save them "
+                         "from the running vehicle, or read them from it with "
+                         "--autopilot-limits LINK"))
     return mine[0], kinematic_limits(mine[0], values)
 
 
@@ -217,13 +224,6 @@ def _shown(value: float) -> str:
     return f"{value:.3g}" if value < 100.0 else f"{value:.0f}"
 
 
-_WHAT = {"speed_xy": "horizontal speed", "climb": "climb rate", "descent": "descent rate",
-         "accel_xy": "horizontal acceleration", "accel_up": "upward acceleration",
-         "accel_down": "downward acceleration", "jerk_xy": "horizontal jerk",
-         "jerk_z": "vertical jerk", "jerk": "jerk", "tilt": "lean angle",
-         "yaw_rate": "yaw rate", "yaw_acceleration": "yaw acceleration"}
-
-
 def requirements(autopilot: Autopilot, peaks: KinematicPeaks,
                  values: Mapping[str, float]) -> list[Requirement]:
     """Every limit in ``values`` that is below what the plan's ``peaks`` need.
@@ -241,7 +241,7 @@ def requirements(autopilot: Autopilot, peaks: KinematicPeaks,
         needed = getattr(peaks, q) / spec.scale
         if current < needed:
             out.append(Requirement(spec.name, current, needed, spec.unit, spec.tracking,
-                                   f"peak {_WHAT[q]} {_peak_text(q, getattr(peaks, q))}"))
+                                   f"peak {KINEMATIC_WORDS[q]} {_peak_text(q, getattr(peaks, q))}"))
     snap = _jerk_snap(values) if autopilot is Autopilot.ARDUPILOT else None
     current = values.get("WPNAV_ACCEL")
     if snap is not None and current is not None:
@@ -261,6 +261,13 @@ def _peak_text(quantity: str, value: float) -> str:
     unit = {"speed": "m/s", "accel": "m/s²", "jerk": "m/s³"}
     head = "speed" if quantity in ("speed_xy", "climb", "descent") else quantity.split("_")[0]
     return f"{value:.3g} {unit[head]}"
+
+
+def limits_text(limits: KinematicLimits) -> str:
+    """The limited quantities of an envelope, in words with SI units (one line)."""
+    shown = [f"{KINEMATIC_WORDS[name]} {_peak_text(name, value)}"
+             for name, value in vars(limits).items() if value is not None]
+    return ", ".join(shown) if shown else "none"
 
 
 def refusal(needs: list[Requirement]) -> str:

@@ -44,6 +44,7 @@ from mavsysid.flight.ground.rotor_watch import RotorWatch
 from mavsysid.flight.ground.setpoints import SmoothMove, hold, trajectory_setpoint
 from mavsysid.flight.ground.stream_control import ModeTaken
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings
+from mavsysid.flight.ground.vehicle_contact import meet_vehicle
 
 from mavsysid.errors import JobFailedError
 
@@ -125,18 +126,8 @@ class _Flight:
     # --- steps ---------------------------------------------------------------------------
 
     def _connect(self) -> None:
-        link = self.link
-        self.say(f"waiting for a vehicle heartbeat on {link.connect}")
-        link.start_heartbeat()
-        v = link.wait_heartbeat(self.settings.heartbeat_timeout, self.say)
-        link.watch_heartbeat = True
-        if v.autopilot is None:
-            raise JobFailedError(f"flight refused: the vehicle's autopilot "
-                                 f"({link.enum_name('MAV_AUTOPILOT', v.autopilot_id)}) is "
-                                 "neither ArduPilot nor PX4")
-        link.poll(0.3)  # a few more messages: is the vehicle signing?
-        if (problem := link.signing_problem()) is not None:
-            raise JobFailedError(f"flight refused: {problem}")
+        v = meet_vehicle(self.link, self.settings.heartbeat_timeout, "flight refused",
+                         self.say, watch=True)
         self.s.note_vehicle()
         self.say(f"connected: {v.autopilot.name.lower()} {self.s.type_name}, system "
                  f"{v.system}, mode {v.mode}, {'armed' if v.armed else 'disarmed'}")

@@ -14,7 +14,7 @@ from mavsysid.cli.options import (
 )
 from mavsysid.errors import InputError
 from mavsysid.experiments.evaluate_job import EvaluationRun, make_specs, run_evaluation, table_notes
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 
 __all__ = ["add_arguments", "format_summary", "main"]
 

@@ -51,6 +51,13 @@ _COMMANDS = (
      "hidden from the model), stream the plan to it and record the flight, estimate θ; with "
      "--iterations, re-plan with the updated model and fly again. Prints planned vs achieved "
      "σ and the estimates against the simulator's truth."),
+    ("experiment", "mavsysid.cli.experiment",
+     "the whole experiment on a real autopilot: plan, fly, estimate",
+     "Run the whole experiment on a real autopilot (ArduPilot Copter or PX4, e.g. ArduCopter "
+     "SITL): read its position-controller limits over --connect, plan an informative flight "
+     "within them, stream it and record the flight, estimate θ from the flight's own "
+     "flight.tlog (rotor speeds from its ESC telemetry or its motor outputs through the "
+     "vehicle file's motor curve), and print the plan, the flight and the estimate."),
     ("simulate", "mavsysid.cli.simulate", "fly the offline simulator and write a pose log",
      "Simulate a vehicle flying the built-in excitation trajectory (physics ≥ 500 Hz, "
      "geometric controller, motor lag, motion-capture noise) and write pose.csv, truth.csv "

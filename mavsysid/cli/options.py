@@ -9,7 +9,7 @@ import re
 from pathlib import Path
 
 from mavsysid.errors import InputError
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 
 __all__ = ["DEFAULT_BOX", "OUTPUT_OPTION", "add_log_arguments", "add_output_folder",
            "add_window_arguments", "allow_negative_values", "parse_numbers"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,12 +23,14 @@ from mavsysid.formats.setpoints_csv import write_setpoints_csv
 from mavsysid.pipeline.plan import (
     SATURATION_WARNING,
     PlanPreview,
+    autopilot_limits,
     preview_plan,
     run_plan,
     with_margins,
 )
 from mavsysid.planner.plan_file import write_trajectory
-from mavsysid.planner.results import PlannerSettings, PlanResult
+from mavsysid.planner.plan_result import BUSY_CORE_SHARE, PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, load_vehicle
 
 __all__ = ["DEFAULT_ROTOR_HEADROOM", "add_arguments", "format_preview", "format_summary", "main",
@@ -68,8 +71,11 @@ def format_summary(result: PlanResult, written: dict[str, Path], verbosity: int 
                                  for i, (c, w) in enumerate(zip(r, widths, strict=True)))
               for r in rows]
     first = stats.time_to_first_solution
+    busy = ""
+    if stats.elapsed > 0.0 and 0.0 < stats.cpu_time < BUSY_CORE_SHARE * stats.elapsed:
+        busy = f" ({100 * stats.cpu_time / stats.elapsed:.0f} % of a core: a busy machine)"
     lines.append(f"  planner    {stats.samples} samples, {stats.vertices} vertices, "
-                 f"{stats.edges} edges, {stats.beliefs} beliefs in {stats.elapsed:.1f} s; "
+                 f"{stats.edges} edges, {stats.beliefs} beliefs in {stats.elapsed:.1f} s{busy}; "
                  f"first solution after {'—' if first is None else f'{first:.1f} s'}")
     if stats.refine_steps:
         lines.append(f"  refined    {stats.refine_accepted} of {stats.refine_steps} "
@@ -123,15 +129,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "prior θ plus Z times its first-order spread under the prior (a normal "
                         "quantile, e.g. 1.645: 95 %% per rotor and sample; default: "
                         f"{PlannerSettings.rotor_confidence:g}, at the prior θ only)")
-    parser.add_argument("--autopilot-limits", type=Path, metavar="FILE",
+    parser.add_argument("--autopilot-limits", metavar="FILE|LINK",
                         help="plan within the position-controller limits of the autopilot "
-                        "that will fly it: a parameter dump of 'NAME VALUE' lines (ArduPilot "
-                        ".parm / MAVProxy 'param save', Mission Planner 'NAME,VALUE', "
-                        "QGroundControl .params; # comments), in the parameters' own units; "
-                        "ArduPilot WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, ATC_SLEW_YAW, "
+                        "that will fly it, read live from the vehicle on a MAVLink LINK "
+                        "(tcp:HOST:PORT, udp:HOST:PORT, udpout:HOST:PORT, serial:DEVICE[:BAUD] "
+                        "or /dev/…, as `stream --connect`; nothing is changed on it) or from "
+                        "a parameter dump FILE of 'NAME VALUE' lines (ArduPilot .parm / "
+                        "MAVProxy 'param save', Mission Planner 'NAME,VALUE', QGroundControl "
+                        ".params; # comments), in the parameters' own units; ArduPilot "
+                        "WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, ATC_SLEW_YAW, "
                         "ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, absent ones "
                         "limit nothing; the plan then passes `stream`'s limit check against "
                         "the same values")
+    parser.add_argument("--signing-key", type=Path, metavar="FILE",
+                        help="MAVLink 2 signing for --autopilot-limits LINK: a file holding "
+                        "the passphrase")
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -143,7 +155,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write a Rerun recording of the plan")
 
 
-def _settings(args: argparse.Namespace) -> PlannerSettings:
+def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSettings:
     """PlannerSettings from the command line (checked by `run_plan`)."""
     names = "x_min,y_min,z_min,x_max,y_max,z_max"
     box = parse_numbers(args.box, 6, "--box", names)
@@ -155,12 +167,15 @@ def _settings(args: argparse.Namespace) -> PlannerSettings:
         time = math.inf
     limits = None
     if args.autopilot_limits is not None:
-        # The ground station's limit tables (and the MAVLink set-up they import) only here.
-        from mavsysid.flight.ground.autopilot_limits import limits_from_parameters
-        from mavsysid.formats.parameter_file import read_parameter_file
+        key = None
+        if args.signing_key is not None:
+            from mavsysid.flight.mavlink_setup import signing_key_from_file
 
-        values = read_parameter_file(args.autopilot_limits)
-        limits = limits_from_parameters(values, str(args.autopilot_limits))[1]
+            key = signing_key_from_file(args.signing_key)
+        source, limits = autopilot_limits(args.autopilot_limits, key, say=say)
+        say(f"planning within the autopilot limits read from {source}")
+    elif args.signing_key is not None:
+        raise InputError("--signing-key: only with --autopilot-limits LINK")
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
                            refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom,
@@ -169,7 +184,11 @@ def _settings(args: argparse.Namespace) -> PlannerSettings:
 
 def main(args: argparse.Namespace) -> int:
     """Run the command; returns the exit code."""
-    settings = _settings(args)
+    def say(text: str) -> None:
+        if args.verbosity >= 0:
+            print(f"mavsysid plan: {text}", file=sys.stderr, flush=True)
+
+    settings = _settings(args, say)
     outputs = {"trajectory": args.output, "setpoints": args.csv, "recording": args.rrd}
     written = {k: Path(v) for k, v in outputs.items() if v is not None}
     for path in written.values():
@@ -177,13 +196,10 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"{path}: is a directory; expected a file name to write")
     config = with_margins(load_vehicle(args.vehicle), args.body_rate_margin,
                           args.yaw_acceleration_margin, args.thrust_margin)
-
-    def say(text: str) -> None:
-        if args.verbosity >= 0:
-            print(f"mavsysid plan: {text}", file=sys.stderr, flush=True)
-
     result = run_plan(config, settings, random=args.random, progress=args.verbosity >= 0,
                       say=say)
+    if result.shortfall:  # even with -q: the flight is not the one asked for
+        print(f"mavsysid plan: warning: {result.shortfall}", file=sys.stderr, flush=True)
     write_trajectory(args.output, result)
     if args.csv is not None:
         write_setpoints_csv(args.csv, result.trajectory)

@@ -197,7 +197,7 @@ def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
                              f"(at least {1 if option == 'replan_samples' else 0})")
     # Only a re-planned flight loads the estimator and the planner.
     from mavsysid.pipeline.replanned_stream import FEEDBACK_HEADROOM, ReplanSettings
-    from mavsysid.planner.results import PlannerSettings
+    from mavsysid.planner.settings import PlannerSettings
 
     time = float("inf") if args.replan_samples is not None else args.replan_time
     planner = PlannerSettings(planning_time=time, max_samples=args.replan_samples,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from mavsysid.formats.trajectory_file import read_trajectory
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, save_vehicle
 
 from mavsysid.cli import main
@@ -110,6 +110,20 @@ def test_quiet_prints_only_the_trajectory_file(tmp_path, capsys, fake_planner):
     assert main(["-q", "plan", "-o", str(out)]) == 0
     assert capsys.readouterr().out == f"{out}\n"
     assert fake_planner[0][1].planning_time == 30.0
+
+
+def test_short_flight_warns_even_when_quiet(tmp_path, monkeypatch, capsys, fake_planner):
+    """A plan's shortfall note reaches stderr as one warning line, even with -q."""
+    rrbt = sys.modules["mavsysid.planner.rrbt"]
+    made = rrbt.plan
+    note = "a 12.0 s flight of the 30 s budget (40 %): the search stopped; try --time 60"
+    monkeypatch.setattr(rrbt, "plan", lambda *a, **k: replace(made(*a, **k), shortfall=note))
+    out = tmp_path / "t.json"
+    assert main(["-q", "plan", "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == f"{out}\n"
+    assert captured.err == f"mavsysid plan: warning: {note}\n"
+    assert json.loads(out.read_text())["planner"]["shortfall"] == note
 
 
 def test_random_uses_the_baseline(tmp_path, fake_planner):

@@ -15,8 +15,8 @@ from mavsysid.experiments.baselines import (
 )
 from mavsysid.planner.feasibility import CONSTRAINTS, check_segment
 from mavsysid.planner.graph_search import GraphSearch
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.segments import VertexState, connect_fixed
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import GRAVITY, load_vehicle
 from mavsysid.vehicle.flatness import flat_to_state
 from mavsysid.vehicle.trajectory import PiecewisePolynomial

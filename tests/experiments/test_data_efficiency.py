@@ -11,7 +11,7 @@ from mavsysid.experiments.data_efficiency import (
     seconds_to_relative_sigma,
 )
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 SETTINGS = PlannerSettings(measurement_rate=50.0)

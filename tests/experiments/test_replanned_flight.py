@@ -18,7 +18,7 @@ from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.replanned_stream import relative_covariance
 from mavsysid.planner.plan_request import check_request, rotor_clearance
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 

@@ -18,7 +18,7 @@ from mavsysid.formats.trajectory_file import (
     write_trajectory_file,
 )
 from mavsysid.planner.plan_file import plan_file_for, write_trajectory
-from mavsysid.planner.results import PlanResult
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, Limits, load_vehicle, vehicle_to_toml
 
 from mavsysid.errors import InputError

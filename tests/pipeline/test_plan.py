@@ -6,7 +6,8 @@ import sys
 
 import pytest
 from mavsysid.pipeline.plan import run_plan
-from mavsysid.planner.results import PlannerSettings, PlanProgress
+from mavsysid.planner.plan_result import PlanProgress
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError, JobFailedError

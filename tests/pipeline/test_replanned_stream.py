@@ -24,7 +24,7 @@ from mavsysid.pipeline.replanned_stream import (
     run_replanned_stream,
     snapshot_pose,
 )
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import JobFailedError

@@ -27,7 +27,7 @@ from mavsysid.vehicle.flatness import flat_to_state
 
 from mavsysid.errors import InputError
 
-# The planner's default flight volume (mavsysid.planner.results.PlannerSettings.box), m.
+# The planner's default flight volume (mavsysid.planner.settings.PlannerSettings.box), m.
 BOX = np.array([-2.0, -2.0, 0.5, 2.0, 2.0, 2.5])
 # Sizes of velocity … snap (m/s … m/s⁴) and yaw rate, acceleration at derivative scale 1.
 POS_SCALES = np.array([1.0, 4.0, 20.0, 100.0])

@@ -16,7 +16,7 @@ from mavsysid.planner.gradient_refine import (
 )
 from mavsysid.planner.graph_search import GraphSearch
 from mavsysid.planner.refine import FlightPricing, PathRefiner, split_path
-from mavsysid.planner.results import PlannerSettings
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 from tests.support.refined_paths import assert_consistent_flight

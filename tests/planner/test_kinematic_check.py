@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from mavsysid.planner.kinematic_check import PLAN_SHARE, exceeded_limits, segment_peaks
 from mavsysid.planner.plan_request import check_request
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.search_setup import segment_trajectory
 from mavsysid.planner.segments import VertexState, connect_free_end
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.kinematic_limits import KINEMATIC_FIELDS, KinematicLimits, kinematic_peaks
 

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from mavsysid.planner.plan_result import PlanResult
 from mavsysid.planner.recording import (
     APPLICATION_ID,
     PATH_RATE,
@@ -16,7 +17,6 @@ from mavsysid.planner.recording import (
     time_colors,
     write_plan_rrd,
 )
-from mavsysid.planner.results import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation

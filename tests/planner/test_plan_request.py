@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from mavsysid.planner.baseline import plan_random
 from mavsysid.planner.plan_request import MIN_BOX_SIDE, check_request, rotor_clearance
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 

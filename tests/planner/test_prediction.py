@@ -10,8 +10,8 @@ from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.flatness import flat_to_state
 

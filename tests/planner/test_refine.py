@@ -17,9 +17,9 @@ from mavsysid.planner.refine import (
     StopChoice,
     split_path,
 )
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
 from mavsysid.planner.segments import VertexState, connect_fixed, to_piecewise
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError
@@ -187,3 +187,35 @@ def test_incremental_pricing_matches_pricing_from_scratch(searched):
     assert refiner.accepted > 5
     assert np.all(np.diff(history) <= 0.0) and final.dopt < path.dopt
     assert_consistent_flight(search, final)
+
+
+def _shorter_is_better() -> FlightPricing:
+    """A stand-in belief that rewards shorter flights: only a floor holds the refiner back."""
+    return FlightPricing(sigma0=0.0,
+                         propagate=lambda sigma, segs: sigma + sum(s.duration for s in segs),
+                         transfer=lambda s: s.duration, apply=lambda sigma, t: sigma + t,
+                         dopt=lambda sigma: sigma, identity=0.0)
+
+
+@pytest.mark.parametrize("floor", [1.8, 2.5])
+def test_refiner_keeps_the_shortest_flight(floor):
+    """No kept flight is shorter than the floor, or than the starting flight when that is
+    shorter; without a floor the same refiner shortens the flight."""
+    box = np.array([-2.0, -2.0, 0.5, 2.0, 2.0, 2.5])
+
+    def refiner(shortest: float) -> PathRefiner:
+        return PathRefiner(replace(_two_vertex_path(), dopt=2.0), feasible=lambda s: True,
+                           stop_at=lambda v: StopChoice(None, None),
+                           pricing=_shorter_is_better(), box=box, budget=10.0,
+                           rng=np.random.default_rng(3), shortest_flight=shortest)
+
+    free = refiner(0.0)
+    for _ in range(300):
+        free.step()
+    assert free.path.duration < 1.8
+    floored = refiner(floor)
+    kept = []
+    for _ in range(300):
+        if floored.step():
+            kept.append(floored.path.duration)
+    assert min(kept, default=2.0) >= min(floor, 2.0) - 1e-12

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.robust_plan import ConfidentPlan, plan_most_confident
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.flatness import flat_to_state
 

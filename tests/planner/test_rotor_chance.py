@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from mavsysid.planner.feasibility import check_segment, segment_slack
-from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.sample_slacks import slab_spread
 from mavsysid.planner.search_setup import initial_covariance, search_model
 from mavsysid.planner.segments import Segment, VertexState, connect_fixed
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.allocation import allocation_pinv
 from mavsysid.vehicle.config import SHIPPED_VEHICLES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.flatness import SAMPLE_SIZE, flat_sample

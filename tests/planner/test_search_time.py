@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from mavsysid.planner.graph_search import (
+from mavsysid.planner.search_stop import (
     FULL_FLIGHT_SHARE,
     SEARCH_SHARE_MAX,
     search_time_is_up,

@@ -8,13 +8,8 @@ import types
 import numpy as np
 import pytest
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
-from mavsysid.planner.results import (
-    PlannerGraph,
-    PlannerSettings,
-    PlannerStats,
-    PlanProgress,
-    PlanResult,
-)
+from mavsysid.planner.plan_result import PlannerGraph, PlannerStats, PlanProgress, PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 
 __all__ = ["fake_result", "install_fake_planner"]

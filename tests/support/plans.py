@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
-from mavsysid.planner.results import PlannerGraph, PlannerSettings, PlannerStats, PlanResult
+from mavsysid.planner.plan_result import PlannerGraph, PlannerStats, PlanResult
+from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
 __all__ = ["fake_plan"]

@@ -150,8 +150,8 @@ def test_the_excitation_figure_on_the_simulated_vehicle_defaults_is_not_refused(
 @pytest.mark.slow
 def test_a_plan_made_for_stock_arducopter_passes_the_streams_limit_check():
     """plan --autopilot-limits (stock values) → the stream's pre-flight check of them."""
-    from mavsysid.planner.results import PlannerSettings
     from mavsysid.planner.rrbt import plan
+    from mavsysid.planner.settings import PlannerSettings
     from mavsysid.vehicle.config import load_vehicle
 
     config = load_vehicle("quad_x")

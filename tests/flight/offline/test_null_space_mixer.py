@@ -127,8 +127,8 @@ def test_exact_plans_fly_with_fewer_saturated_ticks() -> None:
     exact mixer saturates on at most 1 % of ticks in the median flight, and on fewer ticks
     in all than the A⁺ mixer flying the same plans."""
     from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-    from mavsysid.planner.results import PlannerSettings
     from mavsysid.planner.rrbt import plan
+    from mavsysid.planner.settings import PlannerSettings
 
     config = replace(load_vehicle("firefly"), allocation="exact")
     fractions: dict[str, list[float]] = {"exact": [], "pseudo_inverse": []}

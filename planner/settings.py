@@ -1,15 +1,13 @@
-"""What the planner takes and returns: settings, progress reports and the planned flight."""
+"""What the planner takes: its settings (`PlannerSettings`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
-from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.kinematic_limits import KinematicLimits
-from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-__all__ = ["PlanProgress", "PlanResult", "PlannerGraph", "PlannerSettings", "PlannerStats"]
+__all__ = ["PlannerSettings"]
 
 
 @dataclass(frozen=True)
@@ -22,7 +20,9 @@ class PlannerSettings:
         Longest flight, s, including the final stopping segment.
     planning_time : float
         Wall-clock planning time, s (the planner stops at whichever of this and
-        ``max_samples`` comes first).
+        ``max_samples`` comes first). The graph search gets the first
+        1 − ``refine_share`` of it, more (up to half of it) while its best flight uses
+        less than 90 % of the budget.
     max_samples : int or None
         Sample budget: with it (and an unlimited planning time) the result depends only
         on the seed, not on the machine or its load.
@@ -116,116 +116,3 @@ class PlannerSettings:
             return np.asarray(self.start, dtype=float)
         b = np.asarray(self.box, dtype=float)
         return np.array([*(0.5 * (b[:3] + b[3:])), 0.0])
-
-
-@dataclass(frozen=True)
-class PlanProgress:
-    """A progress report, sent to the progress callback while planning."""
-
-    elapsed: float
-    samples: int
-    vertices: int
-    edges: int
-    beliefs: int
-    best_dopt: float | None
-
-
-@dataclass(frozen=True)
-class PlannerStats:
-    """How a planning run went.
-
-    Attributes
-    ----------
-    samples, vertices, edges, beliefs : int
-        Sampled states, graph vertices, feasible edges, beliefs kept (open + closed).
-    edges_attempted : int
-        Connections tried (feasible or not).
-    beliefs_propagated : int
-        Belief propagations along edges (kept or pruned).
-    elapsed : float
-        Planning wall time, s.
-    time_to_first_solution : float or None
-        Wall time until the first feasible plan, s.
-    edge_time, propagation_time : float
-        Wall time spent building edges (segments, feasibility, transfers) and propagating
-        beliefs, s.
-    best_history : ndarray, shape (H, 2)
-        (elapsed s, best D-opt) each time the best plan improved, in the search and then
-        in the refinement.
-    refine_steps, refine_accepted : int
-        Refinement perturbations tried and kept (`mavsysid.planner.refine`).
-    """
-
-    samples: int
-    vertices: int
-    edges: int
-    beliefs: int
-    edges_attempted: int
-    beliefs_propagated: int
-    elapsed: float
-    time_to_first_solution: float | None
-    edge_time: float
-    propagation_time: float
-    best_history: np.ndarray
-    refine_steps: int = 0
-    refine_accepted: int = 0
-
-
-@dataclass(frozen=True)
-class PlannerGraph:
-    """The motion graph, for display.
-
-    Attributes
-    ----------
-    vertices : ndarray, shape (V, 4)
-        [x, y, z, yaw] of each vertex.
-    edges : ndarray, shape (E, 2)
-        (from, to) vertex indices of each feasible edge.
-    edge_paths : list of ndarray, each shape (P, 3)
-        Sampled positions along each edge.
-    path : list of int
-        Vertex indices of the search's best path (start vertex first); the flown
-        trajectory is this path after refinement.
-    """
-
-    vertices: np.ndarray
-    edges: np.ndarray
-    edge_paths: list[np.ndarray]
-    path: list[int]
-
-
-@dataclass(frozen=True)
-class PlanResult:
-    """A planned calibration flight.
-
-    Attributes
-    ----------
-    kind : str
-        "dopt" (the information-gathering planner) or "random" (the paper's baseline).
-    trajectory : PiecewisePolynomial
-        The flight, from hover at the start to hover at the end (stopping segment included).
-    predicted_dopt : float
-        Predicted D-optimality det(Σ_θ)^(1/6) at the end of the flight, SI units.
-    predicted_covariance : ndarray, shape (6, 6)
-        Predicted final θ covariance, SI.
-    sigma_times : ndarray, shape (M,)
-        Times along the flight, s.
-    predicted_sigma : ndarray, shape (M, 6)
-        Predicted σ of each parameter at those times, SI.
-    config : VehicleConfig
-        The vehicle (its nominal θ is the planner's model).
-    settings : PlannerSettings
-    stats : PlannerStats
-    graph : PlannerGraph
-    """
-
-    kind: str
-    trajectory: PiecewisePolynomial
-    predicted_dopt: float
-    predicted_covariance: np.ndarray
-    sigma_times: np.ndarray
-    predicted_sigma: np.ndarray
-    config: VehicleConfig
-    settings: PlannerSettings
-    stats: PlannerStats
-    graph: PlannerGraph = field(repr=False)

@@ -1,0 +1,130 @@
+"""``mavsysid experiment``: the whole experiment on a real autopilot in one command.
+
+A thin layer over `mavsysid.pipeline.autopilot_experiment.run_autopilot_experiment`:
+read the position-controller limits from the vehicle on ``--connect``, plan within them,
+fly the plan, estimate θ from the flight's ``flight.tlog``, and print the plan, the flight
+and the estimate. Everything is kept in the flight directory. Exit codes: 0 estimated,
+2 bad input, 3 refused at any stage (one line naming it), 130 interrupted after braking
+and landing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from mavsysid.cli.options import DEFAULT_BOX, allow_negative_values, parse_numbers
+from mavsysid.cli.stream import format_summary as flight_summary
+from mavsysid.errors import InputError
+from mavsysid.estimation.estimator import EstimatorSettings
+from mavsysid.estimation.report import format_table
+from mavsysid.flight.ground.stream_session import StreamSettings
+from mavsysid.flight.mavlink_setup import signing_key_from_file
+from mavsysid.pipeline.autopilot_experiment import ExperimentOutcome, run_autopilot_experiment
+from mavsysid.planner.settings import PlannerSettings
+
+__all__ = ["add_arguments", "format_report", "main"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``mavsysid experiment``."""
+    allow_negative_values(parser)  # "--box -2,-2,0.5,2,2,2.5"
+    parser.add_argument("--connect", required=True, metavar="LINK",
+                        help="the vehicle: udp:HOST:PORT (listen), udpout:HOST:PORT, "
+                        "tcp:HOST:PORT or a serial device[:BAUD], as `stream --connect`")
+    parser.add_argument("--vehicle", required=True, metavar="NAME|TOML",
+                        help="shipped vehicle name or TOML path: the plan's model and the "
+                        "estimate's prior")
+    parser.add_argument("--budget", type=float, default=20.0, metavar="S",
+                        help="flight time, s, the final stop included (default: 20)")
+    parser.add_argument("--box", default=DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                        help=f"flight box in m, world ENU (default: {DEFAULT_BOX})")
+    parser.add_argument("--time", type=float, metavar="S",
+                        help=f"planning time, wall s (default: {PlannerSettings.planning_time:g}, "
+                        "or no limit with --samples)")
+    parser.add_argument("--samples", type=int, metavar="N",
+                        help="stop planning after N samples: the plan then depends only on "
+                        "the seed")
+    parser.add_argument("--refine-steps", type=int, default=PlannerSettings.refine_steps,
+                        metavar="N", help="most steps refining the search's best flight "
+                        f"(default: {PlannerSettings.refine_steps}; keep it small with "
+                        "--samples)")
+    parser.add_argument("--seed", type=int, default=0, help="planner seed (default: 0)")
+    parser.add_argument("--log-dir", type=Path, default=Path("logs"), metavar="DIR",
+                        help="where the flight directory is created (default: ./logs)")
+    parser.add_argument("--signing-key", type=Path, metavar="FILE",
+                        help="MAVLink 2 signing: a file holding the passphrase")
+    parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
+                        help="run the streamer's clock K times faster (only against a "
+                        "simulated vehicle running K times faster; default: 1)")
+    parser.add_argument("--heartbeat-timeout", type=float, default=30.0, metavar="S",
+                        help="how long to wait for the vehicle's first heartbeat (default: 30 s)")
+    parser.add_argument("--prearm-timeout", type=float, default=60.0, metavar="S",
+                        help="how long to wait for the pre-arm checks (default: 60 s)")
+    parser.add_argument("--position-timeout", type=float, default=90.0, metavar="S",
+                        help="how long to wait for a usable local position (default: 90 s)")
+    parser.add_argument("--no-fence", action="store_true",
+                        help="fly without the autopilot's geofence around the box")
+    parser.add_argument("--prior-sigma", type=float,
+                        default=EstimatorSettings.prior_relative_sigma, metavar="REL",
+                        help="the estimate's prior σ relative to the vehicle file's θ "
+                        f"(default: {EstimatorSettings.prior_relative_sigma:g})")
+
+
+def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings]:
+    for option in ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout",
+                   "prior_sigma"):
+        value = getattr(args, option)
+        if not (value > 0.0 and value < math.inf):
+            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
+                             "number")
+    box = parse_numbers(args.box, 6, "--box", "x_min,y_min,z_min,x_max,y_max,z_max")
+    time = args.time
+    if time is None:
+        time = math.inf if args.samples is not None else PlannerSettings.planning_time
+    planner = PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
+                              box=box, seed=args.seed,  # type: ignore[arg-type]
+                              refine_steps=args.refine_steps)
+    key = None if args.signing_key is None else signing_key_from_file(args.signing_key)
+    stream = StreamSettings(connect=args.connect, box=box, signing_key=key,
+                            speedup=args.speedup, heartbeat_timeout=args.heartbeat_timeout,
+                            position_timeout=args.position_timeout,
+                            prearm_timeout=args.prearm_timeout, log_dir=args.log_dir,
+                            fence=not args.no_fence)
+    return planner, stream
+
+
+def format_report(outcome: ExperimentOutcome, verbosity: int = 0) -> str:
+    """The text printed after an experiment (``verbosity`` < 0: the estimate file alone)."""
+    if verbosity < 0:
+        return str(outcome.estimate_file)
+    plan = outcome.plan
+    lines = [f"Planned a {plan.trajectory.duration:.1f} s flight of the "
+             f"{plan.settings.budget:g} s budget within the limits of {outcome.limits}; "
+             f"predicted D-opt {plan.predicted_dopt:.3g}.",
+             f"  trajectory {outcome.trajectory}"]
+    if plan.shortfall:
+        lines.append(f"  warning    {plan.shortfall}")
+    run = outcome.estimate
+    lines += [flight_summary(outcome.flight, verbosity), "",
+              format_table(run.result, run.config, str(run.flight.source)),
+              f"wrote estimate {outcome.estimate_file}"]
+    return "\n".join(lines)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run the command; returns the exit code."""
+    planner, stream = _settings(args)
+    verbose = args.verbosity >= 0
+
+    def say(text: str) -> None:
+        if verbose or text.startswith("warning:"):
+            print(f"mavsysid experiment: {text}", file=sys.stderr, flush=True)
+
+    outcome = run_autopilot_experiment(
+        args.vehicle, planner, stream, EstimatorSettings(prior_relative_sigma=args.prior_sigma),
+        say, progress=verbose)
+    print(format_report(outcome, args.verbosity))
+    return 0

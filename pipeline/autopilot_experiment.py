@@ -1,0 +1,127 @@
+"""The whole experiment on a real autopilot, in one job: plan within the limits read from
+the vehicle, fly the plan, estimate θ from the flight's own log, report.
+
+`run_autopilot_experiment` is what ``mavsysid experiment`` calls; tests call it directly.
+Each stage is the job its own command runs (`mavsysid.pipeline.plan`,
+`mavsysid.pipeline.stream`, `mavsysid.pipeline.estimate`), so the experiment refuses what
+they refuse, in their words. The flight directory keeps everything: the trajectory file
+(``trajectory.json``) next to the streamer's ``flight.tlog``, ``pose.csv`` and
+``meta.json``, and ``estimate.json`` once θ is estimated. The plan is written first as
+``LOG_DIR/trajectory-seedN.json`` (the flight directory is named after it) and stays there
+when the flight is refused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from mavsysid.estimation.estimator import EstimatorSettings
+from mavsysid.estimation.report import write_estimate_json
+from mavsysid.flight.ground.stream_session import StreamSettings
+from mavsysid.pipeline.estimate import EstimateRun, run_estimate
+from mavsysid.pipeline.plan import autopilot_limits, run_plan
+from mavsysid.pipeline.stream import StreamOutcome, run_stream
+from mavsysid.planner.plan_file import write_trajectory
+from mavsysid.planner.plan_result import PlanResult
+from mavsysid.planner.settings import PlannerSettings
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["FLIGHT_LOG", "ExperimentOutcome", "run_autopilot_experiment"]
+
+#: The log θ is estimated from: the streamer's MAVLink log, the rotor speeds from the
+#: vehicle's ESC telemetry or its motor outputs through the vehicle file's motor curve.
+FLIGHT_LOG = "flight.tlog"
+
+
+@dataclass(frozen=True)
+class ExperimentOutcome:
+    """A finished experiment.
+
+    Attributes
+    ----------
+    limits : str
+        Where the autopilot's limits came from and what they are (one line).
+    plan : PlanResult
+        The planned flight (its ``shortfall`` note says when it is short of the budget).
+    flight : StreamOutcome
+        The flight directory and its ``meta.json``.
+    trajectory : Path
+        The trajectory file flown, in the flight directory.
+    estimate : EstimateRun
+        θ estimated from the flight's log.
+    estimate_file : Path
+        ``estimate.json`` in the flight directory.
+    """
+
+    limits: str
+    plan: PlanResult
+    flight: StreamOutcome
+    trajectory: Path
+    estimate: EstimateRun
+    estimate_file: Path
+
+
+def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
+                             stream: StreamSettings,
+                             estimator: EstimatorSettings | None = None,
+                             say: Callable[[str], None] | None = None,
+                             progress: bool = True) -> ExperimentOutcome:
+    """Plan within the vehicle's limits, fly it on ``stream.connect``, estimate θ from its log.
+
+    Parameters
+    ----------
+    vehicle : str or Path
+        Shipped vehicle name or TOML path: the plan's model and the estimate's prior.
+    planner : PlannerSettings
+        Budget, box, planning time, seed, …; its ``autopilot_limits`` are replaced by the
+        limits read from the vehicle.
+    stream : StreamSettings
+        The link (``connect``), rates, guards and where the flight directory goes. The
+        plan is made within the vehicle's limits, so ``set_limits`` is not needed.
+    estimator : EstimatorSettings, optional
+        ``mavsysid estimate``'s defaults when None.
+    say : callable, optional
+        Receives one-line status messages.
+    progress : bool
+        Progress bars while planning and streaming.
+
+    Returns
+    -------
+    ExperimentOutcome
+
+    Raises
+    ------
+    InputError
+        Bad vehicle, settings or link.
+    JobFailedError
+        No vehicle answered, no plan was found, the flight was refused or aborted (its
+        directory keeps what was recorded), or the estimate was refused: one line naming
+        the stage, and for a flown experiment its flight directory.
+    """
+    say = say or (lambda _text: None)
+    say(f"reading the autopilot's limits from the vehicle on {stream.connect}")
+    source, limits = autopilot_limits(stream.connect, stream.signing_key,
+                                      stream.heartbeat_timeout, say)
+    say(f"planning within the limits of {source}")
+    plan = run_plan(vehicle, replace(planner, autopilot_limits=limits), progress=progress)
+    if plan.shortfall:
+        say(f"warning: {plan.shortfall}")
+    stream.log_dir.mkdir(parents=True, exist_ok=True)
+    staged = stream.log_dir / f"trajectory-seed{planner.seed}.json"
+    write_trajectory(staged, plan)
+    flight = run_stream(staged, stream, vehicle, say, progress)
+    trajectory = flight.directory / "trajectory.json"
+    staged.replace(trajectory)
+    log = flight.directory / FLIGHT_LOG
+    say(f"estimating θ from {log}")
+    try:
+        estimate = run_estimate(log, vehicle, settings=estimator)
+    except JobFailedError as refused:
+        raise JobFailedError(f"flown and recorded in {flight.directory}, but no estimate: "
+                             f"{refused}") from refused
+    estimate_file = flight.directory / "estimate.json"
+    write_estimate_json(estimate_file, estimate.result, estimate.config, log)
+    return ExperimentOutcome(source, plan, flight, trajectory, estimate, estimate_file)

@@ -1,0 +1,70 @@
+"""``mavsysid experiment``: bad options and an unanswered link are one line each, before
+anything is planned or flown; against `mavsysid sim` (its own process, TCP on 127.0.0.1)
+the limits are read, the plan flown and θ estimated, all kept in one flight directory."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mavsysid.flight.loopback_ports import free_tcp_port
+
+from mavsysid.cli import main
+from tests.support.stream_flights import SimProcess
+
+BAD_OPTIONS = {
+    "speedup 0": (["--speedup", "0"], "--speedup"),
+    "negative prior sigma": (["--prior-sigma", "-1"], "--prior-sigma"),
+    "box with 3 numbers": (["--box", "1,2,3"], "--box"),
+    "heartbeat timeout nan": (["--heartbeat-timeout", "nan"], "--heartbeat-timeout"),
+}
+
+
+@pytest.mark.parametrize("extra,named", BAD_OPTIONS.values(), ids=BAD_OPTIONS.keys())
+def test_bad_options_exit_2_before_connecting(tmp_path: Path, capsys, extra, named):
+    """A bad option is exit 2 in one line naming it; no link is opened, nothing written."""
+    link = f"tcp:127.0.0.1:{free_tcp_port()}"
+    code = main(["experiment", "--connect", link, "--vehicle", "quad_x",
+                 "--log-dir", str(tmp_path / "logs"), *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and named in err and "\n" not in err, err
+    assert not (tmp_path / "logs").exists()
+
+
+def test_no_vehicle_on_the_link_exits_3_in_one_line(tmp_path: Path, capsys):
+    """A link nobody answers on fails in one line naming it, before any planning."""
+    link = f"tcp:127.0.0.1:{free_tcp_port()}"
+    code = main(["-q", "experiment", "--connect", link, "--vehicle", "quad_x",
+                 "--log-dir", str(tmp_path / "logs")])
+    err = capsys.readouterr().err.strip()
+    assert code == 3 and link in err and "\n" not in err, err
+    assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.slow
+def test_experiment_against_the_sim_keeps_everything_in_one_directory(tmp_path: Path, capsys):
+    """Limits read from the sim, a plan within them flown without raising any, and θ
+    estimated from the flight's tlog: exit 0, or a refused estimate in one line naming the
+    flight directory; either way the plan and the recorded flight are kept together."""
+    port = free_tcp_port()
+    logs = tmp_path / "logs"
+    with SimProcess(tmp_path / "sim", "--connect", f"tcpin:127.0.0.1:{port}", "--vehicle",
+                    "quad_x", lockstep=False) as sim:
+        sim.wait_ready(timeout=90.0)
+        code = main(["experiment", "--connect", f"tcp:127.0.0.1:{port}", "--vehicle",
+                     "quad_x", "--budget", "10", "--samples", "80", "--refine-steps", "100",
+                     "--seed", "1", "--log-dir", str(logs)])
+    out, err = capsys.readouterr()
+    (flight,) = [p for p in logs.iterdir() if p.is_dir()]
+    for name in ("trajectory.json", "flight.tlog", "pose.csv", "meta.json"):
+        assert (flight / name).is_file(), name
+    meta = json.loads((flight / "meta.json").read_text())
+    assert meta["autopilot_limits"]["set_limits"] is False
+    assert "planning within the limits of the ArduPilot vehicle on tcp:127.0.0.1" in err
+    if code == 0:
+        assert (flight / "estimate.json").is_file()
+        assert f"wrote estimate {flight / 'estimate.json'}" in out
+    else:
+        last = err.strip().splitlines()[-1]
+        assert code == 3 and f"flown and recorded in {flight}, but no estimate" in last, err
