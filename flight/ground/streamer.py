@@ -51,6 +51,8 @@ from mavsysid.errors import JobFailedError
 __all__ = ["fly"]
 
 _TELEMETRY = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ESC_TELEMETRY_1_TO_4")
+#: SYS_STATUS rate while preparing, Hz: the pre-arm wait sees each change of health.
+_HEALTH_RATE = 2.0
 
 
 def fly(session: StreamSession, say: Callable[[str], None], progress: bool = True,
@@ -142,6 +144,10 @@ class _Flight:
                 self.say(f"warning: the vehicle did not accept {name} at {rate:g} Hz: {why}")
         # Motor outputs for the log, a fallback for missing ESC rpm; a refusal is no matter.
         self.commands.set_message_interval("SERVO_OUTPUT_RAW", rate)
+        # Health as it changes: the pre-arm wait judges the latest SYS_STATUS, and a vehicle
+        # that sends none unasked (ArduPilot on a fresh link) would leave it judging one
+        # stale reply for the whole wait.
+        self.commands.set_message_interval("SYS_STATUS", _HEALTH_RATE)
         self.commands.wait_position(self.settings.position_timeout)
         achieved = self._measure_rates(2.0)
         shown = ", ".join(f"{n} {achieved.get(n, 0.0):.1f} Hz" for n in names)
