@@ -107,6 +107,7 @@ EFFECT_PARAMETER_SIGNS: dict[tuple[str, str], str] = {
     ("ground_effect", "rotor_radius"): "positive",
     ("body_drag", "k"): "nonnegative",
     ("rotor_drag_linear", "k"): "nonnegative",
+    ("rotor_drag_linear", "k_z"): "nonnegative",
 }
 
 

@@ -9,7 +9,7 @@ acting on the body).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -163,6 +163,9 @@ class ModelEffect:
     #: Channels through which the effect enters: a subset of {"wrench", "pose",
     #: "rotor_speeds"}.
     channels: ClassVar[frozenset[str]] = frozenset()
+    #: Whether the wrench acts on the velocity through the air: with a wind in the model
+    #: (`air_velocity`), `total_wrench` evaluates it at the airspeed.
+    airspeed: ClassVar[bool] = False
 
     def __init__(self, **values: float) -> None:
         known = {p.name for p in self.parameters}
@@ -206,6 +209,10 @@ class ModelEffect:
         """Extra body force (N) and torque (N·m), each of shape (N, 3)."""
         return zero_wrench(inputs)
 
+    def air_velocity(self, inputs: EffectInputs) -> np.ndarray | None:
+        """The body's velocity through the air v_B − Rᵀ w (N, 3), m/s; None: still air."""
+        return None
+
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
         """Truth → measurement: the pose reported at times t given the true pose at t.
@@ -227,11 +234,21 @@ class ModelEffect:
 
 def total_wrench(effects: tuple[ModelEffect, ...] | list[ModelEffect], inputs: EffectInputs
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Sum of the wrenches of ``effects`` at ``inputs``: force and torque (N, 3) each."""
+    """Sum of the wrenches of ``effects`` at ``inputs``: force and torque (N, 3) each.
+
+    An effect that moves the air (a wind: `ModelEffect.air_velocity`) changes what every
+    airspeed effect (`ModelEffect.airspeed`: body drag, linear rotor drag) sees: those are
+    evaluated at the airspeed, so each is written once for still air.
+    """
     force, torque = zero_wrench(inputs)
+    air = inputs
+    for effect in effects:
+        velocity = effect.air_velocity(inputs)
+        if velocity is not None:
+            air = replace(inputs, velocity=velocity)
     for effect in effects:
         if "wrench" in effect.channels:
-            f, m = effect.wrench(inputs)
+            f, m = effect.wrench(air if effect.airspeed else inputs)
             force += f
             torque += m
     return force, torque

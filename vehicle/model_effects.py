@@ -64,6 +64,7 @@ class BodyDrag(ModelEffect):
                    "(F = -k |v| v at the centre of gravity)")
     parameters = (EffectParameter("k", "kg/m", "drag force per squared airspeed", 0.02),)
     channels = frozenset({"wrench"})
+    airspeed = True
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         v = inputs.velocity
@@ -72,20 +73,30 @@ class BodyDrag(ModelEffect):
 
 
 class RotorDragLinear(ModelEffect):
-    """Rotor drag linear in rotor speed (RotorS/RotorPy form): F_i = −k n_i P(v_B + ω × r_i)."""
+    """Rotor drag linear in rotor speed (RotorS/RotorPy form): F_i = −n_i K (v_B + ω × r_i).
+
+    K = diag(k, k, k_z): k is the in-plane drag of blade flapping and induced drag (the
+    H-force), k_z the loss of thrust with the axial inflow through the rotor (induced
+    inflow), which also damps roll and pitch through the arms. RotorPy's rotor drag matrix
+    (its ``k_d``, ``k_z``) exactly.
+    """
 
     name = "rotor_drag_linear"
     title = "rotor drag linear in rotor speed"
     description = ("blade flapping and induced drag of each rotor, proportional to its speed "
-                   "and to the in-plane hub velocity (F_i = -k n_i (v + w x r_i)_xy)")
-    parameters = (EffectParameter("k", "N·s/(m·rad)", "drag force per rotor speed and speed",
-                                  1e-4),)
+                   "and to the hub velocity: in plane (k) and along the rotor axis (k_z, "
+                   "the induced inflow), F_i = -n_i diag(k, k, k_z) (v + w x r_i)")
+    parameters = (EffectParameter("k", "N·s/(m·rad)", "in-plane drag force per rotor speed "
+                                  "and speed", 1e-4),
+                  EffectParameter("k_z", "N·s/(m·rad)", "axial (inflow) force per rotor speed "
+                                  "and speed", 1e-4))
     channels = frozenset({"wrench"})
+    airspeed = True
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         hub = inputs.hub_velocities()
-        forces = -self.values[0] * inputs.rotor_speeds[..., None] * hub
-        forces[..., 2] = 0.0
+        forces = -inputs.rotor_speeds[..., None] * hub * np.array(
+            [self.values[0], self.values[0], self.values[1]])
         return hub_forces_wrench(inputs, forces)
 
 
@@ -205,10 +216,12 @@ class CogOffset(ModelEffect):
 
 
 class Wind(ModelEffect):
-    """Constant horizontal wind w (world ENU): the rotor drag sees airspeed v_B − Rᵀ w.
+    """Constant horizontal wind w (world ENU): the drags see the airspeed v_B − Rᵀ w.
 
-    The paper's rotor drag has no component along z_B, so a vertical wind is not
-    observable through it and is not a parameter.
+    Its wrench is the change of the paper's rotor drag; the airspeed effects in the same
+    model (body drag, linear rotor drag) see the wind too (`total_wrench`). The paper's
+    rotor drag has no component along z_B, so a vertical wind is not observable through it
+    and is not a parameter.
     """
 
     name = "wind"
@@ -219,10 +232,14 @@ class Wind(ModelEffect):
                   EffectParameter("y", "m/s", "wind towards +y (north)", 0.5))
     channels = frozenset({"wrench"})
 
-    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
+    def air_velocity(self, inputs: EffectInputs) -> np.ndarray:
         w_body = np.einsum("nji,j->ni", inputs.rotation(), np.append(self.values, 0.0))
-        # The paper's rotor drag at the airspeed v_B − Rᵀ w, less the model's at v_B.
-        air_force, air_torque = rotor_force_wrench(inputs, velocity=inputs.velocity - w_body)
+        return inputs.velocity - w_body
+
+    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
+        # The paper's rotor drag at the airspeed v_B − Rᵀ w, less the model's at v_B (the
+        # airspeed effects see the wind through `total_wrench`).
+        air_force, air_torque = rotor_force_wrench(inputs, velocity=self.air_velocity(inputs))
         force, torque = rotor_force_wrench(inputs)
         return air_force - force, air_torque - torque
 
