@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 from mavsysid.discrepancy.candidates import candidate_library
+from mavsysid.discrepancy.filter_nis import nis_pair
 from mavsysid.discrepancy.regression import fit_theta
-from mavsysid.discrepancy.resample import resample_flight
+from mavsysid.discrepancy.resample import average_blocks, resample_flight
 from mavsysid.discrepancy.residual_stats import (
     AxisStats,
     Where,
@@ -39,6 +40,8 @@ from mavsysid.discrepancy.selection import (
     forward_select,
 )
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
+from mavsysid.estimation.progress import report_stage
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
@@ -49,6 +52,7 @@ __all__ = [
     "Diagnosis",
     "DiagnosisSettings",
     "Gap",
+    "check_refits",
     "diagnose_flight",
     "reestimate",
 ]
@@ -139,6 +143,8 @@ class Diagnosis:
     split_time : float
         Start of the held-out part, s.
     notes : tuple of str
+    theta_after_sigma : ndarray, shape (6,) or None
+        Standard error of ``theta_after`` (None when no effect was named), SI.
     """
 
     effects: tuple[FittedEffect, ...]
@@ -157,48 +163,12 @@ class Diagnosis:
     used: np.ndarray
     split_time: float
     notes: tuple[str, ...] = field(default_factory=tuple)
+    theta_after_sigma: np.ndarray | None = None
 
     @property
     def significant(self) -> bool:
         """True when at least one effect was named."""
         return bool(self.effects)
-
-
-def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
-         grid: np.ndarray) -> np.ndarray:
-    """The parameter EKF's NIS with ``effects`` in the model at their values, on ``grid``.
-
-    The estimator's effect channels (`mavsysid.estimation.estimator.estimate_with_effects`, held
-    values, filter only) carry every catalogue effect, wrenches included. The filter runs
-    on the logged samples (it needs no uniform rate); each grid sample of a resampled
-    flight takes the NIS of the logged sample nearest to it.
-    """
-    from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
-
-    result = estimate_with_effects(flight, config, tuple(effects),
-                                   EstimatorSettings(refine=False), fit_effects=False)
-    nis = np.asarray(result.history.nis, float)
-    if grid is flight.t:
-        return nis
-    t = flight.t
-    i = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
-    nearest = np.where(grid - t[i - 1] <= t[i] - grid, i - 1, i)
-    return nis[nearest]
-
-
-def _nis_pair(flight: FlightData, config: VehicleConfig, known: tuple[ModelEffect, ...],
-              fitted: tuple[ModelEffect, ...], grid: np.ndarray
-              ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
-    """NIS without and with the named effects on ``grid`` (`_nis`), and notes.
-
-    An EKF that cannot follow the log (`JobFailedError`, a diverged filter) is not caught:
-    such a log contradicts the model so grossly (a wrong vehicle, rotor order, or time on
-    the ground) that "no significant discrepancy" from the residual regression would be
-    a confident wrong answer, so the diagnosis is refused (exit 3) with the filter's reason.
-    """
-    before = _nis(flight, config, known, grid)
-    after = _nis(flight, config, (*known, *fitted), grid) if fitted else before
-    return before, after, []
 
 
 def _split(problem: ResidualProblem, used: np.ndarray, settings: DiagnosisSettings
@@ -264,7 +234,8 @@ def diagnose_flight(
     known_effects : sequence of ModelEffect
         Effects already in the model (not candidates).
     progress : callable, optional
-        Receives one-line progress messages.
+        Receives one-line progress messages (default: the estimator's stage listener,
+        `mavsysid.estimation.progress.report_stage`).
     with_nis : bool
         Run the parameter EKF for the NIS (needs its compiled kernels).
 
@@ -288,20 +259,21 @@ def diagnose_flight(
     names = settings.candidates
     known_names = {e.name for e in known}
     library = tuple(c for c in candidate_library(names) if c.name not in known_names)
-    uniform, resampling = resample_flight(flight)
+    say = progress or report_stage
+    uniform, resampling = average_blocks(*resample_flight(flight))
     problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling)
     used = problem.keep()
     t = uniform.t
     split, train, test = _split(problem, used, settings)
-    if progress:
-        progress("fitting θ to the flight's accelerations")
+    say(f"fitting θ to the flight's accelerations ({len(t)} samples at "
+        f"{1.0 / problem.dt:.4g} Hz)")
     base, weights = fit_theta(problem, train)
-    selection = forward_select(base, library, train, weights, settings.selection, progress)
+    selection = forward_select(base, library, train, weights, settings.selection, say)
     fitted = tuple(f.effect for f in selection.effects)
     measured, model, pose = base.evaluate()
     r_before = measured - model
     r_after = base.residual(fitted, selection.theta_after)
-    nis_before, nis_after, nis_notes = (_nis_pair(flight, config, known, fitted, t)
+    nis_before, nis_after, nis_notes = (nis_pair(flight, config, known, fitted, t)
                                         if with_nis else (None, None, []))
     before = AxisStats(axis_rms(r_before[test]), ljung_box(r_before[test], base.block),
                        *nis_stats(nis_before, test))
@@ -311,15 +283,42 @@ def diagnose_flight(
     flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
     gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
     where = where_large(base, pose, r_before, used, noise, train, settings.window)
-    notes = [MASS_NOTE, *([resampling.describe()] if resampling.resampled else []),
+    changed = resampling.resampled or resampling.averaged > 1
+    notes = [MASS_NOTE, *([resampling.describe()] if changed else []),
              *nis_notes]
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
         where=where, theta_identified=theta0, theta_before=selection.theta_before,
         theta_after=selection.theta_after, augmented_effects=(*known, *fitted), t=t,
         residual_before=r_before, residual_after=r_after, pose=pose, used=used,
-        split_time=split, notes=tuple(notes),
+        split_time=split, notes=tuple(notes), theta_after_sigma=selection.theta_after_sigma,
     )
+
+
+def check_refits(source: str, diagnosis: Diagnosis, prior: np.ndarray) -> None:
+    """Refuse (`JobFailedError`, one line) a θ refit that is physically impossible.
+
+    θ refitted without effects is judged under the known effects, θ refitted with the named
+    ones under all of them: an entry the named effects take over (c_D when
+    ``rotor_drag_linear`` carries the rotor drag) may then be ≈ 0, within its σ
+    (`mavsysid.estimation.plausibility`).
+
+    Parameters
+    ----------
+    source : str
+        The log, named first in a refusal.
+    diagnosis : Diagnosis
+    prior : ndarray, shape (6,)
+        The vehicle config's θ, SI.
+    """
+    known = diagnosis.augmented_effects[:len(diagnosis.augmented_effects)
+                                        - len(diagnosis.effects)]
+    for what, refit, sigma, effects in (
+            ("θ refitted without effects", diagnosis.theta_before, None, known),
+            ("θ refitted with the named effects", diagnosis.theta_after,
+             diagnosis.theta_after_sigma, diagnosis.augmented_effects)):
+        check_plausible(source, refit, sigma, prior, what=what,
+                        may_vanish=vanishing_parameters(e.name for e in effects))
 
 
 def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],

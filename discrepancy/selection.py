@@ -137,8 +137,10 @@ class SelectionResult:
         1/σ of each axis used in the regression.
     block : int
         Effective-sample block D (smoother window, samples).
-    coefficients : ndarray
-        Final regression coefficients [Δθ (6), linear effect parameters …].
+    theta_after_sigma : ndarray, shape (6,) or None
+        Standard error of ``theta_after`` from the final regression (block-inflated, so
+        it includes the collinearity of θ with the named effects), SI; None when no
+        effect was named.
     """
 
     effects: tuple[FittedEffect, ...]
@@ -150,6 +152,7 @@ class SelectionResult:
     bic_after: float
     weights: np.ndarray
     block: int
+    theta_after_sigma: np.ndarray | None = None
 
 
 def forward_select(
@@ -187,6 +190,8 @@ def forward_select(
     bic_before = current = reg.bic(reg.fit(*reg.stack(r0, cols))[0], 6)
     for step in range(settings.max_effects):
         remaining = [c for c in candidates if c.name not in {e.name for e in model.effects}]
+        if progress is not None:
+            progress(f"step {step + 1}: scoring {len(remaining)} candidate effects")
         if step > 0:
             r0, cols, extra = model.design(remaining)
         trial, weak = _score_candidates(model, reg, remaining, (r0, cols, extra), current,
@@ -325,7 +330,7 @@ def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
             # Rotor speeds and poses are stamped to within a sample interval of each other
             # (ESC telemetry carries no time stamp, FIELD-NOTES.md); a time-like parameter
             # cannot be resolved better: uniform ±dt/2, σ = dt/√12, in quadrature.
-            extra = 1.96 * model.problem.dt / np.sqrt(12.0)
+            extra = 1.96 * model.problem.stamp_dt / np.sqrt(12.0)
             lo = v - float(np.hypot(v - lo, extra))
             hi = v + float(np.hypot(hi - v, extra))
         fitted[e.name] = FittedEffect(
@@ -337,4 +342,5 @@ def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
         theta_before=theta_base, theta_after=model.problem.theta + beta[:6],
         bic_before=float(bic_before), bic_after=float(reg.bic(rss, model.k())),
         weights=reg.weights, block=reg.block,
+        theta_after_sigma=np.sqrt(np.diag(np.asarray(cov))[:6]),
     )

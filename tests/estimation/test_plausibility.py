@@ -175,7 +175,8 @@ def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -
                         lambda log, config, **kw: SimpleNamespace(source=str(log)))
     monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
     monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
-        theta_before=PRIOR.copy(), theta_after=refit))
+        theta_before=PRIOR.copy(), theta_after=refit, theta_after_sigma=None, effects=(),
+        augmented_effects=()))
     with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted with the named "
                        r"effects: c_T = .* is 500× below the prior"):
         diagnose_job.run_diagnose("flight.ulg", "quad_x")
