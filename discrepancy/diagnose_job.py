@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -106,7 +106,8 @@ def run_diagnose(
     flight = load_flight(log, config, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
     diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
-    check_refits(flight.source, diagnosis, config.theta)
+    notes = check_refits(flight.source, diagnosis, config.theta)
+    diagnosis = replace(diagnosis, notes=(*diagnosis.notes, *notes))
     return DiagnoseRun(config, flight, diagnosis)
 
 

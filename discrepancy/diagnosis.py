@@ -1,6 +1,7 @@
 """The model-discrepancy workflow behind ``mavsysid diagnose``.
 
 1. *Where they disagree*: the identified model is replayed along the logged rotor speeds
+   (a log faster than `mavsysid.discrepancy.resample.DIAGNOSIS_RATE` averaged down to it)
    and compared with the accelerations of the smoothed pose (`mavsysid.discrepancy.residuals`,
    statistics in `mavsysid.discrepancy.residual_stats`):
    residual per axis, its whiteness (Ljung–Box), the time windows and flight regimes
@@ -40,7 +41,11 @@ from mavsysid.discrepancy.selection import (
     forward_select,
 )
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
+from mavsysid.estimation.plausibility import (
+    check_plausible,
+    implausibility,
+    vanishing_parameters,
+)
 from mavsysid.estimation.progress import report_stage
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
@@ -295,13 +300,15 @@ def diagnose_flight(
     )
 
 
-def check_refits(source: str, diagnosis: Diagnosis, prior: np.ndarray) -> None:
-    """Refuse (`JobFailedError`, one line) a θ refit that is physically impossible.
+def check_refits(source: str, diagnosis: Diagnosis, prior: np.ndarray) -> tuple[str, ...]:
+    """Refuse (`JobFailedError`, one line) an answer that is physically impossible.
 
-    θ refitted without effects is judged under the known effects, θ refitted with the named
-    ones under all of them: an entry the named effects take over (c_D when
-    ``rotor_drag_linear`` carries the rotor drag) may then be ≈ 0, within its σ
-    (`mavsysid.estimation.plausibility`).
+    The answer is θ refitted with the named effects, judged under all of the model's
+    effects: an entry the named effects take over (c_D when ``rotor_drag_linear`` carries
+    the rotor drag) may then be ≈ 0, within its σ (`mavsysid.estimation.plausibility`).
+    θ refitted *without* them is what the mismatch does to the paper's model: with effects
+    named, an impossible one is a note (the named effects explain it), not a refusal;
+    with none named it is the answer itself.
 
     Parameters
     ----------
@@ -310,15 +317,26 @@ def check_refits(source: str, diagnosis: Diagnosis, prior: np.ndarray) -> None:
     diagnosis : Diagnosis
     prior : ndarray, shape (6,)
         The vehicle config's θ, SI.
+
+    Returns
+    -------
+    tuple of str
+        Notes for the diagnosis (θ refitted without the named effects impossible).
     """
+    check_plausible(source, diagnosis.theta_after, diagnosis.theta_after_sigma, prior,
+                    what="θ refitted with the named effects" if diagnosis.effects
+                    else "θ refitted without effects",
+                    may_vanish=vanishing_parameters(e.name for e in diagnosis.augmented_effects))
+    if not diagnosis.effects:
+        return ()
     known = diagnosis.augmented_effects[:len(diagnosis.augmented_effects)
                                         - len(diagnosis.effects)]
-    for what, refit, sigma, effects in (
-            ("θ refitted without effects", diagnosis.theta_before, None, known),
-            ("θ refitted with the named effects", diagnosis.theta_after,
-             diagnosis.theta_after_sigma, diagnosis.augmented_effects)):
-        check_plausible(source, refit, sigma, prior, what=what,
-                        may_vanish=vanishing_parameters(e.name for e in effects))
+    reason = implausibility(diagnosis.theta_before, None, prior,
+                            may_vanish=vanishing_parameters(e.name for e in known))
+    if reason is None:
+        return ()
+    return (f"θ refitted without the named effects is not physically possible ({reason}): "
+            "the mismatch they explain",)
 
 
 def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
