@@ -106,7 +106,7 @@ def run_diagnose(
     flight = load_flight(log, config, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
     diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
-    notes = check_refits(flight.source, diagnosis, config.theta)
+    notes = check_refits(flight.source, diagnosis, config)
     diagnosis = replace(diagnosis, notes=(*diagnosis.notes, *notes))
     return DiagnoseRun(config, flight, diagnosis)
 

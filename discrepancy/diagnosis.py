@@ -44,6 +44,7 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.plausibility import (
     check_plausible,
     implausibility,
+    vanishing_floor,
     vanishing_parameters,
 )
 from mavsysid.estimation.progress import report_stage
@@ -300,7 +301,7 @@ def diagnose_flight(
     )
 
 
-def check_refits(source: str, diagnosis: Diagnosis, prior: np.ndarray) -> tuple[str, ...]:
+def check_refits(source: str, diagnosis: Diagnosis, config: VehicleConfig) -> tuple[str, ...]:
     """Refuse (`JobFailedError`, one line) an answer that is physically impossible.
 
     The answer is θ refitted with the named effects, judged under all of the model's
@@ -315,24 +316,28 @@ def check_refits(source: str, diagnosis: Diagnosis, prior: np.ndarray) -> tuple[
     source : str
         The log, named first in a refusal.
     diagnosis : Diagnosis
-    prior : ndarray, shape (6,)
-        The vehicle config's θ, SI.
+    config : VehicleConfig
+        The vehicle: its θ is the prior, its top rotor speed bounds a vanishing c_D.
 
     Returns
     -------
     tuple of str
         Notes for the diagnosis (θ refitted without the named effects impossible).
     """
+    prior, n_max = config.theta, config.limits.rotor_speed_max
+    after = diagnosis.augmented_effects
     check_plausible(source, diagnosis.theta_after, diagnosis.theta_after_sigma, prior,
                     what="θ refitted with the named effects" if diagnosis.effects
                     else "θ refitted without effects",
-                    may_vanish=vanishing_parameters(e.name for e in diagnosis.augmented_effects))
+                    may_vanish=vanishing_parameters(e.name for e in after),
+                    floor=vanishing_floor(after, float(diagnosis.theta_after[0]), n_max))
     if not diagnosis.effects:
         return ()
-    known = diagnosis.augmented_effects[:len(diagnosis.augmented_effects)
-                                        - len(diagnosis.effects)]
+    known = after[:len(after) - len(diagnosis.effects)]
     reason = implausibility(diagnosis.theta_before, None, prior,
-                            may_vanish=vanishing_parameters(e.name for e in known))
+                            may_vanish=vanishing_parameters(e.name for e in known),
+                            floor=vanishing_floor(known, float(diagnosis.theta_before[0]),
+                                                  n_max))
     if reason is None:
         return ()
     return (f"θ refitted without the named effects is not physically possible ({reason}): "

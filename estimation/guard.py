@@ -130,7 +130,8 @@ def correlated_noise_sigma(innovation: np.ndarray) -> tuple[float, float]:
 
 
 def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
-               prior: ParameterEstimate, may_vanish: np.ndarray | None = None) -> str | None:
+               prior: ParameterEstimate, may_vanish: np.ndarray | None = None,
+               floor: np.ndarray | None = None) -> str | None:
     """Why a filter run counts as diverged, as one phrase; None when it did not.
 
     Parameters
@@ -145,8 +146,11 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
         The prior (the vehicle file's θ and σ).
     may_vanish : ndarray of bool, shape (6,), optional
         θ entries the model lets be ≈ 0 (`mavsysid.estimation.plausibility.vanishing_parameters`).
+    floor : ndarray, shape (6,), optional
+        Their least possible values (`mavsysid.estimation.plausibility.vanishing_floor`).
     """
-    reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish)
+    reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish,
+                            floor)
     if reason is not None:
         return reason
     level, bound = nis_level(t, nis)
