@@ -24,7 +24,11 @@ from mavsysid.discrepancy.diagnosis import (
 )
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.kinematics_check import check_kinematics
-from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
+from mavsysid.estimation.plausibility import (
+    check_plausible,
+    vanishing_floor,
+    vanishing_parameters,
+)
 from mavsysid.estimation.readers import load_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
@@ -102,7 +106,9 @@ def run_diagnose(
         known = estimated or known
         # The config's own θ is the prior, checked (and warned about) when loaded.
         check_plausible(str(estimate), theta, None, config.theta, what="identified θ",
-                        may_vanish=vanishing_parameters(e.name for e in known))
+                        may_vanish=vanishing_parameters(e.name for e in known),
+                        floor=vanishing_floor(known, float(theta[0]),
+                                              config.limits.rotor_speed_max))
     flight = load_flight(log, config, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
     diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
