@@ -23,7 +23,6 @@ import numpy as np
 from mavsysid.estimation.batch import refine, shooting_problem
 from mavsysid.estimation.batch_scipy import solve_least_squares
 from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.estimate_job import run_estimate
 from mavsysid.estimation.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
@@ -34,6 +33,7 @@ from mavsysid.estimation.progress import stage_listener
 from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.pipeline.estimate import run_estimate
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import MavsysidError

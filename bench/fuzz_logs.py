@@ -5,7 +5,7 @@ reads (pose.csv, .tlog, .ulg, .bin), estimates each clean log, then ``--count`` 
 logs (`tests.support.log_fuzz`: mutated values — ±1e30, NaN/inf, negative or absurd
 rotor speeds, stretched/reversed/duplicated clocks, stuck signals, wrong units — and
 mutated bytes — truncation, flipped bytes, junk, empty and huge files). Each log runs in
-a worker process through `mavsysid.estimation.estimate_job.run_estimate` (what
+a worker process through `mavsysid.pipeline.estimate.run_estimate` (what
 ``mavsysid estimate`` calls) with a wall-time limit (``--hang``) that counts a hang.
 
 Prints: total, refusals by error type, exit 0, tracebacks, hangs, the largest wall time

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from mavsysid.estimation.estimate_job import run_estimate
+from mavsysid.pipeline.estimate import run_estimate
 from mavsysid.vehicle.config import PARAMETER_NAMES
 
 from mavsysid.cli.main import exit_code

@@ -6,7 +6,7 @@ catalogue physics from `mavsysid.vehicle.model_effects`), draw the prior ±50 % 
 scoring truth (seeded, as `bench/estimate_accuracy.py` does), run
 `mavsysid.estimation.estimator.estimate_parameters` (what ``mavsysid estimate`` runs) and
 score its final (refined) θ after the checks `mavsysid estimate` applies
-(`mavsysid.estimation.estimate_job.check_result`; a refusal counts as not covering).
+(`mavsysid.pipeline.estimate.check_result`; a refusal counts as not covering).
 Prints per truth and parameter the median |relative error| and the share of flights
 whose 95 % interval (θ ± 1.96 σ) covers the truth.
 
@@ -22,7 +22,7 @@ Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
   The estimate is scored against the nominal θ, i.e. c_D's hover equivalent.
 
 ``--reestimate`` measures the second candidate of the issue (what ``mavsysid estimate
---auto-effects`` runs): `mavsysid.discrepancy.checked_estimate.estimate_with_named_effects`
+--auto-effects`` runs): `mavsysid.pipeline.auto_effects.estimate_with_named_effects`
 estimates θ, lets `mavsysid.discrepancy.diagnosis.diagnose_flight` (from the estimate,
 without the NIS) name effects, and estimates θ again with them (fitted jointly); that θ is
 scored (the first estimate when nothing is named). When
@@ -46,12 +46,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from mavsysid.discrepancy.checked_estimate import estimate_with_named_effects
-from mavsysid.estimation.estimate_job import check_result
 from mavsysid.estimation.estimator import estimate_parameters
 from mavsysid.estimation.results import Z95, EstimationResult
+from mavsysid.pipeline.auto_effects import estimate_with_named_effects
+from mavsysid.pipeline.estimate import check_result
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
-from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
 from bench.diagnose_accuracy import CASES
@@ -83,7 +83,7 @@ def truth_side(config: VehicleConfig, truth: str) -> tuple[np.ndarray, list[Mode
 
 def hover_speed(config: VehicleConfig, c_T: float) -> float:
     """n_h = √(m g / (rotors · c_T)), rad/s."""
-    return math.sqrt(config.mass * GRAVITY / (config.rotor_count * c_T))
+    return float(rotor_speed_for_thrust(c_T, config.hover_thrust / config.rotor_count))
 
 
 def scored(result: EstimationResult, config: VehicleConfig) -> tuple[np.ndarray, np.ndarray]:

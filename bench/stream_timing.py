@@ -42,12 +42,12 @@ from pathlib import Path
 
 import numpy as np
 from mavsysid.flight.ground.setpoints import Setpoint
-from mavsysid.flight.ground.stream_job import run_stream
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.flight.mavlink_setup import load_mavutil
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+from mavsysid.pipeline.stream import run_stream
 from mavsysid.vehicle.config import load_vehicle
 
 BOX = (-2.0, -2.0, 0.5, 2.0, 2.0, 2.5)

@@ -13,7 +13,12 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from mavsysid.estimation.ekf import rk4_step_kernel
+from mavsysid.vehicle.covariance import (
+    MEASURED_ERROR_INDICES,
+    pose_residual_kernel,
+    predict_covariance_kernel,
+)
+from mavsysid.vehicle.dynamics import rk4_linear_step_kernel
 from mavsysid.vehicle.linearization import jacobian_kernel, transition_kernel
 from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
 
@@ -105,6 +110,7 @@ def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W,
     Qs = np.empty((18, 18))
     x = np.empty(13)
     x_next = np.empty(13)
+    y = np.empty(6)
     d = np.empty(12)
     Jr = np.zeros((12, 30))
     want_jac = mode != MODE_RESIDUALS
@@ -115,15 +121,14 @@ def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W,
         last = node_idx[k + 1] if k < K - 1 else node_idx[K] - 1
         for i in range(node_idx[k], last + 1):
             if i < node_idx[k + 1]:  # measurement at sample i
-                res[row:row + 3] = (z[i, 0:3] - x[0:3]) / sig_p
-                c = np.array([x[6], -x[7], -x[8], -x[9]])
-                res[row + 3:row + 6] = log_kernel(multiply_kernel(c, z[i, 3:7])) / sig_a
-                if want_jac:
+                pose_residual_kernel(z[i], x, y)
+                res[row:row + 3] = y[0:3] / sig_p
+                res[row + 3:row + 6] = y[3:6] / sig_a
+                if want_jac:  # the rows H Φ of the measured error-state entries
                     for a in range(6):
-                        src = a if a < 3 else a + 3
                         s = sig_p if a < 3 else sig_a
                         for b in range(18):
-                            Jr[a, b] = -Phi[src, b] / s
+                            Jr[a, b] = -Phi[MEASURED_ERROR_INDICES[a], b] / s
                     if mode == MODE_COO:
                         e = _write_coo(Jr, 6, 18, row, k, th_col, rows, cols, vals, e)
                     else:
@@ -137,9 +142,13 @@ def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W,
                 transition_kernel(A, G, Qc[i], dt, F, Qs)
                 first = i == node_idx[k]  # Phi = I and Qacc = 0 so far: skip the products
                 Phi = F.copy() if first else F @ Phi
-                if want_q:
-                    Qacc = Qs.copy() if first else F @ Qacc @ F.T + Qs
-            rk4_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps, x_next)
+                if want_q:  # the process noise accumulated since the node (paper Eq. prior)
+                    if first:
+                        Qacc[:] = Qs
+                    else:
+                        predict_covariance_kernel(Qacc, F, Qs)
+            rk4_linear_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps,
+                                   x_next)
             x[:] = x_next
         if k < K - 1:
             if want_q:

@@ -9,11 +9,14 @@
   ``P`` is the covariance of the error state (18, 18) of `mavsysid.vehicle.linearization`:
   the attitude error is a 3-vector (``q = q̂ ⊗ Exp(δφ)``) and θ errors are in units of
   ``theta_scale`` (the prior), so P stays well conditioned at any vehicle scale.
-* ``predict(u, dt, u_next)`` integrates the nonlinear model (RK4, rotor speeds linear
-  between ``u`` and ``u_next``) and propagates P with the shared linearisation
-  (paper Eq. prior); ``update(z)`` takes z = [p (3), q (4)] and applies the correction
-  multiplicatively to the attitude (Joseph form, with the error-state reset).
+* ``predict(u, dt, u_next)`` integrates the nonlinear model (the model's RK4,
+  `mavsysid.vehicle.dynamics.rk4_linear_step_kernel`, rotor speeds linear between ``u``
+  and ``u_next``) and propagates P with the shared linearisation (paper Eq. prior);
+  ``update(z)`` takes z = [p (3), q (4)] and applies the correction multiplicatively to
+  the attitude (Joseph form, with the error-state reset).
 
+The covariance step and the measurement (H, residual) are the planner's too
+(`mavsysid.vehicle.covariance`), so the belief the planner predicts is this filter's P.
 The arithmetic lives in compiled kernels shared by the per-step methods and by `run`,
 which filters a whole flight in one compiled loop.
 """
@@ -29,7 +32,12 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.input_noise import step_process_noise
 from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
 from mavsysid.vehicle.config import VehicleConfig
-from mavsysid.vehicle.dynamics import STATE_DIM, derivative_kernel
+from mavsysid.vehicle.covariance import (
+    pose_residual_kernel,
+    predict_covariance_kernel,
+    update_covariance_kernel,
+)
+from mavsysid.vehicle.dynamics import STATE_DIM, rk4_linear_step_kernel
 from mavsysid.vehicle.linearization import (
     ERROR_DIM,
     MEAS_DIM,
@@ -39,7 +47,6 @@ from mavsysid.vehicle.linearization import (
 )
 from mavsysid.vehicle.rotation import (
     exp_kernel,
-    log_kernel,
     multiply_kernel,
     quat_log,
     quat_multiply,
@@ -48,7 +55,7 @@ from mavsysid.vehicle.rotation import (
 
 from mavsysid.errors import JobFailedError, LogFormatError
 
-__all__ = ["FILTER_DIM", "FilterOverflow", "FilterRun", "ParameterEKF", "rk4_step_kernel"]
+__all__ = ["FILTER_DIM", "FilterOverflow", "FilterRun", "ParameterEKF"]
 
 #: Length of the nominal filter state x = [p, v_B, q, ω, θ].
 FILTER_DIM = STATE_DIM + 6
@@ -76,50 +83,6 @@ class FilterRun:
 
 
 @numba.njit(cache=True)
-def rk4_step_kernel(x, n0, n1, w0, w1, theta, dt, mass, r, eps, out):
-    """One RK4 step of the model state with rotor speeds linear from ``n0`` to ``n1``.
-
-    Shared by the filter's prediction and the batch refinement's shooting, so that both
-    integrate the model identically. Compiled (numba, nopython).
-
-    Parameters
-    ----------
-    x : ndarray, shape (13,)
-        Model state [p, v_B, q, ω] at the step's start (m, m/s, unit quaternion, rad/s).
-    n0, n1 : ndarray, shape (k,)
-        Rotor speeds at the step's start and end, rad/s.
-    w0, w1 : ndarray, shape (6,)
-        Extra body force and torque [F_B, M_B] (N, N·m) of known model effects at the
-        step's ends, also linear in between; zeros leave the model unchanged (0 + F is
-        exact, so the no-effect path is bit-for-bit the plain model).
-    theta : ndarray, shape (6,)
-        θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI.
-    dt : float
-        Step, s.
-    mass : float
-        kg.
-    r : ndarray, shape (k, 3)
-        Rotor positions, m, body frame.
-    eps : ndarray, shape (k,)
-        Rotor directions, ±1.
-    out : ndarray, shape (13,)
-        Receives the state at the step's end (quaternion renormalised).
-    """
-    nm = 0.5 * (n0 + n1)
-    wm = 0.5 * (w0 + w1)
-    k1 = np.empty(13)
-    k2 = np.empty(13)
-    k3 = np.empty(13)
-    k4 = np.empty(13)
-    derivative_kernel(x, n0, theta, mass, r, eps, w0[0:3], w0[3:6], k1)
-    derivative_kernel(x + 0.5 * dt * k1, nm, theta, mass, r, eps, wm[0:3], wm[3:6], k2)
-    derivative_kernel(x + 0.5 * dt * k2, nm, theta, mass, r, eps, wm[0:3], wm[3:6], k3)
-    derivative_kernel(x + dt * k3, n1, theta, mass, r, eps, w1[0:3], w1[3:6], k4)
-    out[:] = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    out[6:10] /= np.sqrt(np.sum(out[6:10] ** 2))
-
-
-@numba.njit(cache=True)
 def _predict_kernel(x, P, n0, n1, w0, w1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
     """Paper Eq. prior: x ← f-integrated, P ← F P Fᵀ + Q (F, Q at the step's start).
 
@@ -130,45 +93,29 @@ def _predict_kernel(x, P, n0, n1, w0, w1, dt, mass, r, eps, scale, Qc, A, G, F, 
     jacobian_kernel(x[:13], n0, theta, mass, r, eps, scale, A, G)
     transition_kernel(A, G, Qc, dt, F, Q)
     state = np.empty(13)
-    rk4_step_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
+    rk4_linear_step_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
     x[:13] = state
-    P[:] = F @ P @ F.T + Q
-    P[:] = 0.5 * (P + P.T)
+    predict_covariance_kernel(P, F, Q)
 
 
 @numba.njit(cache=True)
 def _update_kernel(x, P, z, R, scale, y, S, SI, K):
     """Measurement update with z = [p, q]; returns the NIS yᵀ S⁻¹ y.
 
-    H selects δp and δφ (paper measurement model), so S and K are read off P directly.
+    The covariance takes the shared Joseph-form step (paper Eq. posterior); the
+    correction is applied multiplicatively to the attitude and the error state reset.
     """
-    y[0:3] = z[0:3] - x[0:3]
-    q_hat = x[6:10]
-    conj = np.array([q_hat[0], -q_hat[1], -q_hat[2], -q_hat[3]])
-    y[3:6] = log_kernel(multiply_kernel(conj, z[3:7]))
-    idx = np.array([0, 1, 2, 6, 7, 8])
-    n = P.shape[0]
-    PHT = np.empty((n, 6))
-    for j in range(6):
-        PHT[:, j] = P[:, idx[j]]
-    for i in range(6):
-        for j in range(6):
-            S[i, j] = PHT[idx[i], j] + R[i, j]
-    SI[:] = np.linalg.inv(S)
-    K[:] = PHT @ SI
+    pose_residual_kernel(z, x, y)
+    update_covariance_kernel(P, R, S, SI, K)
     dx = K @ y
     # Multiplicative attitude correction and additive everything else.
     x[0:6] += dx[0:6]
-    q = multiply_kernel(q_hat, exp_kernel(dx[6:9]))
+    q = multiply_kernel(x[6:10], exp_kernel(dx[6:9]))
     x[6:10] = q / np.sqrt(np.sum(q * q))
     x[10:13] += dx[9:12]
     x[13:19] += scale * dx[12:18]
-    # Joseph form: (I - KH) P (I - KH)ᵀ + K R Kᵀ.
-    IKH = np.eye(n)
-    for j in range(6):
-        IKH[:, idx[j]] -= K[:, j]
-    P[:] = IKH @ P @ IKH.T + K @ R @ K.T
     # Error-state reset: the new attitude error is measured from the corrected nominal.
+    n = P.shape[0]
     Gam = np.eye(n)
     d = dx[6:9]
     Gam[6, 7], Gam[6, 8] = 0.5 * d[2], -0.5 * d[1]

@@ -40,6 +40,8 @@ __all__ = [
     "SmoothedPose",
     "SmootherSettings",
     "acceleration_kernel",
+    "body_force_readout",
+    "body_rotation_readout",
     "consistent_accelerations",
     "model_accelerations",
     "noise_gain",
@@ -263,7 +265,8 @@ def consistent_accelerations(pose: SmoothedPose, inputs: SmoothedPose, model: np
     paper Eq. newton in the world frame), and the quaternion's second derivative for the
     rotation (model: q̈ = q ⊗ (½[0, ω̇] − ¼‖ω‖² [1, 0]), from q̇ = ½ q ⊗ [0, ω]). The model's
     side is filtered by `acceleration_kernel`; both are then read in the smoothed body
-    frame: f = Rᵀ(a − g), ω̇ = 2 Im(q* ⊗ q̈).
+    frame: f = Rᵀ(a − g), ω̇ = 2 Im(q* ⊗ q̈) (`body_force_readout`,
+    `body_rotation_readout`).
 
     Parameters
     ----------
@@ -282,17 +285,54 @@ def consistent_accelerations(pose: SmoothedPose, inputs: SmoothedPose, model: np
     measured, model : ndarray, shape (N, 6)
     """
     kernel = acceleration_kernel(settings, dt)
-    world_model = _filter(np.einsum("nij,nj->ni", inputs.rotation(), model[:, :3]), kernel)
-    w2 = np.sum(inputs.rates**2, axis=1)
-    inner = np.column_stack([-0.25 * w2, 0.5 * model[:, 3:]])
-    qdd_model = _filter(quat_multiply(inputs.quaternion, inner), kernel)
-    # Read both in the long-window body frame (a rotation of the small difference only).
-    R = pose.rotation()
-    conj = pose.quaternion * np.array([1.0, -1.0, -1.0, -1.0])
     measured = np.hstack([pose.specific_force(), pose.angular_acceleration])
-    model_b = np.hstack([np.einsum("nji,nj->ni", R, world_model),
-                         2.0 * quat_multiply(conj, qdd_model)[:, 1:]])
+    model_b = np.hstack([body_force_readout(pose, inputs, model[:, :3], kernel),
+                         body_rotation_readout(pose, inputs, model[:, 3:], kernel)])
     return measured, model_b
+
+
+def body_force_readout(pose: SmoothedPose, inputs: SmoothedPose, force: np.ndarray,
+                       kernel: np.ndarray) -> np.ndarray:
+    """A body-frame model force (per unit mass) as the smoother sees it, shape (N, 3).
+
+    The force is rotated to the world frame with the input attitude, filtered by
+    ``kernel`` (`acceleration_kernel`, where the smoother acted on the position) and read
+    back in the smoothed body frame. Linear in ``force``.
+
+    Parameters
+    ----------
+    pose, inputs : SmoothedPose
+        The measured side's smoothing and the model's input states.
+    force : ndarray, shape (N, 3)
+        Body force per unit mass, m/s².
+    kernel : ndarray, shape (w,)
+    """
+    world = _filter(np.einsum("nij,nj->ni", inputs.rotation(), force), kernel)
+    return np.einsum("nji,nj->ni", pose.rotation(), world)
+
+
+def body_rotation_readout(pose: SmoothedPose, inputs: SmoothedPose, omega_dot: np.ndarray,
+                          kernel: np.ndarray, rate_term: bool = True) -> np.ndarray:
+    """A model angular acceleration as the smoother sees it, shape (N, 3), rad/s².
+
+    q̈ = q ⊗ (½[0, ω̇] − ¼‖ω‖² [1, 0]) at the input states, filtered by ``kernel``,
+    read as 2 Im(q* ⊗ q̈) with the smoothed attitude. Without the ``rate_term`` it is
+    linear in ``omega_dot``; the rate term alone is the readout of ω̇ = 0.
+
+    Parameters
+    ----------
+    pose, inputs : SmoothedPose
+    omega_dot : ndarray, shape (N, 3)
+        Body angular acceleration, rad/s².
+    kernel : ndarray, shape (w,)
+    rate_term : bool
+        Include the −¼‖ω‖² part of q̈.
+    """
+    scalar = -0.25 * np.sum(inputs.rates**2, axis=1) if rate_term else np.zeros(len(omega_dot))
+    inner = np.column_stack([scalar, 0.5 * np.asarray(omega_dot, float)])
+    qdd = _filter(quat_multiply(inputs.quaternion, inner), kernel)
+    conj = pose.quaternion * np.array([1.0, -1.0, -1.0, -1.0])
+    return 2.0 * quat_multiply(conj, qdd)[:, 1:]
 
 
 def acceleration_kernel(settings: SmootherSettings, dt: float) -> np.ndarray:

@@ -24,30 +24,27 @@ it in one run (the opening's noise realisation is the same, since the seed is).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.estimate_job import check_result
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.kinematics_check import check_kinematics
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.offline.simulator import Simulator
+from mavsysid.pipeline.estimate import checked_estimate
+from mavsysid.pipeline.replanned_stream import (
+    belief_after_opening,
+    prior_estimate,
+    relative_covariance,
+)
 from mavsysid.planner.plan_request import rotor_clearance
 from mavsysid.planner.results import PlannerSettings, PlanResult
 from mavsysid.planner.robust_plan import plan_most_confident
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-from mavsysid.errors import JobFailedError
-
 __all__ = ["CONTINUITY_TOLERANCE", "OPENING_BUDGET", "START_MARGIN", "ReplannedFlight",
-           "belief_after_opening", "checked_estimate", "concatenate", "end_hover",
-           "opening_settings", "prior_estimate", "relative_covariance", "replan_flight",
-           "rest_settings"]
+           "concatenate", "end_hover", "opening_settings", "replan_flight", "rest_settings"]
 
 #: Default budget of the opening flight, s.
 OPENING_BUDGET = 6.0
@@ -87,65 +84,6 @@ class ReplannedFlight:
     rest_config: VehicleConfig
     rest_settings: PlannerSettings
     refusal: str | None = None
-
-
-def prior_estimate(prior: VehicleConfig, settings: PlannerSettings) -> ParameterEstimate:
-    """The planner's θ belief as an estimate (SI): the config's θ and the settings' prior
-    (``PlannerSettings.theta_covariance``, relative to θ)."""
-    theta = prior.theta
-    return ParameterEstimate(theta.copy(), settings.theta_covariance * np.outer(theta, theta))
-
-
-def checked_estimate(flight: FlightData, config: VehicleConfig,
-                     settings: EstimatorSettings | None = None,
-                     source: str | None = None) -> ParameterEstimate:
-    """θ̂ and Σ (SI) as ``mavsysid estimate`` reports them: the final estimate.
-
-    The kinematics check, `estimate_parameters` and `check_result` (``source``, default the
-    flight's, names the log in a refusal).
-
-    Raises
-    ------
-    JobFailedError
-        Refused, as ``estimate`` would refuse it (exit 3).
-    InputError
-        The log's kinematics are inconsistent (bad input).
-    """
-    check_kinematics(flight)
-    result = estimate_parameters(flight, config, settings)
-    check_result(flight.source if source is None else source, result)
-    return result.final
-
-
-def belief_after_opening(estimate: Callable[[], ParameterEstimate], prior: ParameterEstimate
-                         ) -> tuple[ParameterEstimate, str | None]:
-    """The opening's estimate, or ``prior`` and the refusal's line when ``estimate`` refuses.
-
-    A refused estimate is no belief to plan aggressively from; the belief the opening was
-    planned from is, and its chance-constrained rotor check keeps the rest as gentle as the
-    opening that flew. The whole flight is estimated (and may be refused) afterwards.
-    """
-    try:
-        return estimate(), None
-    except JobFailedError as refusal:
-        return prior, str(refusal).splitlines()[0]
-
-
-def relative_covariance(estimate: ParameterEstimate) -> tuple[tuple[float, ...], ...]:
-    """Σ relative to the estimate's θ̂: Σ_ij / (θ̂_i θ̂_j), as ``prior_covariance`` takes it.
-
-    Raises
-    ------
-    JobFailedError
-        A θ̂ component is not positive (the opening's filter diverged): no relative belief.
-    """
-    theta = np.asarray(estimate.value, dtype=float)
-    if not np.all(np.isfinite(theta)) or np.any(theta <= 0.0):
-        raise JobFailedError("the opening flight's estimate has a non-positive parameter "
-                             f"({', '.join(f'{v:.3g}' for v in theta)}): cannot re-plan from it")
-    rel = np.asarray(estimate.covariance, dtype=float) / np.outer(theta, theta)
-    rel = 0.5 * (rel + rel.T)
-    return tuple(tuple(float(v) for v in row) for row in rel)
 
 
 def end_hover(trajectory: PiecewisePolynomial) -> tuple[float, float, float, float]:
@@ -239,7 +177,7 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     # with the wide prior that is usually a low z (a gentle opening), after it a high one.
     opening = plan_most_confident(prior, opening_settings(settings, prior, opening_budget)).result
     simulator.run(opening.trajectory, directory)
-    # The estimate the stream's continuation would use (experiments.replanned_stream).
+    # The estimate the stream's continuation would use (pipeline.replanned_stream).
     posterior, refusal = belief_after_opening(
         lambda: checked_estimate(load_flight(directory / "pose.csv", prior), prior),
         prior_estimate(prior, settings))

@@ -14,14 +14,34 @@ from typing import Any
 
 import numpy as np
 from mavsysid.formats.flight_dir import write_meta
-from mavsysid.formats.poselog_writer import PoseLogWriter
+from mavsysid.formats.poselog import PoseLogWriter
 from mavsysid.vehicle.config import VehicleConfig, vehicle_to_toml
 from mavsysid.vehicle.dynamics import ATT, POS, RATE, VEL
 
-__all__ = ["FlightRecorder", "software_version"]
+__all__ = ["REFERENCE_COLUMNS", "TRUTH_COLUMNS", "FlightRecorder", "command_columns",
+           "software_version"]
 
-_REFERENCE_COLUMNS = ("x_ref", "y_ref", "z_ref", "yaw_ref")
-_TRUTH_EXTRA = ("vx_body", "vy_body", "vz_body", "wx", "wy", "wz")
+#: Extra columns of ``pose.csv``: the controller's reference position (m, ENU) and yaw (rad).
+REFERENCE_COLUMNS = ("x_ref", "y_ref", "z_ref", "yaw_ref")
+#: Extra columns of ``truth.csv`` before the commands: the true body velocity (m/s, FLU)
+#: and body rates (rad/s, FLU).
+TRUTH_COLUMNS = ("vx_body", "vy_body", "vz_body", "wx", "wy", "wz")
+
+
+def command_columns(k: int) -> tuple[str, ...]:
+    """The last extra columns of ``truth.csv``: the commanded rotor speeds, rad/s.
+
+    Parameters
+    ----------
+    k : int
+        Number of rotors.
+
+    Returns
+    -------
+    tuple of str
+        ``("n_cmd1", …, "n_cmdk")``, in the config's rotor order.
+    """
+    return tuple(f"n_cmd{i + 1}" for i in range(k))
 
 
 def software_version() -> str:
@@ -52,7 +72,7 @@ class FlightRecorder:
         self._meta: dict[str, Any] = {}
         self._pose: PoseLogWriter | None = None
         self._truth: PoseLogWriter | None = None
-        self._cmd_columns = tuple(f"n_cmd{i + 1}" for i in range(rotor_count))
+        self._cmd_columns = command_columns(rotor_count)
 
     @property
     def pose_path(self) -> Path:
@@ -82,11 +102,11 @@ class FlightRecorder:
             "status": "recording",
             "samples": 0,
         }
-        self._pose = PoseLogWriter(self.pose_path, self.rotor_count, _REFERENCE_COLUMNS)
+        self._pose = PoseLogWriter(self.pose_path, self.rotor_count, REFERENCE_COLUMNS)
         if meta.get("simulated"):
             self._meta["files"]["truth"] = "truth.csv"
             self._truth = PoseLogWriter(
-                self.directory / "truth.csv", self.rotor_count, _TRUTH_EXTRA + self._cmd_columns
+                self.directory / "truth.csv", self.rotor_count, TRUTH_COLUMNS + self._cmd_columns
             )
         write_meta(self.directory / "meta.json", self._meta)
 
@@ -101,10 +121,10 @@ class FlightRecorder:
         go into the pose log.
         """
         assert self._pose is not None, "start() first"
-        ref = dict(zip(_REFERENCE_COLUMNS, (*reference[0:3], reference[9]), strict=True))
+        ref = dict(zip(REFERENCE_COLUMNS, (*reference[0:3], reference[9]), strict=True))
         self._pose.write(t, position, quaternion, rotor_speeds, ref)
         if self._truth is not None and true_state is not None:
-            extra = dict(zip(_TRUTH_EXTRA, (*true_state[VEL], *true_state[RATE]), strict=True))
+            extra = dict(zip(TRUTH_COLUMNS, (*true_state[VEL], *true_state[RATE]), strict=True))
             extra.update(zip(self._cmd_columns, commands, strict=True))
             self._truth.write(t, true_state[POS], true_state[ATT] / np.linalg.norm(
                 true_state[ATT]), true_rotor_speeds, extra)

@@ -1,11 +1,16 @@
-"""The pose log ``pose.csv``: its format, the `PoseLog` it holds, and its reader.
+"""The pose log ``pose.csv``: its format, the `PoseLog` it holds, its reader and writer.
 
 A pose log (docs/architecture.md, "Pose log") is CSV text: a header row, then one row per sample
 with ``t`` (s, strictly increasing), ``x, y, z`` (m, world ENU), ``qw, qx, qy, qz``
 (Hamilton quaternion [w, x, y, z], body → world), ``n1 … nk`` (rad/s, actual rotor
 speeds in the vehicle config's rotor order) and optionally more columns, which readers
-keep as extras. Readers find columns by header name, so their order is free. The writer
-is `mavsysid.formats.poselog_writer.PoseLogWriter`.
+keep as extras. Readers find columns by header name, so their order is free.
+
+- `read_pose_log` reads and fully checks one; `PoseLogWriter` writes one row by row, every
+  row on disk as it is recorded (`write_pose_log` a whole `PoseLog`).
+- `read_external_pose` reads the pose columns of a motion-capture file with the same header
+  names (``--pose``): rotor columns may be absent, and rows are left for the caller to
+  clean.
 """
 
 from __future__ import annotations
@@ -13,22 +18,25 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import math
+import os
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+from mavsysid.formats.parsed_log import Series
 
-from mavsysid.errors import LogFormatError
+from mavsysid.errors import InputError, LogFormatError
 
 __all__ = [
-    "POSE_COLUMNS", "QUATERNION_TOLERANCE", "ROTOR_COLUMN", "PoseLog", "TruncatedLogWarning",
-    "check_positive_count", "parse_plain_rows", "read_pose_log", "read_text_file",
-    "rotor_columns",
+    "POSE_COLUMNS", "QUATERNION_TOLERANCE", "ROTOR_COLUMN", "PoseLog", "PoseLogWriter",
+    "TruncatedLogWarning", "check_positive_count", "parse_plain_rows", "read_external_pose",
+    "read_pose_log", "read_text_file", "rotor_columns", "write_pose_log",
 ]
 
 #: Required leading columns of a pose log, in the order the writer emits them.
@@ -194,13 +202,18 @@ def parse_plain_rows(text: str, columns: Sequence[int] | None = None) -> np.ndar
     return frame.to_numpy() if columns is None else frame[list(columns)].to_numpy()
 
 
-def _is_number(text: str) -> bool:
-    """Whether a CSV field is a number, as numpy's loadtxt parses it."""
+def _is_float(text: str) -> bool:
+    """Whether Python's float parses a CSV field."""
     try:
         float(text)
     except ValueError:
         return False
-    return "_" not in text  # float() accepts digit separators, loadtxt does not
+    return True
+
+
+def _is_number(text: str) -> bool:
+    """Whether a CSV field is a number, as numpy's loadtxt parses it."""
+    return _is_float(text) and "_" not in text  # float() accepts digit separators, loadtxt not
 
 
 def _field(body: list[str], i: int, j: int) -> str:
@@ -351,3 +364,238 @@ def _parse_body(path: Path, body: list[str], names: list[str]) -> np.ndarray:
                 raise LogFormatError(f"{path}: line {i + 2}, column {names[j]!r}: "
                                      f"{_field(body, i, j)} is not a number")
     raise LogFormatError(f"{path}: the samples could not be parsed as numbers")
+
+
+def read_external_pose(path: Path) -> Series:
+    """Read the pose columns of a motion-capture CSV file (other columns are ignored).
+
+    Parameters
+    ----------
+    path : Path
+        CSV text with a header naming at least ``t, x, y, z, qw, qx, qy, qz``.
+
+    Returns
+    -------
+    Series
+        Times on the motion-capture clock, s, and the pose (m = 7), as in the file (rows
+        with NaN or out of order are left for `repair_samples` to report).
+
+    Raises
+    ------
+    LogFormatError
+        A missing column, a short row or a field that is not a number, with its line.
+    """
+    text = read_text_file(path, "utf-8-sig")
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise LogFormatError(f"{path}: no header row (expected {', '.join(POSE_COLUMNS)})")
+    names = [c.strip() for c in next(csv.reader([lines[0]]))]
+    missing = [c for c in POSE_COLUMNS if c not in names]
+    if missing:
+        raise LogFormatError(f"{path}: missing pose column(s) {', '.join(missing)}")
+    index = [names.index(c) for c in POSE_COLUMNS]
+    rows = [line for line in lines[1:] if line.strip()]
+    if not rows:
+        raise LogFormatError(f"{path}: no samples, only a header row")
+    data = None
+    if all(line.count(",") == len(names) - 1 for line in rows):
+        data = parse_plain_rows("\n".join(rows), index)
+    if data is None:  # not plain numbers, or a bad row: parse field by field
+        data = _parse_fields(path, lines, len(names), index)
+    return Series(data[:, 0], data[:, 1:], f"pose of {path.name}")
+
+
+def _parse_fields(path: Path, lines: list[str], ncol: int, index: list[int]) -> np.ndarray:
+    """The columns ``index`` of the data rows, by Python's float; raise at a bad row."""
+    rows = []
+    for number, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        fields = line.split(",")
+        if len(fields) != ncol:
+            raise LogFormatError(f"{path}: line {number} has {len(fields)} fields, the header "
+                                 f"has {ncol}")
+        try:
+            rows.append([float(fields[j]) for j in index])
+        except ValueError:
+            bad = next(fields[j].strip() for j in index if not _is_float(fields[j]))
+            raise LogFormatError(f"{path}: line {number}: {bad[:24]!r} is not a number") from None
+    return np.array(rows, dtype=float)
+
+
+# --- writing -----------------------------------------------------------------------------
+
+# Fixed point per column group, finer than any sensor: t 1e-6 s, position 1e-7 m,
+# quaternion 1e-9, rotor speed 1e-4 rad/s. Extras have unknown units: 10 significant digits.
+_FMT_T, _FMT_POS, _FMT_QUAT, _FMT_ROTOR, _FMT_EXTRA = "%.6f", "%.7f", "%.9f", "%.4f", "%.10g"
+_CHUNK_ROWS = 20_000
+_BAD_NAME_RE = re.compile(r"[\s,\"']")
+
+
+class PoseLogWriter:
+    """Writer of a pose log whose every row reaches the OS as soon as it is written.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to create, with any missing parent directories.
+    rotor_count : int
+        Number of rotors k (columns ``n1 … nk``).
+    extra_columns : iterable of str
+        Further columns, written after the rotor speeds.
+    overwrite : bool, keyword-only
+        Replace an existing file; otherwise that is an `InputError`, so that a new
+        recording never destroys a flown one.
+
+    Rows are flushed as written, to survive a crash of this process; `close` also
+    ``fsync``s. Each row is checked first (shapes, finite values, unit quaternion, ``t``
+    increasing by at least the written 1e-6 s; else ``ValueError``), so the file always
+    reads back. Attributes: ``path``, ``columns`` (the header), ``rows_written``.
+    """
+
+    def __init__(self, path: str | Path, rotor_count: int, extra_columns: Iterable[str] = (),
+                 *, overwrite: bool = False) -> None:
+        check_positive_count(rotor_count, "rotor_count")
+        extras = tuple(extra_columns)
+        taken = set(POSE_COLUMNS)
+        for c in extras:
+            if not isinstance(c, str) or not c or _BAD_NAME_RE.search(c):
+                raise ValueError(f"extra column name {c!r} must be non-empty text without "
+                                 "whitespace, commas or quotes")
+            if c in taken or ROTOR_COLUMN.fullmatch(c):
+                raise ValueError(f"extra column name {c!r} is reserved or repeated")
+            taken.add(c)
+        self.path, self.rotor_count, self.extra_columns = Path(path), rotor_count, extras
+        self.columns = POSE_COLUMNS + rotor_columns(rotor_count) + extras
+        fmts = [_FMT_T, *[_FMT_POS] * 3, *[_FMT_QUAT] * 4, *[_FMT_ROTOR] * rotor_count]
+        self._fmt = ",".join(fmts + [_FMT_EXTRA] * len(extras)) + "\n"
+        self.rows_written = 0
+        self._last_t = -math.inf  # as written, i.e. rounded to 1e-6 s
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._file = open(  # noqa: SIM115 - closed by close()
+                self.path, "w" if overwrite else "x", encoding="utf-8", newline="\n")
+        except FileExistsError:
+            raise InputError(f"{self.path}: pose log already exists; "
+                             "refusing to overwrite it") from None
+        self._emit(",".join(self.columns) + "\n", 0, self._last_t)
+
+    @property
+    def closed(self) -> bool:
+        """Whether `close` has been called."""
+        return self._file.closed
+
+    def write(self, t: float, position: Any, quaternion: Any, rotor_speeds: Any,
+              extra: Mapping[str, float] | None = None) -> None:
+        """Write one sample: t (s), position (3,) m, quaternion (4,) [w,x,y,z], speeds (k,) rad/s.
+
+        ``extra`` maps every name of ``extra_columns`` to a float.
+        """
+        self._check_open()
+        pos, quat, rot = (np.asarray(v, dtype=np.float64)
+                          for v in (position, quaternion, rotor_speeds))
+        ex = {} if extra is None else extra
+        if (np.ndim(t) == 0 and pos.shape == (3,) and quat.shape == (4,)
+                and rot.shape == (self.rotor_count,) and ex.keys() == set(self.extra_columns)
+                and all(isinstance(v, float | int) or np.ndim(v) == 0 for v in ex.values())):
+            # Fast path on plain floats: a recorder calls this at every sample.
+            values = [float(t), *pos.tolist(), *quat.tolist(), *rot.tolist(),
+                      *(float(ex[c]) for c in self.extra_columns)]
+            t_out = round(values[0], 6)
+            if (all(map(math.isfinite, values)) and t_out > self._last_t
+                    and abs(math.hypot(*values[4:8]) - 1.0) <= QUATERNION_TOLERANCE):
+                self._emit(self._fmt % tuple(values), 1, t_out)
+                return
+        if np.ndim(t) != 0:
+            raise ValueError(f"t must be a scalar, got shape {np.shape(t)}")
+        for name, arr, size in (("position", pos, 3), ("quaternion", quat, 4),
+                                ("rotor_speeds", rot, self.rotor_count)):
+            if arr.shape != (size,):
+                raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
+        # The block validator says what is wrong; should it find nothing, the row is written.
+        self.write_rows(np.reshape(np.asarray(t, dtype=np.float64), (1,)), pos[None],
+                        quat[None], rot[None], {c: np.ravel(v) for c, v in ex.items()})
+
+    def write_rows(self, t: Any, position: Any, quaternion: Any, rotor_speeds: Any,
+                   extra: Mapping[str, Any] | None = None) -> None:
+        """Write N samples: t (N,) s, position (N, 3) m, quaternion (N, 4), speeds (N, k) rad/s.
+
+        ``extra`` maps every name of ``extra_columns`` to an array of shape (N,).
+        """
+        self._check_open()
+        t = np.asarray(t, dtype=np.float64)
+        if t.ndim != 1:
+            raise ValueError(f"t must have shape (N,), got {t.shape}")
+        n, k = t.shape[0], self.rotor_count
+        cols = [t[:, None]]
+        for name, value, shape in (("position", position, (n, 3)),
+                                   ("quaternion", quaternion, (n, 4)),
+                                   ("rotor_speeds", rotor_speeds, (n, k))):
+            cols.append(np.asarray(value, dtype=np.float64))
+            if cols[-1].shape != shape:
+                raise ValueError(f"{name} must have shape {shape} for {n} sample(s) of a "
+                                 f"{k}-rotor log, got {cols[-1].shape}")
+        extra = extra or {}
+        if extra.keys() != set(self.extra_columns):
+            raise ValueError(f"extra values must be exactly {list(self.extra_columns)}, "
+                             f"got {sorted(extra)}")
+        for c in self.extra_columns:
+            cols.append(np.asarray(extra[c], dtype=np.float64).reshape(-1, 1))
+            if cols[-1].shape != (n, 1):
+                raise ValueError(f"extra[{c!r}] must have shape ({n},), got {np.shape(extra[c])}")
+        block = np.hstack(cols)
+        if n == 0:
+            return
+        bad = ~np.isfinite(block)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise ValueError(f"{self.columns[j]} of sample {i} is {block[i, j]}; "
+                             "a pose log holds finite values only")
+        norm_err = np.abs(np.linalg.norm(cols[2], axis=1) - 1.0)
+        if norm_err.max() > QUATERNION_TOLERANCE:
+            i = int(np.argmax(norm_err))
+            raise ValueError(f"quaternion of sample {i} has norm {1 + norm_err[i]:.6g}, not 1")
+        # Compare t as written: samples closer than 1e-6 s would read back as repeated.
+        step = np.diff(np.concatenate(([self._last_t], np.round(t, 6)))) <= 0.0
+        if step.any():
+            i = int(np.argmax(step))
+            before = self._last_t if i == 0 else float(t[i - 1])
+            raise ValueError(f"t must increase by at least 1e-6 s: sample {i} has "
+                             f"t = {float(t[i])!r} after {before!r}")
+        # One %-format per chunk runs in C with no Python loop per row; chunks bound memory.
+        for i in range(0, n, _CHUNK_ROWS):
+            part = block[i:i + _CHUNK_ROWS]
+            self._file.write((self._fmt * len(part)) % tuple(part.ravel().tolist()))
+        self._emit("", n, float(np.round(t[-1], 6)))
+
+    def _check_open(self) -> None:
+        if self._file.closed:
+            raise ValueError(f"{self.path}: pose log writer is closed")
+
+    def _emit(self, text: str, rows: int, last_t: float) -> None:
+        self._file.write(text)
+        self._file.flush()
+        self.rows_written += rows
+        self._last_t = last_t
+
+    def close(self) -> None:
+        """Flush, ``fsync`` and close the file. Closing twice is harmless."""
+        if not self._file.closed:
+            try:
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            finally:
+                self._file.close()
+
+    def __enter__(self) -> PoseLogWriter:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def write_pose_log(path: str | Path, log: PoseLog, *, overwrite: bool = False) -> Path:
+    """Write a whole `PoseLog` to ``path`` with a `PoseLogWriter`; return the path."""
+    with PoseLogWriter(path, log.rotor_count, log.extra, overwrite=overwrite) as w:
+        w.write_rows(log.t, log.position, log.quaternion, log.rotor_speeds, log.extra)
+    return w.path

@@ -3,7 +3,8 @@
 Along a candidate segment the nominal flat states are sampled at the estimator's
 measurement rate, the full state and rotor speeds are recovered by flatness, the model
 is linearised with the shared `mavsysid.vehicle.linearization` kernels, and the EKF covariance
-recursion is collapsed into one transfer (paper Eq. one_step, after Prentice & Roy):
+recursion, whose every step is the estimator's own (`mavsysid.vehicle.covariance`), is
+collapsed into one transfer (paper Eq. one_step, after Prentice & Roy):
 
     S_k^C = (F_k, Q_k; 0, F_kᵀ),   S_k^M = (I, 0; -Hᵀ R⁻¹ H, I),
     S_k = S_k^C ⋆ S_k^M,           S_edge = S_1 ⋆ S_2 ⋆ … ⋆ S_K,
@@ -24,8 +25,13 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.covariance import (
+    measurement_information,
+    predict_covariance_kernel,
+    update_covariance_kernel,
+)
 from mavsysid.vehicle.flatness import flat_to_state
-from mavsysid.vehicle.linearization import E_ATT, E_POS, ERROR_DIM, ErrorStateModel
+from mavsysid.vehicle.linearization import ERROR_DIM, ErrorStateModel
 from mavsysid.vehicle.trajectory import FlatOutputs, Trajectory
 
 __all__ = [
@@ -179,20 +185,21 @@ def segments_samples(
 
 
 @numba.njit(cache=True)
-def _riccati_kernel(Sigma, F, Q, H, R):
-    """The EKF covariance recursion (Joseph form) over the steps of F and Q: final Σ."""
-    n = Sigma.shape[0]
-    eye = np.eye(n)
-    P = Sigma.copy()
+def _riccati_kernel(P, F, Q, R, history):
+    """The EKF covariance recursion over the steps of F and Q, from P (updated in place).
+
+    Each step is the estimator's own (paper Eqs. prior–posterior, `predict_covariance_kernel`
+    and `update_covariance_kernel`). ``history`` (K + 1, 18, 18) receives P after each step
+    at rows 1…K; pass shape (0, 18, 18) for the final P only.
+    """
+    S = np.empty((R.shape[0], R.shape[0]))
+    SI = np.empty_like(S)
+    K = np.empty((P.shape[0], R.shape[0]))
     for k in range(F.shape[0]):
-        P = F[k] @ P @ F[k].T + Q[k]
-        PHt = P @ H.T
-        S = H @ PHt + R
-        K = np.linalg.solve(S, PHt.T).T
-        IKH = eye - K @ H
-        P = IKH @ P @ IKH.T + K @ R @ K.T
-        P = 0.5 * (P + P.T)
-    return P
+        predict_covariance_kernel(P, F[k], Q[k])
+        update_covariance_kernel(P, R, S, SI, K)
+        if history.shape[0] > 0:
+            history[k + 1] = P
 
 
 def riccati_final(model: ErrorStateModel, sigma0: np.ndarray, F: np.ndarray,
@@ -203,8 +210,10 @@ def riccati_final(model: ErrorStateModel, sigma0: np.ndarray, F: np.ndarray,
     edge's transfer and applying it; the refinement prices each candidate segment this
     way and builds transfers (`steps_transfer`, same F and Q) only for the ones it keeps.
     """
-    return _riccati_kernel(np.ascontiguousarray(sigma0, dtype=float), F, Q,
-                           model.measurement_jacobian(), model.measurement_covariance())
+    P = np.array(sigma0, dtype=float)
+    _riccati_kernel(P, F, Q, model.measurement_covariance(),
+                    np.empty((0, ERROR_DIM, ERROR_DIM)))
+    return P
 
 
 def propagate_final(
@@ -214,11 +223,6 @@ def propagate_final(
     """`riccati_final` along samples as returned by `edge_samples`, shape (18, 18)."""
     F, Q = model.discrete(states[:-1], rotor_speeds[:-1], theta, dt)
     return riccati_final(model, sigma0, F, Q)
-
-
-def _measurement_information(model: ErrorStateModel) -> np.ndarray:
-    H = model.measurement_jacobian()
-    return H.T @ np.linalg.solve(model.measurement_covariance(), H)
 
 
 def edge_transfer(
@@ -236,7 +240,8 @@ def edge_transfer(
 
 def steps_transfer(model: ErrorStateModel, F: np.ndarray, Q: np.ndarray) -> EdgeTransfer:
     """The transfer of K steps with transitions F and process noises Q, each (K, 18, 18)."""
-    return EdgeTransfer(*_chain_kernel(F, Q, _measurement_information(model)))
+    information = measurement_information(model.measurement_covariance())
+    return EdgeTransfer(*_chain_kernel(F, Q, information))
 
 
 def propagate_steps(
@@ -251,16 +256,5 @@ def propagate_steps(
     F, Q = model.discrete(states[:-1], rotor_speeds[:-1], theta, dt)
     out = np.empty((F.shape[0] + 1, ERROR_DIM, ERROR_DIM))
     out[0] = sigma0
-    P = np.array(sigma0, dtype=float)
-    idx = np.r_[E_POS, E_ATT]
-    H = np.zeros((6, ERROR_DIM))
-    H[np.arange(6), idx] = 1.0
-    R = model.measurement_covariance()
-    for k in range(F.shape[0]):
-        P = F[k] @ P @ F[k].T + Q[k]
-        S = H @ P @ H.T + R
-        K = P @ H.T @ np.linalg.inv(S)
-        IKH = np.eye(ERROR_DIM) - K @ H
-        P = IKH @ P @ IKH.T + K @ R @ K.T
-        out[k + 1] = 0.5 * (P + P.T)
+    _riccati_kernel(np.array(sigma0, dtype=float), F, Q, model.measurement_covariance(), out)
     return out

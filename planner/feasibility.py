@@ -1,7 +1,8 @@
 """Feasibility of a polynomial segment: paper Eq. (constraints) plus speed and rotor limits.
 
 Checked in this order (`mavsysid.vehicle.config.Limits`): position in the flight box; collective
-thrust m‖a − g‖ in [thrust_min_ratio, thrust_max_ratio] · m g; ‖v‖ ≤ speed_max (a
+thrust m‖a − g‖ in [thrust_min_ratio, thrust_max_ratio] · m g (the ratio bounds of
+`mavsysid.vehicle.thrust_envelope`); ‖v‖ ≤ speed_max (a
 planner limit in docs/architecture.md); |ψ̈| ≤ yaw_acceleration_max; ‖ω‖ ≤ body_rate_max; rotor
 speeds in [rotor_speed_min, rotor_speed_max]² — the Firefly has so little yaw authority
 that without these the planner would plan yaw it cannot fly. The vehicle's
@@ -38,6 +39,7 @@ from mavsysid.vehicle.allocation import allocation_pinv
 from mavsysid.vehicle.allocation_polytope import allocation_slabs
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.flatness import SAMPLE_SIZE
+from mavsysid.vehicle.thrust_envelope import thrust_envelope
 
 from mavsysid.errors import InputError
 
@@ -269,8 +271,9 @@ def _kernel_inputs(config: VehicleConfig, theta: np.ndarray | None, headroom: fl
     if hit is not None and hit[0] is config:
         return hit[1]
     lim = config.limits
-    limits = np.array([config.mass, (lim.thrust_min_ratio * GRAVITY) ** 2,
-                       (lim.thrust_max_ratio * GRAVITY) ** 2, lim.speed_max**2,
+    # The envelope's ratio bounds: each rotor's own check below implies its rotor bounds.
+    thrust = thrust_envelope(config)
+    limits = np.array([config.mass, thrust.ratio_min**2, thrust.ratio_max**2, lim.speed_max**2,
                        lim.yaw_acceleration_max, lim.body_rate_max,
                        *(rotor_square_range(config, headroom) if rotor_check
                          else (-UNBOUNDED_SQUARE, UNBOUNDED_SQUARE))])

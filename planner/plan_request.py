@@ -17,7 +17,7 @@ from mavsysid.planner.kinematic_check import check_limits
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.segments import VertexState
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
-from mavsysid.vehicle.mav_model import rotor_thrust
+from mavsysid.vehicle.thrust_envelope import thrust_envelope
 
 from mavsysid.errors import ConfigError, InputError, JobFailedError
 
@@ -75,12 +75,12 @@ def _check_hover(config: VehicleConfig) -> None:
         raise ConfigError(
             f"{config.source}: [limits].thrust_max_ratio: above 1 so that the vehicle can "
             f"climb out of hover (T_max > m g), got {limits.thrust_max_ratio!r}")
-    idle_thrust = config.rotor_count * rotor_thrust(config.parameters.c_T, limits.rotor_speed_min)
-    if idle_thrust >= config.mass * GRAVITY:
+    idle = thrust_envelope(config).rotor_min  # all rotors at rotor_speed_min, per mass
+    if idle >= GRAVITY:
         raise ConfigError(
             f"{config.source}: [limits].rotor_speed_min: a speed at which the rotors lift "
             f"less than m g = {config.mass * GRAVITY:.4g} N, got {limits.rotor_speed_min!r} "
-            f"rad/s giving {idle_thrust:.4g} N")
+            f"rad/s giving {idle * config.mass:.4g} N")
 
 
 def _check_numbers(settings: PlannerSettings) -> None:

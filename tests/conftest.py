@@ -1,4 +1,8 @@
-"""Shared fixtures: shipped vehicles and an aggressive reference trajectory."""
+"""Shared fixtures: shipped vehicles, an aggressive reference trajectory, synthetic logs.
+
+The synthetic flight and its log writers (`tests.support.synthetic_logs`) serve the format
+tests and the reader tests.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,8 @@ import numpy as np
 import pytest
 from mavsysid.vehicle.config import SHIPPED_VEHICLES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
+
+pytest_plugins = ["tests.support.synthetic_logs"]
 
 
 @pytest.fixture(params=SHIPPED_VEHICLES)

@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 #: Configurations shipped with the package, selectable by name.
-SHIPPED_VEHICLES: tuple[str, ...] = ("firefly", "quad_x", "micro_quad")
+SHIPPED_VEHICLES: tuple[str, ...] = ("firefly", "quad_x", "micro_quad", "sitl_quad")
 
 _CONFIG_DIR = Path(__file__).with_name("configs")
 

@@ -19,6 +19,13 @@ model, the hook through which the simulator's truth side adds unmodelled effects
 The rotor wrench and Euler's equation are those of `mavsysid.vehicle.mav_model` (one
 statement of each law). The kernel is compiled with numba because the simulator calls
 it at ≥ 1 kHz; the numpy-facing `state_derivative` wraps it for arrays of states.
+
+The model is integrated by one RK4 step, `rk4_step_kernel`, given the rotor speeds and
+extra wrench at its four stages. The parameter EKF's prediction and the batch
+refinement's shooting hold the logged inputs linear over a step
+(`rk4_linear_step_kernel`); the simulator's truth hands it the RK4 stages of its lagged
+rotor speeds (`mavsysid.flight.offline.truth_step`). So the filter, the refinement and the
+simulated truth integrate the rigid body with the same arithmetic.
 """
 
 from __future__ import annotations
@@ -37,6 +44,8 @@ __all__ = [
     "VEL",
     "derivative_kernel",
     "hover_state",
+    "rk4_linear_step_kernel",
+    "rk4_step_kernel",
     "rotation_kernel",
     "state_derivative",
 ]
@@ -93,6 +102,82 @@ def derivative_kernel(x, n, theta, mass, r, eps, force_ext, torque_ext, out):
     out[9] = 0.5 * (qw * wz + qx * wy - qy * wx)
     # Paper Eq. euler: ω̇ = J⁻¹ (M_B - ω × J ω), J = diag(j_x, j_y, j_z).
     euler_kernel(torque, x[10:13], theta[3:6], out[10:13])
+
+
+@numba.njit(cache=True)
+def rk4_step_kernel(x, n_stages, w_stages, theta, dt, mass, r, eps, out):
+    """One classical RK4 step of the model state over ``dt``. Compiled (numba, nopython).
+
+    Parameters
+    ----------
+    x : ndarray, shape (13,)
+        Model state [p, v_B, q, ω] at the step's start (m, m/s, unit quaternion, rad/s).
+    n_stages : ndarray, shape (4, k)
+        Rotor speeds (rad/s) at the four stages: the step's start, its middle (second and
+        third stage, which may differ, as for a lagged rotor integrated alongside), its end.
+    w_stages : ndarray, shape (4, 6)
+        Extra body force and torque [F_B, M_B] (N, N·m) at the four stages; zeros leave
+        the model unchanged (0 + F is exact, so the no-effect path is the plain model).
+    theta : ndarray, shape (6,)
+        θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI.
+    dt : float
+        Step, s.
+    mass : float
+        kg.
+    r : ndarray, shape (k, 3)
+        Rotor positions, m, body frame.
+    eps : ndarray, shape (k,)
+        Rotor directions, ±1.
+    out : ndarray, shape (13,)
+        Receives the state at the step's end, its quaternion renormalised.
+    """
+    # Written out element by element: the simulator takes this step at 1 kHz, and array
+    # expressions would allocate a temporary for every stage.
+    k = np.empty((4, STATE_DIM))
+    stage = np.empty(STATE_DIM)
+    derivative_kernel(x, n_stages[0], theta, mass, r, eps, w_stages[0, 0:3], w_stages[0, 3:6],
+                      k[0])
+    for s in range(1, 4):
+        h = dt if s == 3 else 0.5 * dt
+        for i in range(STATE_DIM):
+            stage[i] = x[i] + h * k[s - 1, i]
+        derivative_kernel(stage, n_stages[s], theta, mass, r, eps, w_stages[s, 0:3],
+                          w_stages[s, 3:6], k[s])
+    for i in range(STATE_DIM):
+        out[i] = x[i] + dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+    norm = np.sqrt(out[6] * out[6] + out[7] * out[7] + out[8] * out[8] + out[9] * out[9])
+    for i in range(6, 10):
+        out[i] = out[i] / norm
+
+
+@numba.njit(cache=True)
+def rk4_linear_step_kernel(x, n0, n1, w0, w1, theta, dt, mass, r, eps, out):
+    """`rk4_step_kernel` with rotor speeds and wrench linear from the step's start to its end.
+
+    The inputs of a log, known at its samples: the middle stages see their mean.
+
+    Parameters
+    ----------
+    x : ndarray, shape (13,)
+        Model state at the step's start.
+    n0, n1 : ndarray, shape (k,)
+        Rotor speeds at the step's start and end, rad/s.
+    w0, w1 : ndarray, shape (6,)
+        Extra body force and torque [F_B, M_B] (N, N·m) at the step's start and end.
+    theta, dt, mass, r, eps, out
+        As for `rk4_step_kernel`.
+    """
+    n_stages = np.empty((4, n0.shape[0]))
+    w_stages = np.empty((4, 6))
+    n_stages[0] = n0
+    n_stages[1] = 0.5 * (n0 + n1)
+    n_stages[2] = n_stages[1]
+    n_stages[3] = n1
+    w_stages[0] = w0
+    w_stages[1] = 0.5 * (w0 + w1)
+    w_stages[2] = w_stages[1]
+    w_stages[3] = w1
+    rk4_step_kernel(x, n_stages, w_stages, theta, dt, mass, r, eps, out)
 
 
 @numba.njit(cache=True)

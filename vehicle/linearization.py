@@ -10,7 +10,8 @@ a covariance stays well conditioned whether c_T is 1e-5 or 2e-8.
 
 Process noise w, shape (6,): unmodelled body force (N) and moment (N·m), white with
 densities from the vehicle's ``[noise]``. Measurement: motion-capture position and
-attitude, ``q_meas = q ⊗ Exp(φ)``; the residual is [p_meas - p̂, Log(q̂⁻¹ ⊗ q_meas)].
+attitude, ``q_meas = q ⊗ Exp(φ)``; its residual, its H and the covariance step that
+uses them are in `mavsysid.vehicle.covariance`.
 
 The Jacobian kernel itself is in `mavsysid.vehicle.error_jacobian`; it is re-exported
 here with the transition kernel, so that the EKF and the planner import both from here.
@@ -171,14 +172,6 @@ class ErrorStateModel:
 
     # -- measurement ------------------------------------------------------------------
 
-    @staticmethod
-    def measurement_jacobian() -> np.ndarray:
-        """H, shape (6, 18): the residual depends on δp and δφ with unit gain."""
-        H = np.zeros((MEAS_DIM, ERROR_DIM))
-        H[0:3, E_POS] = np.eye(3)
-        H[3:6, E_ATT] = np.eye(3)
-        return H
-
     def measurement_covariance(self) -> np.ndarray:
         """R = diag(σ_p² I₃, σ_φ² I₃), shape (6, 6), in m² and rad²."""
         nz = self.config.noise
@@ -189,14 +182,6 @@ class ErrorStateModel:
         """Noise-free measurement h(x) = [p, q], shape (..., 13) → (..., 7)."""
         x = np.asarray(x, dtype=float)
         return np.concatenate([x[..., POS], x[..., ATT]], axis=-1)
-
-    @staticmethod
-    def residual(z: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Measurement residual [p_meas - p̂, Log(q̂⁻¹ ⊗ q_meas)], shape (..., 6)."""
-        z = np.asarray(z, dtype=float)
-        x = np.asarray(x, dtype=float)
-        dq = quat_multiply(quat_conjugate(x[..., ATT]), z[..., 3:7])
-        return np.concatenate([z[..., 0:3] - x[..., POS], quat_log(dq)], axis=-1)
 
     # -- error-state algebra ----------------------------------------------------------
 

@@ -1,10 +1,12 @@
 """Flight-log readers: `load_flight` turns any supported log into a checked `FlightData`.
 
 Formats, by file extension: ``.csv`` (mavsysid's pose log), ``.tlog`` (MAVLink telemetry),
-``.ulg`` (PX4 ULog), ``.bin`` (ArduPilot DataFlash). One module per format returns the
-pose and rotor speeds it found (`mavsysid.estimation.readers.streams.LogStreams`, already in
-ENU/FLU and rad/s); `merge` optionally replaces the pose by an external motion-capture
-file; `streams.to_flight_data` resamples the rotor speeds to the pose times and
+``.ulg`` (PX4 ULog), ``.bin`` (ArduPilot DataFlash). Each is read by its module in
+`mavsysid.formats`; `READERS` gives, per extension, the pose and rotor speeds in the
+project's conventions (`mavsysid.estimation.readers.streams.LogStreams`: ENU/FLU, rad/s,
+the config's rotor order; `pose_csv`, `autopilot_logs`). Then `window` picks the part of
+the log to use, `merge` optionally replaces the pose by an external motion-capture file,
+`streams.to_flight_data` resamples the rotor speeds to the pose times and
 `checks.validate_flight` checks the result.
 """
 
@@ -12,22 +14,20 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.readers.dataflash import read_dataflash
-from mavsysid.estimation.readers.guard import check_log_size
+from mavsysid.estimation.readers.autopilot_logs import read_autopilot_log
 from mavsysid.estimation.readers.merge import merge_pose
 from mavsysid.estimation.readers.pose_csv import read_pose_csv
 from mavsysid.estimation.readers.streams import LogStreams, to_flight_data
-from mavsysid.estimation.readers.tlog import read_tlog
-from mavsysid.estimation.readers.ulog import read_ulog
-from mavsysid.estimation.readers.window import (
-    TimeWindow,
-    choose_window,
-    dataflash_control_spans,
-    ulog_control_spans,
-)
+from mavsysid.estimation.readers.window import TimeWindow, choose_window, control_spans
+from mavsysid.formats.bounded_parse import check_log_size
+from mavsysid.formats.dataflash import read_dataflash, read_dataflash_modes
+from mavsysid.formats.parsed_log import ModeChanges
+from mavsysid.formats.tlog import read_tlog
+from mavsysid.formats.ulog import read_ulog, read_ulog_modes
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError
@@ -37,9 +37,9 @@ __all__ = ["READERS", "TimeWindow", "load_flight"]
 #: The reader of each supported file extension (lower case).
 READERS: dict[str, Callable[[Path, VehicleConfig], LogStreams]] = {
     ".csv": read_pose_csv,
-    ".tlog": read_tlog,
-    ".ulg": read_ulog,
-    ".bin": read_dataflash,
+    ".tlog": partial(read_autopilot_log, read_tlog),
+    ".ulg": partial(read_autopilot_log, read_ulog),
+    ".bin": partial(read_autopilot_log, read_dataflash),
 }
 
 
@@ -53,8 +53,12 @@ def _existing_file(path: str | Path, what: str) -> Path:
     return path
 
 
-#: Readers of the autopilot's mode spans, for formats whose reader does not give them.
-_MODE_SPANS = {".ulg": ulog_control_spans, ".bin": dataflash_control_spans}
+#: Readers of the autopilot's modes, for formats whose reader does not give them (a
+#: second pass over the file, made only when the default window needs it).
+_MODE_READERS: dict[str, Callable[[Path], ModeChanges | None]] = {
+    ".ulg": read_ulog_modes,
+    ".bin": read_dataflash_modes,
+}
 
 
 def _windowed(streams: LogStreams, path: Path, start: float | None, end: float | None,
@@ -64,9 +68,10 @@ def _windowed(streams: LogStreams, path: Path, start: float | None, end: float |
         return streams, None
 
     def spans() -> tuple[tuple[float, float], ...] | None:
-        if streams.control_spans is not None or path.suffix.lower() not in _MODE_SPANS:
+        if streams.control_spans is not None or path.suffix.lower() not in _MODE_READERS:
             return streams.control_spans
-        return _MODE_SPANS[path.suffix.lower()](path)
+        modes = _MODE_READERS[path.suffix.lower()](path)
+        return None if modes is None else control_spans(modes)
 
     window = choose_window(path, start, end, spans)
     if window is None:

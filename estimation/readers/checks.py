@@ -9,7 +9,7 @@ shorter than `MIN_DURATION` are dropped, with a note. Problems that can be repai
 are repaired and reported with counts as warnings: rows with NaN dropped, out-of-order
 timestamps sorted, duplicate timestamps dropped, short gaps, slightly non-unit
 quaternions normalised, a pose frozen in flight or a stuck or dead rotor
-(`mavsysid.estimation.readers.frozen`) left out as a gap.
+(`mavsysid.estimation.readers.unphysical_samples`) left out as a gap.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import dataclasses
 
 import numpy as np
 from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
-from mavsysid.estimation.readers.frozen import (
+from mavsysid.estimation.readers.unphysical_samples import (
     FLYING_THRUST,
     attitude_jumps,
     drop_unphysical_samples,

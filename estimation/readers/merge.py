@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 from mavsysid.estimation.readers.checks import normalise_quaternions, repair_samples
-from mavsysid.estimation.readers.pose_csv import read_external_pose
-from mavsysid.estimation.readers.streams import LogStreams, Series
+from mavsysid.estimation.readers.streams import LogStreams
 from mavsysid.estimation.readers.time_align import estimate_time_offset
+from mavsysid.formats.parsed_log import Series
+from mavsysid.formats.poselog import read_external_pose
 
 from mavsysid.errors import LogFormatError
 

@@ -1,16 +1,17 @@
-"""What a format reader extracts from a log, and its assembly into a `FlightData`.
+"""What is read from a log, in the project's conventions, and its assembly into a `FlightData`.
 
-Each reader returns `LogStreams`: the pose samples (already in ENU/FLU) and one or more
-rotor-speed series (already in rad/s), each on its own clock samples. `to_flight_data`
+Each reader (`mavsysid.estimation.readers.READERS`) returns `LogStreams`: the pose samples
+(in ENU/FLU) and one or more rotor-speed series (in rad/s, the config's rotor order), each
+on its own clock samples (`mavsysid.formats.parsed_log.Series`). `to_flight_data`
 resamples the rotor speeds to the pose times (linear interpolation; pose samples outside
-the rotor-speed time span are dropped) and runs the checks of `mavsysid.estimation.readers.checks`.
-Keeping the streams apart until then lets `--pose` swap in a motion-capture pose first.
+the rotor-speed time span are dropped) and runs the checks of
+`mavsysid.estimation.readers.checks`. Keeping the streams apart until then lets `--pose`
+swap in a motion-capture pose first.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from mavsysid.estimation.flight_data import FlightData
@@ -22,36 +23,14 @@ from mavsysid.estimation.readers.checks import (
     repair_samples,
     validate_flight,
 )
-from mavsysid.estimation.readers.frames import interpolate_quaternions
+from mavsysid.estimation.readers.slerp import interpolate_quaternions
+from mavsysid.formats.parsed_log import PoseSource, Series
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["LogStreams", "PoseSource", "Series", "combine_pose", "to_flight_data"]
-
-#: Where a pose came from (see `mavsysid.estimation.flight_data.POSE_SOURCES`).
-PoseSource = Literal["motion_capture", "autopilot"]
-
-
-@dataclass(frozen=True)
-class Series:
-    """Timed samples of one signal.
-
-    Attributes
-    ----------
-    t : ndarray, shape (N,)
-        Sample times, s, on the flight's clock (need not be sorted or clean yet).
-    values : ndarray, shape (N, m)
-        The samples. A pose has m = 7: x, y, z (m, world ENU), qw, qx, qy, qz (body FLU →
-        world ENU); rotor speeds have one column per rotor, rad/s.
-    label : str
-        What the samples are, for messages ("ESC_TELEMETRY_1_TO_4 rpm", …).
-    """
-
-    t: np.ndarray
-    values: np.ndarray
-    label: str
+__all__ = ["LogStreams", "combine_pose", "to_flight_data"]
 
 
 @dataclass(frozen=True)

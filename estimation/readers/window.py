@@ -22,27 +22,23 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.readers.guard import import_parser, parsing
 from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.parsed_log import ModeChanges
 
 from mavsysid.errors import InputError
 
 __all__ = [
     "CONTROLLED_MODES",
-    "PX4_NAV_STATE_OFFBOARD",
     "TimeWindow",
     "choose_window",
-    "dataflash_control_spans",
+    "control_spans",
     "longest_span",
     "meta_window",
     "spans_of",
-    "ulog_control_spans",
 ]
 
 #: Autopilot modes in which an external controller (the streamer) flies the vehicle.
 CONTROLLED_MODES = frozenset({"GUIDED", "GUIDED_NOGPS", "OFFBOARD"})
-#: PX4's ``vehicle_status.nav_state`` in offboard control (NAVIGATION_STATE_OFFBOARD).
-PX4_NAV_STATE_OFFBOARD = 14
 
 
 @dataclass(frozen=True)
@@ -119,42 +115,21 @@ def meta_window(path: Path) -> tuple[float, float | None] | None:
     return float(window["start"]), float(end) if isinstance(end, (int, float)) else None
 
 
-def ulog_control_spans(path: Path) -> tuple[tuple[float, float], ...] | None:
-    """OFFBOARD spans of a PX4 ULog (``vehicle_status.nav_state``), s; None without it."""
-    ULog = import_parser("pyulog", path).ULog
-    with parsing(path, "a PX4 ULog"):
-        ulog = ULog(str(path), message_name_filter_list=["vehicle_status"])
-        data = [d for d in ulog.data_list if d.name == "vehicle_status"]
-        if not data or "nav_state" not in data[0].data:
-            return None
-        t = data[0].data["timestamp"] * 1e-6
-        active = data[0].data["nav_state"] == PX4_NAV_STATE_OFFBOARD
-        end = ulog.last_timestamp * 1e-6
-    return tuple(spans_of(t, active, True, end))
+def control_spans(modes: ModeChanges) -> tuple[tuple[float, float], ...]:
+    """The spans of a log's modes in which an external controller flies (`CONTROLLED_MODES`).
 
+    Parameters
+    ----------
+    modes : ModeChanges
+        The log's modes, as its format's reader gives them.
 
-def dataflash_control_spans(path: Path) -> tuple[tuple[float, float], ...] | None:
-    """GUIDED spans of an ArduPilot DataFlash log (``MODE`` messages), s; None without.
-
-    A log that ends in GUIDED has its last span open (until the log's end, ∞ here).
+    Returns
+    -------
+    tuple of (float, float)
+        Start and end of each span, s (see `spans_of`).
     """
-    reader = import_parser("pymavlink.DFReader", path)
-    modes = import_parser("pymavlink.mavutil", path).mode_mapping_acm
-    times, active = [], []
-    with parsing(path, "an ArduPilot DataFlash log"):
-        log = reader.DFReader_binary(str(path))
-        try:
-            while (m := log.recv_match(type=["MODE"])) is not None:
-                mode = getattr(m, "Mode", None)
-                if not isinstance(mode, str):
-                    mode = modes.get(int(getattr(m, "ModeNum", mode)), "")
-                times.append(m.TimeUS * 1e-6)
-                active.append(mode.upper() in CONTROLLED_MODES)
-        finally:
-            log.close()
-    if not times:
-        return None
-    return tuple(spans_of(np.array(times), np.array(active), True, math.inf))
+    active = np.array([mode in CONTROLLED_MODES for mode in modes.modes])
+    return tuple(spans_of(modes.t, active, modes.events, modes.end))
 
 
 def choose_window(path: Path, start: float | None, end: float | None,

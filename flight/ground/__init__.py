@@ -3,8 +3,8 @@
 `streamer.fly` runs the whole sequence over a `mavlink_link.MavlinkLink`: pre-flight checks
 (`preflight`), take-off, setpoints at a fixed rate with their guards (`stream_control`,
 `setpoints`), landing. `stream_session` makes the flight directory and its ``meta.json``;
-the link records ``flight.tlog`` (`tlog_writer`) and `telemetry_recorder` ``pose.csv``, each
-row on disk as it arrives.
+the link records ``flight.tlog`` (`mavsysid.formats.tlog`, stamped by `link_clock`) and
+`telemetry_recorder` ``pose.csv``, each row on disk as it arrives.
 """
 
 __all__: list[str] = []

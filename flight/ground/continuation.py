@@ -4,7 +4,7 @@ After the session's trajectory ends in hover, a *continuation* (a caller's callb
 asked for the next trajectory, given what has been recorded so far (`FlightSoFar`: the
 flight directory, whose ``pose.csv`` has every row up to now on disk, and where the
 vehicle holds). It may take a while (estimate θ from the recording, plan the rest of the
-flight: `mavsysid.experiments.replanned_stream`), so it runs in a worker thread while this
+flight: `mavsysid.pipeline.replanned_stream`), so it runs in a worker thread while this
 thread keeps the vehicle holding: the hover setpoint streams, and the same guards watch
 as during the trajectory (box and limits on every setpoint, tracking, mode, link loss).
 

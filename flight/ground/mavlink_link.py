@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from mavsysid.flight.autopilot_modes import Autopilot
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.ground.link_state import (
     MIN_SILENCE_WALL,
     HeartbeatLost,
@@ -34,8 +35,8 @@ from mavsysid.flight.ground.link_state import (
     VehicleState,
     link_loss_problem,
 )
-from mavsysid.flight.ground.tlog_writer import LinkClock, TlogWriter
 from mavsysid.flight.mavlink_setup import GCS_COMPONENT, GCS_SYSTEM, load_mavutil, parse_connect
+from mavsysid.formats.tlog import TlogWriter
 
 from mavsysid.errors import JobFailedError
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
 from mavsysid.flight.ground.meta_writer import MetaWriter, stream_flight_dir
 from mavsysid.flight.ground.parameter_session import ParameterSession
@@ -35,7 +36,6 @@ from mavsysid.flight.ground.preflight import check_plan
 from mavsysid.flight.ground.realtime import raise_priority, restore_scheduling
 from mavsysid.flight.ground.stream_control import FlightGuards, SetpointStream
 from mavsysid.flight.ground.telemetry_recorder import STAMPING, SetpointHistory, TelemetryRecorder
-from mavsysid.flight.ground.tlog_writer import LinkClock
 from mavsysid.flight.ground.trajectory_safety import flight_limits, operator_box
 from mavsysid.flight.ground.vehicle_commands import VehicleCommands
 from mavsysid.flight.mavlink_setup import parse_connect

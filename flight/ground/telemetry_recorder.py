@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 from mavsysid.flight.ground.setpoints import Setpoint
-from mavsysid.formats.poselog_writer import PoseLogWriter
+from mavsysid.formats.poselog import PoseLogWriter
+from mavsysid.formats.tlog import ESC_TELEMETRY
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
@@ -48,7 +49,6 @@ __all__ = [
 
 EXTRA_COLUMNS = ("vx", "vy", "vz", "x_ref", "y_ref", "z_ref", "yaw_ref", "ref_active",
                  "t_traj")
-_ESC_BASE = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_8": 4, "ESC_TELEMETRY_9_TO_12": 8}
 _CLOCKED = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE")
 
 #: How each column group of pose.csv is stamped (stored in meta.json).
@@ -201,8 +201,8 @@ class TelemetryRecorder:
         elif kind == "ATTITUDE" and not self._has_att_q:
             self._quaternion = quaternion_ned_to_enu(
                 euler_ned_to_quaternion(msg.roll, msg.pitch, msg.yaw))
-        elif kind in _ESC_BASE:
-            base = _ESC_BASE[kind]
+        elif kind in ESC_TELEMETRY:
+            base = ESC_TELEMETRY[kind]
             for j in range(min(4, self._k - base)):
                 self._rotors[base + j] = msg.rpm[j] * RPM_TO_RAD_S
             self._esc_seen = self._esc_seen or base < self._k

@@ -8,10 +8,9 @@ The limits are the vehicle's (`flight_limits`, from the vehicle config the opera
 never from the file's ``limits`` block):
 
 - speed ‖v‖ ≤ ``speed_max``;
-- thrust acceleration ‖a − g‖ (collective thrust / mass) within
-  [T_min/m, T_max/m], T_max = min(``thrust_max_ratio`` m g, k c_T n_max²) and
-  T_min = max(``thrust_min_ratio`` m g, k c_T n_min²): the planner's thrust constraint
-  and the rotors' (k rotors, n the rotor speed limits);
+- thrust acceleration ‖a − g‖ (collective thrust / mass) within the vehicle's thrust
+  envelope (`mavsysid.vehicle.thrust_envelope`): the planner's thrust ratios and the
+  rotors' collective thrust at their speed limits, whichever is tighter, [T_min/m, T_max/m];
 - jerk ‖j‖ ≤ ``body_rate_max`` · T_max/m: the thrust axis turns at
   ‖j⊥‖/‖a − g‖ ≤ the body-rate limit, and ‖a − g‖ ≤ T_max/m; the same bound is put on
   the whole jerk (the thrust-rate part is far smaller on any flyable trajectory);
@@ -35,8 +34,8 @@ from collections.abc import Sequence
 import numpy as np
 from mavsysid.flight.ground.setpoints import SetpointLimits
 from mavsysid.vehicle.config import VehicleConfig
-from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.polynomial_extremes import segment_extremes
+from mavsysid.vehicle.thrust_envelope import thrust_envelope
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import InputError
@@ -88,16 +87,26 @@ def operator_box(cli_box: Sequence[float] | None, vehicle_box: Sequence[float] |
 
 
 def flight_limits(config: VehicleConfig, box: Sequence[float]) -> SetpointLimits:
-    """The vehicle's limits on a trajectory and on every setpoint (module docstring)."""
-    lim, m = config.limits, config.mass
-    k, c_t = config.rotor_count, config.parameters.c_T
-    thrust_max = min(lim.thrust_max_ratio * m * GRAVITY, k * c_t * lim.rotor_speed_max**2)
-    thrust_min = max(lim.thrust_min_ratio * m * GRAVITY, k * c_t * lim.rotor_speed_min**2)
+    """The vehicle's limits on a trajectory and on every setpoint (module docstring).
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        The vehicle the operator chose: its `Limits`, mass, rotors and nominal c_T.
+    box : sequence of 6 float
+        The flight box [x_min, y_min, z_min, x_max, y_max, z_max], m.
+
+    Returns
+    -------
+    SetpointLimits
+    """
+    lim = config.limits
+    thrust = thrust_envelope(config)
     b = tuple(float(v) for v in box)
     return SetpointLimits(
         box=b, floor=min(b[2], 0.0) - GROUND_MARGIN, speed_max=lim.speed_max,
-        thrust_acceleration_min=thrust_min / m, thrust_acceleration_max=thrust_max / m,
-        jerk_max=lim.body_rate_max * thrust_max / m, yaw_rate_max=lim.body_rate_max,
+        thrust_acceleration_min=thrust.minimum, thrust_acceleration_max=thrust.maximum,
+        jerk_max=lim.body_rate_max * thrust.maximum, yaw_rate_max=lim.body_rate_max,
         yaw_acceleration_max=lim.yaw_acceleration_max)
 
 

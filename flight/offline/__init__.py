@@ -13,7 +13,8 @@
 - `excitation`: the built-in excitation trajectory.
 - `phased_flight`: take-off, a calibration part and landing as one trajectory;
 - `autopilot_log`, `ardupilot_log`, `px4_log`: a simulated flight written as ArduPilot and PX4
-  log it (message names, rates, mode changes, their motor numbering).
+  log it (which messages, at which rates, mode changes, their motor numbering), encoded by
+  `mavsysid.formats.dataflash` and `mavsysid.formats.ulog`.
 """
 
 

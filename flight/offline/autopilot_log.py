@@ -5,7 +5,9 @@ pose (what motion capture or the autopilot's estimator reports), world velocity,
 actual rotor speeds (what ESC telemetry reports) and the commanded ones (what the
 autopilot sends to its outputs), and the flight's phases. `write_ardupilot_log`
 (`mavsysid.flight.offline.ardupilot_log`) and `write_px4_log`
-(`mavsysid.flight.offline.px4_log`) turn it into a ``.bin`` and a ``.ulg``.
+(`mavsysid.flight.offline.px4_log`) choose what the autopilot logs of it, when, and
+write it with the format's module (`mavsysid.formats.dataflash`, `mavsysid.formats.ulog`)
+as a ``.bin`` and a ``.ulg``.
 
 Motor numbering: an autopilot numbers its motors its own way per frame (ArduPilot's
 ``AP_MotorsMatrix``, PX4's airframe geometry), not in the vehicle config's rotor order.
@@ -21,12 +23,11 @@ from pathlib import Path
 
 import numpy as np
 from mavsysid.flight.offline.phased_flight import FlightPhases
+from mavsysid.formats.flight_log import TRUTH_COLUMNS, command_columns
 from mavsysid.formats.poselog import read_pose_log
-from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.rotation import quat_to_matrix
 
-__all__ = ["LoggedFlight", "check_motor_order", "microsecond_stamp", "pwm_from_rotor_speed",
-           "sample_indices"]
+__all__ = ["LoggedFlight", "check_motor_order", "microsecond_stamp", "sample_indices"]
 
 
 @dataclass(frozen=True)
@@ -85,9 +86,9 @@ class LoggedFlight:
         """
         pose = read_pose_log(Path(directory) / "pose.csv", rotor_count)
         truth = read_pose_log(Path(directory) / "truth.csv", rotor_count)
-        body = np.column_stack([truth.extra[f"v{a}_body"] for a in "xyz"])
+        body = np.column_stack([truth.extra[c] for c in TRUTH_COLUMNS[:3]])
         velocity = np.einsum("nij,nj->ni", quat_to_matrix(truth.quaternion), body)
-        commands = np.column_stack([truth.extra[f"n_cmd{i + 1}"] for i in range(rotor_count)])
+        commands = np.column_stack([truth.extra[c] for c in command_columns(rotor_count)])
         return cls(pose.t, pose.position, pose.quaternion, velocity, pose.rotor_speeds,
                    commands, phases)
 
@@ -147,29 +148,3 @@ def sample_indices(t: np.ndarray, rate: float, phase: float = 0.0) -> np.ndarray
     """
     instants = np.arange(t[0] + phase, t[-1], 1.0 / rate)
     return np.unique(np.clip(np.searchsorted(t, instants - 1e-9), 0, t.size - 1))
-
-
-def pwm_from_rotor_speed(n: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
-    """Motor output pulse width, µs, for rotor speeds n (rad/s), with the `[motor]` curve.
-
-    The inverse of the curve the readers apply to motor outputs
-    (``mavsysid.estimation.readers.motor_curve``): thrust ∝ (1 − e) u + e u² ∝ n², so u
-    solves e u² + (1 − e) u − (n / n_max)² = 0; PWM = pwm_min + u (pwm_max − pwm_min).
-
-    Parameters
-    ----------
-    n : ndarray, any shape
-        Rotor speeds, rad/s.
-    vehicle : VehicleConfig
-        ``[motor]`` pwm_min, pwm_max, thrust_expo and ``[limits]`` rotor_speed_max.
-
-    Returns
-    -------
-    ndarray, same shape
-        PWM, µs, within [pwm_min, pwm_max].
-    """
-    motor = vehicle.motor
-    e = motor.thrust_expo
-    s = np.clip(np.asarray(n, dtype=float) / vehicle.limits.rotor_speed_max, 0.0, 1.0) ** 2
-    u = s if e == 0.0 else (-(1.0 - e) + np.sqrt((1.0 - e) ** 2 + 4.0 * e * s)) / (2.0 * e)
-    return motor.pwm_min + u * (motor.pwm_max - motor.pwm_min)

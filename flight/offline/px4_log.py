@@ -1,8 +1,9 @@
 """A simulated flight written as PX4 writes its ULog (``.ulg``).
 
-Topics, fields and rates as PX4 1.14/1.15's logger writes them (``src/modules/logger/
-logged_topics.cpp``; message definitions in ``msg/``), with the high-rate profile
-(SDLOG_PROFILE) a system-identification flight uses:
+What PX4 1.14/1.15's logger writes of the flight and when (``src/modules/logger/
+logged_topics.cpp``), with the high-rate profile (SDLOG_PROFILE) a system-identification
+flight uses; the topics themselves (fields, units, frames) are `mavsysid.formats.ulog`'s
+`PX4_TOPICS`:
 
 - ``vehicle_status`` (``nav_state``: POSCTL for the take-off, OFFBOARD for the
   calibration part, what ``mavsysid stream`` commands, AUTO_LAND), at 2 Hz and on change;
@@ -29,36 +30,22 @@ from mavsysid.flight.offline.autopilot_log import (
     microsecond_stamp,
     sample_indices,
 )
-from mavsysid.formats.ulog_writer import Row, write_ulog
+from mavsysid.formats.motor_curve import throttle_from_rotor_speed
+from mavsysid.formats.ulog import (
+    ARMING_STATE_ARMED,
+    ESC_SLOTS,
+    MOTOR_SLOTS,
+    NAVIGATION_STATES,
+    PX4_TOPICS,
+    Row,
+    write_ulog,
+)
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import enu_to_ned, quaternion_enu_to_ned
 
 Stamp = Callable[[float], int]  # flight time, s → log time, µs since boot
 
-__all__ = ["NAVIGATION_STATES", "PX4_FORMATS", "PX4LogSettings", "write_px4_log"]
-
-#: vehicle_status.nav_state values used here (msg/VehicleStatus.msg).
-NAVIGATION_STATES: dict[str, int] = {"POSCTL": 2, "OFFBOARD": 14, "AUTO_LAND": 18}
-_ARMED = 2  # vehicle_status.arming_state
-_ESC_SLOTS, _MOTOR_SLOTS = 8, 12
-
-#: The formats written (subsets of PX4's fields; readers find fields by name).
-PX4_FORMATS: dict[str, str] = {
-    "vehicle_status": "uint64_t timestamp;uint64_t nav_state_timestamp;uint8_t nav_state;"
-                      "uint8_t arming_state;",
-    "vehicle_local_position": "uint64_t timestamp;uint64_t timestamp_sample;bool xy_valid;"
-                              "bool z_valid;float x;float y;float z;float vx;float vy;"
-                              "float vz;float heading;",
-    "vehicle_attitude": "uint64_t timestamp;uint64_t timestamp_sample;float[4] q;",
-    "vehicle_mocap_odometry": "uint64_t timestamp;uint64_t timestamp_sample;"
-                              "uint8_t pose_frame;float[3] position;float[4] q;",
-    "esc_report": "uint64_t timestamp;int32_t esc_rpm;float esc_voltage;float esc_current;"
-                  "uint8_t esc_address;",
-    "esc_status": "uint64_t timestamp;uint16_t counter;uint8_t esc_count;"
-                  "uint8_t esc_connectiontype;esc_report[8] esc;",
-    "actuator_motors": "uint64_t timestamp;uint64_t timestamp_sample;"
-                       "uint16_t reversible_flags;float[12] control;",
-}
+__all__ = ["PX4LogSettings", "write_px4_log"]
 
 
 @dataclass(frozen=True)
@@ -94,7 +81,7 @@ def _status_rows(flight: LoggedFlight, stamp: Stamp) -> list[Row]:
     for t in times:
         since, name = max((c for c in changes if c[0] <= t), default=changes[0])
         rows.append({"timestamp": stamp(t), "nav_state_timestamp": stamp(since),
-                     "nav_state": NAVIGATION_STATES[name], "arming_state": _ARMED})
+                     "nav_state": NAVIGATION_STATES[name], "arming_state": ARMING_STATE_ARMED})
     return rows
 
 
@@ -137,10 +124,10 @@ def _motor_topics(flight: LoggedFlight, order: np.ndarray, rotor_speed_max: floa
            for j, t in enumerate(flight.t[i])]
     i = sample_indices(flight.t, s.motors_rate, phase=0.001)
     # control is relative thrust: thrust ∝ n² (PX4 applies THR_MDL_FAC after it).
-    thrust = np.clip(flight.commands[i][:, order] / rotor_speed_max, 0.0, 1.0) ** 2
+    thrust = throttle_from_rotor_speed(flight.commands[i][:, order], rotor_speed_max, 0.0)
     motors = [{"timestamp": stamp(t), "timestamp_sample": stamp(t),
                **{f"control[{m}]": float(thrust[j, m]) if m < k else np.nan
-                  for m in range(_MOTOR_SLOTS)}}
+                  for m in range(MOTOR_SLOTS)}}
               for j, t in enumerate(flight.t[i])]
     return {"esc_status": esc, "actuator_motors": motors}
 
@@ -173,15 +160,15 @@ def write_px4_log(path: Path, flight: LoggedFlight, rotor_speed_max: float,
     """
     settings = settings or PX4LogSettings()
     order = check_motor_order(motor_order, flight.rotor_count)
-    if flight.rotor_count > _ESC_SLOTS:
-        raise ValueError(f"{flight.rotor_count} rotors: esc_status holds at most {_ESC_SLOTS}")
+    if flight.rotor_count > ESC_SLOTS:
+        raise ValueError(f"{flight.rotor_count} rotors: esc_status holds at most {ESC_SLOTS}")
 
     stamp = microsecond_stamp(settings.boot_time)
 
     topics = {"vehicle_status": _status_rows(flight, stamp),
               **_pose_topics(flight, settings, stamp),
               **_motor_topics(flight, order, rotor_speed_max, settings, stamp)}
-    formats = {name: fields for name, fields in PX4_FORMATS.items()
+    formats = {name: fields for name, fields in PX4_TOPICS.items()
                if name in topics or name == "esc_report"}
     write_ulog(path, formats, topics, info={"sys_name": "PX4", "ver_sw": "v1.15.0",
                                             "sys_mcu": "mavsysid simulation"},

@@ -4,6 +4,11 @@ Shared by the offline simulator (`mavsysid.flight.offline.simulator`) and the si
 MAVLink vehicle (`mavsysid.flight.simvehicle.physics`), so that both fly the same physics.
 The truth state is ``y = [x (13), n (k)]``: the model state [p, v_B, q, ω] and the actual
 (lagged) rotor speeds.
+
+The rotor speeds follow their commands with a first-order lag, ṅ = (n_cmd − n) / τ,
+which does not depend on the rigid-body state. One RK4 step of the whole of ``y`` is
+therefore the lag's RK4 stages (`_lag_stages`) handed to the model's one integrator,
+`mavsysid.vehicle.dynamics.rk4_step_kernel`, which the estimator integrates with too.
 """
 
 from __future__ import annotations
@@ -13,9 +18,28 @@ from collections.abc import Sequence
 import numba
 import numpy as np
 from mavsysid.flight.offline.effects import TruthEffect
-from mavsysid.vehicle.dynamics import STATE_DIM, derivative_kernel
+from mavsysid.vehicle.dynamics import STATE_DIM, rk4_step_kernel
 
 __all__ = ["advance_truth", "summed_effect_wrench"]
+
+
+@numba.njit(cache=True)
+def _lag_stages(n, n_cmd, tau, dt, n_stages, n_end):
+    """The lagged rotor speeds at the RK4 stages of one step, and at its end.
+
+    RK4 of ṅ = (n_cmd − n) / τ with ``n_cmd`` held: ``n_stages`` (4, k) receives the
+    speeds each stage evaluates the model at, ``n_end`` (k,) the speeds after the step.
+    """
+    for i in range(n.shape[0]):
+        d1 = (n_cmd[i] - n[i]) / tau
+        n_stages[0, i] = n[i]
+        n_stages[1, i] = n[i] + 0.5 * dt * d1
+        d2 = (n_cmd[i] - n_stages[1, i]) / tau
+        n_stages[2, i] = n[i] + 0.5 * dt * d2
+        d3 = (n_cmd[i] - n_stages[2, i]) / tau
+        n_stages[3, i] = n[i] + dt * d3
+        d4 = (n_cmd[i] - n_stages[3, i]) / tau
+        n_end[i] = n[i] + dt / 6.0 * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
 
 
 @numba.njit(cache=True)
@@ -49,37 +73,24 @@ def advance_truth(y, n_cmd, dt, steps, tau, theta, mass, r, eps, force, torque):
     force, torque : ndarray, shape (3,)
         Extra body force (N) and torque (N·m) of truth-side effects, held over the steps.
     """
-    nx = 13
-    dim = y.shape[0]
-    k1 = np.empty(dim)
-    k2 = np.empty(dim)
-    k3 = np.empty(dim)
-    k4 = np.empty(dim)
-    tmp = np.empty(dim)
+    n_stages = np.empty((4, n_cmd.shape[0]))
+    n_end = np.empty(n_cmd.shape[0])
+    w_stages = np.empty((4, 6))
+    for stage in range(4):
+        w_stages[stage, 0:3] = force
+        w_stages[stage, 3:6] = torque
+    state = np.empty(STATE_DIM)
     if tau <= 0.0:
-        y[nx:] = n_cmd
-    for _ in range(steps):
+        y[STATE_DIM:] = n_cmd
         for stage in range(4):
-            if stage == 0:
-                tmp[:] = y
-                kk = k1
-            elif stage == 1:
-                tmp[:] = y + 0.5 * dt * k1
-                kk = k2
-            elif stage == 2:
-                tmp[:] = y + 0.5 * dt * k2
-                kk = k3
-            else:
-                tmp[:] = y + dt * k3
-                kk = k4
-            derivative_kernel(tmp[:nx], tmp[nx:], theta, mass, r, eps, force, torque, kk[:nx])
-            if tau > 0.0:
-                kk[nx:] = (n_cmd - tmp[nx:]) / tau
-            else:
-                kk[nx:] = 0.0
-        y += dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        q = y[6:10]
-        y[6:10] = q / np.sqrt(np.sum(q * q))
+            n_stages[stage] = n_cmd
+    for _ in range(steps):
+        if tau > 0.0:
+            _lag_stages(y[STATE_DIM:], n_cmd, tau, dt, n_stages, n_end)
+        rk4_step_kernel(y[:STATE_DIM], n_stages, w_stages, theta, dt, mass, r, eps, state)
+        y[:STATE_DIM] = state
+        if tau > 0.0:
+            y[STATE_DIM:] = n_end
 
 
 def summed_effect_wrench(

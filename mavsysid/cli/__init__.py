@@ -1,8 +1,9 @@
 """The ``mavsysid`` command line: one module per command, each only parsing, calling and printing.
 
-`main` dispatches to the command modules; the work is done by library functions in the stage
-packages (`mavsysid.planner`, `mavsysid.flight`, `mavsysid.estimation`,
-`mavsysid.discrepancy`) and the experiments (`mavsysid.experiments`).
+`main` dispatches to the command modules; the work is done by one library function per
+command in the pipeline (`mavsysid.pipeline`), except ``evaluate`` (the paper's evaluation,
+`mavsysid.experiments.evaluate_job`) and ``sim`` (the simulated vehicle,
+`mavsysid.flight.simvehicle`).
 """
 
 from __future__ import annotations

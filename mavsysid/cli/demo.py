@@ -1,7 +1,7 @@
 """``mavsysid demo``: the whole experiment on the simulated vehicle, end to end.
 
 Plan, fly over MAVLink against the simulated vehicle, estimate and diagnose, in one run
-folder: a thin layer over `mavsysid.experiments.demo.run_demo` (which tests call
+folder: a thin layer over `mavsysid.pipeline.demo.run_demo` (which tests call
 directly), printing the one-screen summary.
 """
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mavsysid.discrepancy.diagnosis import Diagnosis
-from mavsysid.experiments.demo import DemoResult, DemoSettings, run_demo
+from mavsysid.pipeline.demo import DemoResult, DemoSettings, run_demo
 from mavsysid.vehicle.config import PARAMETER_NAMES
 
 __all__ = ["add_arguments", "diagnosis_lines", "format_summary", "main"]

@@ -1,6 +1,6 @@
 """``mavsysid diagnose``: find, name and fit what the model still gets wrong.
 
-A thin layer over `mavsysid.discrepancy.diagnose_job.run_diagnose` (which tests call
+A thin layer over `mavsysid.pipeline.diagnose.run_diagnose` (which tests call
 directly: read the log and the estimate, run
 `mavsysid.discrepancy.diagnosis.diagnose_flight`): print the report, write the JSON, the
 augmented vehicle config and the Rerun recording on request.
@@ -12,7 +12,6 @@ import argparse
 from pathlib import Path
 
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
-from mavsysid.discrepancy.diagnose_job import reestimate_comparison, run_diagnose
 from mavsysid.discrepancy.diagnosis import MASS_NOTE, DiagnosisSettings
 from mavsysid.discrepancy.report import (
     augmented_vehicle,
@@ -20,6 +19,7 @@ from mavsysid.discrepancy.report import (
     format_reestimate,
     write_diagnosis_json,
 )
+from mavsysid.pipeline.diagnose import reestimate_comparison, run_diagnose
 from mavsysid.vehicle.config import save_vehicle
 
 __all__ = ["add_arguments", "main"]

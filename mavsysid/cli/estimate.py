@@ -1,13 +1,13 @@
 """``mavsysid estimate``: θ with uncertainties from a flight log.
 
-A thin layer over `mavsysid.estimation.estimate_job.run_estimate` (which tests call
+A thin layer over `mavsysid.pipeline.estimate.run_estimate` (which tests call
 directly: read the log, run the filter and the refinement): print the table, write the
 JSON, the updated vehicle config and the Rerun recording on request. The vehicle
 config's model effects (``[effects.NAME]``) are part of the model; their parameters are
 fitted with θ (or held with ``--fixed-effects``), reported, and written back by
 ``--update-vehicle``. ``--auto-effects`` lets the diagnosis name the effects the log
 shows and estimates θ again with them
-(`mavsysid.discrepancy.checked_estimate.run_estimate_with_named_effects`). ``--report DIR``
+(`mavsysid.pipeline.auto_effects.run_estimate_with_named_effects`). ``--report DIR``
 writes figures, the estimate over time and a one-page HTML; ``--history CSV`` the estimate
 over time alone. While it works, the stages are shown on stderr (on a terminal, or always
 with ``-v``; never with ``-q``).
@@ -20,12 +20,12 @@ import sys
 from pathlib import Path
 
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
-from mavsysid.discrepancy.checked_estimate import run_estimate_with_named_effects
-from mavsysid.estimation.estimate_job import EstimateRun, run_estimate
 from mavsysid.estimation.estimator import EstimatorSettings
 from mavsysid.estimation.history_table import write_history_csv
 from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
 from mavsysid.estimation.report import format_table, updated_vehicle, write_estimate_json
+from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
+from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.vehicle.config import save_vehicle
 
 __all__ = ["add_arguments", "main"]

@@ -1,6 +1,6 @@
 """``mavsysid plan``: plan a maximally informative calibration flight.
 
-A thin layer over `mavsysid.planner.plan_job.run_plan`, which checks the request
+A thin layer over `mavsysid.pipeline.plan.run_plan`, which checks the request
 (`mavsysid.planner.plan_request`) and runs the information-gathering planner (or the
 paper's random baseline) with a progress bar: parse the options, plan, write the
 trajectory file (and on request the sampled setpoints and a Rerun recording) and print a
@@ -18,8 +18,8 @@ import numpy as np
 from mavsysid.cli.options import DEFAULT_BOX, allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.formats.setpoints_csv import write_setpoints_csv
+from mavsysid.pipeline.plan import run_plan
 from mavsysid.planner.plan_file import write_trajectory
-from mavsysid.planner.plan_job import run_plan
 from mavsysid.planner.results import PlannerSettings, PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
 

@@ -19,8 +19,8 @@ from mavsysid.cli.options import allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.mavlink_setup import signing_key_from_file
-from mavsysid.flight.offline.offline_flight import parse_hidden_effects
 from mavsysid.flight.simvehicle.endpoint import SimEndpoint, SimSettings
+from mavsysid.pipeline.simulate import parse_hidden_effects
 from mavsysid.vehicle.config import load_vehicle
 
 __all__ = ["add_arguments", "main", "settings_from_args"]

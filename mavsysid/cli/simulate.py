@@ -1,6 +1,6 @@
 """``mavsysid simulate``: fly in the offline simulator.
 
-A thin layer over `mavsysid.flight.offline.offline_flight.run_offline_flight`, which tests
+A thin layer over `mavsysid.pipeline.simulate.run_offline_flight`, which tests
 call directly. It flies the built-in excitation, or a trajectory file (``--trajectory``,
 e.g. from ``mavsysid plan``), with the vehicle config's known effects and any hidden ones
 (``--hidden-effect NAME:KEY=VALUE,...``, repeatable), e.g.::
@@ -13,12 +13,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from mavsysid.flight.offline.offline_flight import (
+from mavsysid.flight.offline.simulator import SimulationSettings
+from mavsysid.pipeline.simulate import (
     OfflineFlight,
     parse_hidden_effects,
     run_offline_flight,
 )
-from mavsysid.flight.offline.simulator import SimulationSettings
 
 __all__ = ["add_arguments", "format_summary", "main"]
 

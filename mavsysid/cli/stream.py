@@ -1,11 +1,11 @@
 """``mavsysid stream``: fly a trajectory file over MAVLink and record the flight.
 
-A thin layer over `mavsysid.flight.ground.stream_job.run_stream` (which tests call
+A thin layer over `mavsysid.pipeline.stream.run_stream` (which tests call
 directly): parse the options, open the session (plan checks, flight directory,
 connection), fly, and print where the flight
 was recorded with its tracking and rate figures. With ``--replan-budget`` the trajectory is
 an opening and the rest is planned in flight
-(`mavsysid.experiments.replanned_stream.run_replanned_stream`). Exit codes: 0 flown, 2 bad input, 3
+(`mavsysid.pipeline.replanned_stream.run_replanned_stream`). Exit codes: 0 flown, 2 bad input, 3
 refused or aborted (one line saying why), 130 interrupted after braking and landing.
 """
 
@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Any
 
 from mavsysid.cli.options import allow_negative_values, parse_numbers
 from mavsysid.errors import InputError
-from mavsysid.flight.ground.stream_job import StreamOutcome, run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
+from mavsysid.pipeline.stream import StreamOutcome, run_stream
 
 if TYPE_CHECKING:
-    from mavsysid.experiments.replanned_stream import ReplanSettings
+    from mavsysid.pipeline.replanned_stream import ReplanSettings
 
 __all__ = ["add_arguments", "format_summary", "main"]
 
@@ -169,7 +169,7 @@ def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
             raise InputError(f"--{option.replace('_', '-')} {value}: expected a count "
                              f"(at least {1 if option == 'replan_samples' else 0})")
     # Only a re-planned flight loads the estimator and the planner.
-    from mavsysid.experiments.replanned_stream import FEEDBACK_HEADROOM, ReplanSettings
+    from mavsysid.pipeline.replanned_stream import FEEDBACK_HEADROOM, ReplanSettings
     from mavsysid.planner.results import PlannerSettings
 
     time = float("inf") if args.replan_samples is not None else args.replan_time
@@ -206,7 +206,7 @@ def main(args: argparse.Namespace) -> int:
         outcome = run_stream(args.trajectory, settings, args.vehicle, say, progress=verbose)
         print(format_summary(outcome, args.verbosity))
         return 0
-    from mavsysid.experiments.replanned_stream import run_replanned_stream
+    from mavsysid.pipeline.replanned_stream import run_replanned_stream
 
     outcome = run_replanned_stream(args.trajectory, settings, replan, args.vehicle, say,
                                    progress=verbose)

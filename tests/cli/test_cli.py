@@ -204,11 +204,11 @@ def test_error_types_map_to_exit_codes(error, expected, monkeypatch, capsys):
 
 @pytest.mark.parametrize("command", ["sim", "stream"])
 def test_vehicle_side_commands_do_not_import_the_estimation_stack(command):
-    """`sim` and `stream` start without importing the diagnosis and evaluation modules."""
+    """`sim` and `stream` start without importing estimation, diagnosis or evaluation."""
     code = ("import sys\nfrom mavsysid.cli import main\n"
             f"try:\n    main(['{command}', '--help'])\nexcept SystemExit:\n    pass\n"
-            "print(sorted(m for m in sys.modules if m.startswith(('mavsysid.discrepancy', "
-            "'mavsysid.experiments', 'statsmodels'))))")
+            "print(sorted(m for m in sys.modules if m.startswith(('mavsysid.estimation', "
+            "'mavsysid.discrepancy', 'mavsysid.experiments', 'statsmodels'))))")
     env = {**os.environ, "PYTHONPATH": str(HERE.parents[1])}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=env, timeout=60, check=True).stdout

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.flight.offline.offline_flight import run_offline_flight
-from mavsysid.formats.poselog import read_pose_log
-from mavsysid.formats.poselog_writer import write_pose_log
+from mavsysid.formats.poselog import read_pose_log, write_pose_log
+from mavsysid.pipeline.simulate import run_offline_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 
 from mavsysid.cli import main

@@ -7,8 +7,8 @@ from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.autopilot_limits import kinematic_limits
 
 from mavsysid.cli import main
-from tests.cli.test_plan_cli import fake_result
 from tests.flight.ground.test_autopilot_limits import STOCK
+from tests.support.fake_planner import fake_result
 
 
 @pytest.fixture

@@ -5,63 +5,25 @@ from __future__ import annotations
 import json
 import math
 import sys
-import types
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import pytest
-from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.formats.trajectory_file import read_trajectory
-from mavsysid.planner.plan_job import run_plan
-from mavsysid.planner.results import (
-    PlannerGraph,
-    PlannerSettings,
-    PlannerStats,
-    PlanProgress,
-    PlanResult,
-)
-from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle, save_vehicle
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, save_vehicle
 
 from mavsysid.cli import main
-from mavsysid.errors import InputError, JobFailedError
+from mavsysid.errors import JobFailedError
+from tests.support.fake_planner import install_fake_planner
 
 HEADER = "t,x,y,z,vx,vy,vz,ax,ay,az,yaw,yaw_rate"
-
-
-def fake_result(config: VehicleConfig, settings: PlannerSettings, kind: str) -> PlanResult:
-    """A hand-made plan for the given request: the 12 s excitation figure, made-up σ."""
-    trajectory = excitation_trajectory(ExcitationSpec(duration=12.0))
-    t = np.linspace(0.0, trajectory.duration, 13)
-    sigma = 0.5 * config.theta * np.exp(-t[:, None] / 4.0)
-    covariance = np.diag(sigma[-1] ** 2)
-    stats = PlannerStats(40, 12, 30, 50, 60, 80, 1.5, 0.2, 0.5, 0.7, np.zeros((0, 2)))
-    graph = PlannerGraph(np.zeros((1, 4)), np.zeros((0, 2), dtype=int), [], [0])
-    return PlanResult(kind, trajectory, float(np.prod(sigma[-1]) ** (1 / 3)), covariance, t,
-                      sigma, config, settings, stats, graph)
 
 
 @pytest.fixture
 def fake_planner(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, PlannerSettings]]:
     """Stand-ins for the planner's rrbt.plan and baseline.plan_random; records the calls."""
-    calls: list[tuple[str, PlannerSettings]] = []
-
-    def make(kind: str):
-        def plan(config, settings, progress=None):
-            calls.append((kind, settings))
-            if progress is not None:
-                progress(PlanProgress(0.5, 20, 7, 12, 30, None))
-                progress(PlanProgress(1.0, 40, 12, 30, 50, 1e-6))
-            return fake_result(config, settings, kind)
-        return plan
-
-    rrbt = types.ModuleType("mavsysid.planner.rrbt")
-    baseline = types.ModuleType("mavsysid.planner.baseline")
-    rrbt.plan = make("dopt")  # type: ignore[attr-defined]
-    baseline.plan_random = make("random")  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "mavsysid.planner.rrbt", rrbt)
-    monkeypatch.setitem(sys.modules, "mavsysid.planner.baseline", baseline)
-    return calls
+    return install_fake_planner(monkeypatch)
 
 
 def _vehicle_with(tmp_path: Path, **limits: float) -> str:
@@ -169,33 +131,6 @@ def test_no_feasible_plan_exits_3_and_writes_nothing(tmp_path, monkeypatch, caps
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no feasible trajectory found" in err
     assert not any(tmp_path.iterdir())
-
-
-def test_failure_message_says_how_far_planning_got(fake_planner, monkeypatch):
-    """A planner failure without the standard wording is prefixed with time and graph size."""
-    def fail(config, settings, progress=None):
-        progress(PlanProgress(3.5, 90, 17, 4, 20, None))
-        raise JobFailedError("every edge leaves the box")
-
-    monkeypatch.setattr(sys.modules["mavsysid.planner.rrbt"], "plan", fail)
-    with pytest.raises(JobFailedError, match=r"^no feasible trajectory found in 3\.5 s "
-                       r"\(17 vertices, 4 edges\): every edge leaves the box$"):
-        run_plan("firefly", PlannerSettings(), progress=False)
-
-
-def test_run_plan_forwards_progress(fake_planner):
-    """A progress callable given to run_plan receives the planner's reports."""
-    seen: list[PlanProgress] = []
-    result = run_plan(load_vehicle("firefly"), PlannerSettings(max_samples=40),
-                      progress=seen.append)
-    assert [p.samples for p in seen] == [20, 40] and result.kind == "dopt"
-
-
-def test_run_plan_checks_before_planning(fake_planner):
-    """run_plan refuses an impossible request itself, without calling the planner."""
-    with pytest.raises(InputError, match="--budget"):
-        run_plan("firefly", PlannerSettings(budget=0.0))
-    assert not fake_planner
 
 
 # --- with the real planner -------------------------------------------------------------

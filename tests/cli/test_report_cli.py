@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.flight.offline.offline_flight import run_offline_flight
+from mavsysid.pipeline.simulate import run_offline_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from mavsysid.vehicle.model_effects import MotorLag
 

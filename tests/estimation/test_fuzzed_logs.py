@@ -4,7 +4,7 @@ A short clean simulated flight is written as pose.csv, .tlog, .ulg and .bin and 
 its values and bytes (`tests.support.log_fuzz`). The readers must return a flight or
 refuse in one line (`LogFormatError`/`InputError`), within a time bound, without output of
 their own; huge files are refused before parsing and a stuck parser is stopped
-(`mavsysid.estimation.readers.guard`). On a seeded sample the whole estimate runs: it must
+(`mavsysid.formats.bounded_parse`). On a seeded sample the whole estimate runs: it must
 exit 0 within 50 % of the truth (the clean log estimates within 1 %) or refuse. The full
 ≥ 1000-log run is ``bench/fuzz_logs.py``.
 """
@@ -21,9 +21,10 @@ import numpy as np
 import pytest
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.kinematics_check import check_kinematics, tilt_gain
-from mavsysid.estimation.readers import guard, load_flight
+from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.readers.checks import MAX_GAP
-from mavsysid.estimation.readers.frozen import attitude_jumps, drop_unphysical_samples
+from mavsysid.estimation.readers.unphysical_samples import attitude_jumps, drop_unphysical_samples
+from mavsysid.formats import bounded_parse
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError, JobFailedError, LogFormatError
@@ -71,7 +72,7 @@ def test_fuzzed_logs_are_read_or_refused_in_one_line(
 @pytest.mark.parametrize("suffix", FORMATS)
 def test_huge_file_is_refused_before_parsing(flight: CleanFlight, tmp_path: Path,
                                              suffix: str) -> None:
-    case = fuzz_case(tmp_path, flight, suffix, "none", "huge", 0, guard.MAX_LOG_BYTES + 1)
+    case = fuzz_case(tmp_path, flight, suffix, "none", "huge", 0, bounded_parse.MAX_LOG_BYTES + 1)
     start = time.perf_counter()
     with pytest.raises(LogFormatError, match=r"larger than the 2\.15 GB a flight log may have"):
         load_flight(case.path, load_vehicle("firefly"))
@@ -84,8 +85,8 @@ def test_stuck_parser_is_stopped_in_one_line(flight: CleanFlight, tmp_path: Path
                                              suffix: str) -> None:
     """A parse over its time budget (made tiny here) ends in one line, not a hang."""
     case = fuzz_case(tmp_path, flight, suffix, "none", "junk_tail", 3)
-    monkeypatch.setattr(guard, "PARSE_SECONDS", 1e-4)
-    monkeypatch.setattr(guard, "PARSE_SECONDS_PER_MB", 0.0)
+    monkeypatch.setattr(bounded_parse, "PARSE_SECONDS", 1e-4)
+    monkeypatch.setattr(bounded_parse, "PARSE_SECONDS_PER_MB", 0.0)
     with pytest.raises(LogFormatError, match=r"parsing took longer than 0 s \(corrupt data\?\)"):
         load_flight(case.path, load_vehicle("firefly"))
 

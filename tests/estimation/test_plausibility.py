@@ -2,15 +2,8 @@
 
 from __future__ import annotations
 
-import json
-from collections.abc import Callable
-from pathlib import Path
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
-from mavsysid.discrepancy import diagnose_job
-from mavsysid.estimation import estimate_job
 from mavsysid.estimation.plausibility import (
     PRIOR_FACTOR_MAX,
     check_plausible,
@@ -21,7 +14,7 @@ from mavsysid.estimation.plausibility import (
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK
 
-from mavsysid.cli.main import exit_code, main
+from mavsysid.cli.main import exit_code
 from mavsysid.errors import JobFailedError
 
 PRIOR = load_vehicle("quad_x").theta
@@ -109,102 +102,6 @@ def test_refusal_is_one_line_naming_file_parameter_and_numbers() -> None:
     assert f"below the prior {PRIOR[2]:.3g}" in message
     assert "the log does not determine it" in message  # σ larger than the value
     assert exit_code(info.value) == 3
-
-
-# -- the jobs refuse before anything is written -------------------------------------------
-
-
-def _stub_result(theta: np.ndarray) -> SimpleNamespace:
-    final = SimpleNamespace(value=theta, sigma=0.05 * np.abs(theta))
-    prior = SimpleNamespace(value=PRIOR, sigma=PRIOR_SIGMA)
-    return SimpleNamespace(final=final, prior=prior, equation_error=None, effects=())
-
-
-@pytest.fixture
-def stub_estimation(monkeypatch: pytest.MonkeyPatch) -> Callable[[np.ndarray], None]:
-    """Replace reading and estimating in `estimate_job` by stubs returning a given θ."""
-
-    def use(theta: np.ndarray) -> None:
-        monkeypatch.setattr(estimate_job, "load_flight",
-                            lambda log, config, **kw: SimpleNamespace(source=str(log)))
-        monkeypatch.setattr(estimate_job, "check_kinematics", lambda flight: None)
-        monkeypatch.setattr(estimate_job, "estimate_parameters",
-                            lambda flight, config, settings=None: _stub_result(theta))
-
-    return use
-
-
-def test_run_estimate_returns_a_plausible_estimate(stub_estimation) -> None:
-    stub_estimation(PRIOR * 1.3)
-    run = estimate_job.run_estimate("flight.ulg", "quad_x")
-    np.testing.assert_array_equal(run.result.final.value, PRIOR * 1.3)
-
-
-def test_estimate_command_refuses_negative_c_M_without_writing(
-    stub_estimation, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-) -> None:
-    stub_estimation(_theta(c_M=-5e-15))
-    out, toml = tmp_path / "estimate.json", tmp_path / "vehicle.toml"
-    code = main(["estimate", "flight.ulg", "--vehicle", "quad_x", "-o", str(out),
-                 "--update-vehicle", str(toml)])
-    err = capsys.readouterr().err
-    assert code == 3
-    assert err.splitlines() == [err.strip()]
-    assert err.startswith("mavsysid estimate: error: flight.ulg: c_M = -5e-15 ± ")
-    assert not out.exists() and not toml.exists()
-
-
-def test_diagnose_refuses_an_impossible_estimate_file_before_reading_the_log(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
-) -> None:
-    estimate = tmp_path / "estimate.json"
-    theta = _theta(j_x=-0.01)
-    estimate.write_text(json.dumps({"parameters": {
-        n: {"value": float(v)} for n, v in zip(PARAMETER_NAMES, theta, strict=True)}}))
-
-    def no_read(*args: object, **kwargs: object) -> None:
-        raise AssertionError("the log was read after an impossible θ")
-
-    monkeypatch.setattr(diagnose_job, "load_flight", no_read)
-    with pytest.raises(JobFailedError, match=r"estimate\.json: identified θ: j_x = -0\.01 "):
-        diagnose_job.run_diagnose("flight.ulg", "quad_x", estimate)
-
-
-def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -> None:
-    refit = _theta(c_T=PRIOR[0] / 500.0)
-    monkeypatch.setattr(diagnose_job, "load_flight",
-                        lambda log, config, **kw: SimpleNamespace(source=str(log)))
-    monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
-    named = SimpleNamespace(name="body_drag")
-    monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
-        theta_before=PRIOR.copy(), theta_after=refit, theta_after_sigma=None,
-        effects=(named,), augmented_effects=(named,)))
-    with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted with the named "
-                       r"effects: c_T = .* is 500× below the prior"):
-        diagnose_job.run_diagnose("flight.ulg", "quad_x")
-
-
-def test_diagnose_notes_an_impossible_refit_the_named_effects_explain(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """θ refitted *without* the named effects breaking the triangle inequality is the
-    mismatch they explain: a note, and the diagnosis stands; with none named, a refusal."""
-    before = _theta(j_z=1.5 * (PRIOR[3] + PRIOR[4]))
-    monkeypatch.setattr(diagnose_job, "load_flight",
-                        lambda log, config, **kw: SimpleNamespace(source=str(log)))
-    monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
-    named = SimpleNamespace(name="body_drag")
-    diagnosis = SimpleNamespace(theta_before=before, theta_after=_theta(),
-                                theta_after_sigma=None, effects=(named,),
-                                augmented_effects=(named,), notes=())
-    monkeypatch.setattr(diagnose_job, "replace",
-                        lambda d, **kw: SimpleNamespace(**{**vars(d), **kw}))
-    monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: diagnosis)
-    notes = diagnose_job.run_diagnose("flight.ulg", "quad_x").diagnosis.notes
-    assert len(notes) == 1 and "triangle inequality" in notes[0]
-    monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
-        **{**vars(diagnosis), "theta_after": before, "effects": (), "augmented_effects": ()}))
-    with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted without effects: J"):
-        diagnose_job.run_diagnose("flight.ulg", "quad_x")
 
 
 def test_vanishing_parameters_of_rotor_drag_linear() -> None:

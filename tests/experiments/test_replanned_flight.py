@@ -7,25 +7,22 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.experiments.experiment import draw_prior
 from mavsysid.experiments.replanned_flight import (
-    belief_after_opening,
-    checked_estimate,
     concatenate,
     end_hover,
     opening_settings,
-    prior_estimate,
-    relative_covariance,
     replan_flight,
 )
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.pipeline.estimate import checked_estimate
+from mavsysid.pipeline.replanned_stream import relative_covariance
 from mavsysid.planner.plan_request import check_request, rotor_clearance
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
-from mavsysid.errors import InputError, JobFailedError
+from mavsysid.errors import InputError
 
 FLAT = ("position", "velocity", "acceleration", "jerk", "snap", "yaw", "yaw_rate",
         "yaw_acceleration")
@@ -43,57 +40,6 @@ def _hover_to_hover(rng: np.random.Generator, start: np.ndarray, start_yaw: floa
     pos[-1, 1:] = 0.0
     yaw[-1, 1:] = 0.0
     return PiecewisePolynomial.from_waypoints(times, pos, yaw)
-
-
-def _random_estimate(rng: np.random.Generator) -> ParameterEstimate:
-    theta = load_vehicle("firefly").theta * rng.uniform(0.6, 1.4, 6)
-    a = rng.normal(size=(6, 6)) * 0.05
-    return ParameterEstimate(theta, (a @ a.T + 1e-4 * np.eye(6)) * np.outer(theta, theta))
-
-
-def test_relative_covariance_is_the_posterior_seen_from_its_mean():
-    rng = np.random.default_rng(11)
-    estimate = _random_estimate(rng)
-    rel = relative_covariance(estimate)
-    config = load_vehicle("firefly").with_parameters(estimate.value)
-    back = prior_estimate(config, PlannerSettings(prior_covariance=rel))
-    np.testing.assert_allclose(back.value, estimate.value, rtol=1e-12)
-    np.testing.assert_allclose(back.covariance, estimate.covariance, rtol=1e-10, atol=0.0)
-    np.testing.assert_allclose(np.sqrt(np.diag(rel)), estimate.relative_sigma, rtol=1e-12)
-
-
-def test_relative_covariance_refuses_a_non_positive_estimate():
-    estimate = _random_estimate(np.random.default_rng(12))
-    value = estimate.value.copy()
-    value[1] = -value[1]
-    with pytest.raises(JobFailedError, match="non-positive"):
-        relative_covariance(ParameterEstimate(value, estimate.covariance))
-
-
-def test_an_accepted_opening_estimate_is_the_belief():
-    """An estimate that is not refused is the rest's belief, with no refusal."""
-    estimate = _random_estimate(np.random.default_rng(3))
-    prior = _random_estimate(np.random.default_rng(4))
-    belief, refusal = belief_after_opening(lambda: estimate, prior)
-    assert belief is estimate and refusal is None
-
-
-def test_a_refused_opening_estimate_falls_back_to_the_prior():
-    """A refused estimate leaves the prior belief and the refusal's first line."""
-    prior = _random_estimate(np.random.default_rng(4))
-
-    def refused() -> ParameterEstimate:
-        raise JobFailedError("pose.csv: the parameter filter diverged\ndetails")
-
-    belief, refusal = belief_after_opening(refused, prior)
-    assert belief is prior and refusal == "pose.csv: the parameter filter diverged"
-
-
-def test_default_prior_estimate_is_the_settings_relative_sigma():
-    config = load_vehicle("firefly")
-    est = prior_estimate(config, PlannerSettings(prior_relative_sigma=0.3))
-    np.testing.assert_allclose(est.relative_sigma, 0.3, rtol=1e-12)
-    assert np.count_nonzero(est.covariance - np.diag(np.diag(est.covariance))) == 0
 
 
 def test_concatenate_flies_the_second_right_after_the_first():

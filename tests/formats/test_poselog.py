@@ -10,11 +10,12 @@ import pytest
 from mavsysid.formats.poselog import (
     POSE_COLUMNS,
     PoseLog,
+    PoseLogWriter,
     TruncatedLogWarning,
     read_pose_log,
     rotor_columns,
+    write_pose_log,
 )
-from mavsysid.formats.poselog_writer import PoseLogWriter, write_pose_log
 
 from mavsysid.errors import InputError, LogFormatError
 

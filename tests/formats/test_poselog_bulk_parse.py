@@ -12,9 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers.pose_csv import read_external_pose
-from mavsysid.formats.poselog import PoseLog, parse_plain_rows, read_pose_log
-from mavsysid.formats.poselog_writer import write_pose_log
+from mavsysid.formats.poselog import (
+    PoseLog,
+    parse_plain_rows,
+    read_external_pose,
+    read_pose_log,
+    write_pose_log,
+)
 
 # The characters parse_plain_rows reads with pandas, weighted towards numbers.
 _ALPHABET = "0123456789" + "eE.+- \t"

@@ -12,7 +12,8 @@ from mavsysid.planner.baseline import plan_random
 from mavsysid.planner.plan_request import MIN_BOX_SIDE, check_request, rotor_clearance
 from mavsysid.planner.results import PlannerSettings
 from mavsysid.planner.rrbt import plan
-from mavsysid.vehicle.config import GRAVITY, VehicleConfig, load_vehicle
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 
 from mavsysid.errors import ConfigError, InputError
 
@@ -28,8 +29,8 @@ def _with_limits(config: VehicleConfig, **limits: float) -> VehicleConfig:
 
 def _idle_speed(config: VehicleConfig, factor: float) -> float:
     """The rotor speed at which the rotors together lift ``factor`` × m g, rad/s."""
-    c_t = config.parameters.c_T
-    return math.sqrt(factor * config.mass * GRAVITY / (config.rotor_count * c_t))
+    per_rotor = factor * config.hover_thrust / config.rotor_count
+    return float(rotor_speed_for_thrust(config.parameters.c_T, per_rotor))
 
 
 # (limits as a function of the vehicle, refused?) around each hover boundary.

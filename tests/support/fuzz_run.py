@@ -1,7 +1,7 @@
 """Running the estimator on one fuzzed log and classifying what it did.
 
 `estimate_outcome` calls the library entry point the CLI calls
-(`mavsysid.estimation.estimate_job.run_estimate`) and sorts the result into exit 0 (with
+(`mavsysid.pipeline.estimate.run_estimate`) and sorts the result into exit 0 (with
 the largest relative error of θ against the truth), a documented refusal (the exception
 type that maps to exit 2 or 3), or a traceback (any other exception: exit 1, a bug).
 `fuzz_plan` draws the seeded mix of (format, value mutation, byte mutation) cases.
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.estimate_job import run_estimate
+from mavsysid.pipeline.estimate import run_estimate
 
 from mavsysid.errors import MavsysidError
 from tests.support.log_fuzz import BYTE_MUTATIONS, FORMATS, VALUE_MUTATIONS

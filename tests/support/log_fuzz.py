@@ -18,8 +18,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from mavsysid.formats.dataflash_writer import write_dataflash
-from mavsysid.formats.ulog_writer import write_ulog
+from mavsysid.formats.dataflash import write_dataflash
+from mavsysid.formats.ulog import write_ulog
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.frames import enu_to_ned, quaternion_enu_to_ned
 

@@ -13,8 +13,8 @@ from contextlib import contextmanager
 from typing import Any
 
 from mavsysid.flight.autopilot_modes import Autopilot
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
-from mavsysid.flight.ground.tlog_writer import LinkClock
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.flight.simvehicle.endpoint import SimEndpoint, SimSettings
 from mavsysid.vehicle.config import load_vehicle

@@ -79,23 +79,6 @@ def test_dynamics_jacobian_matches_finite_differences(any_vehicle, aggressive_tr
     assert worst < 1e-5
 
 
-def test_measurement_jacobian_matches_finite_differences(firefly, aggressive_trajectory):
-    """H agrees with central finite differences of the residual of h(x ⊞ δx)."""
-    model = ErrorStateModel.for_vehicle(firefly)
-    X, _, Th = _random_linearisation_points(firefly, aggressive_trajectory, 20, seed=3)
-    H = model.measurement_jacobian()
-    eps = 1e-6
-    for x, th in zip(X, Th, strict=True):
-        fd = np.empty((6, ERROR_DIM))
-        for i in range(ERROR_DIM):
-            e = np.zeros(ERROR_DIM)
-            e[i] = eps
-            zp = model.measure(model.inject(x, th, e)[0])
-            zm = model.measure(model.inject(x, th, -e)[0])
-            fd[:, i] = (model.residual(zp, x) - model.residual(zm, x)) / (2 * eps)
-        np.testing.assert_allclose(fd, H, atol=1e-8)
-
-
 def test_inject_and_difference_are_inverse(firefly):
     """(x ⊞ δx) ⊟ x = δx for small and large attitude errors."""
     model = ErrorStateModel.for_vehicle(firefly)

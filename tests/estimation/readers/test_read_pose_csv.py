@@ -10,8 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.formats.poselog import PoseLog
-from mavsysid.formats.poselog_writer import write_pose_log
+from mavsysid.formats.poselog import PoseLog, write_pose_log
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
 from mavsysid.errors import LogFormatError

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import pytest
 from mavsysid.flight.ground import meta_writer
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.ground.link_state import (
     HeartbeatLost,
     VehicleState,
@@ -20,7 +21,6 @@ from mavsysid.flight.ground.meta_writer import MetaWriter
 from mavsysid.flight.ground.prearm import PrearmMonitor
 from mavsysid.flight.ground.realtime import raise_priority, restore_scheduling
 from mavsysid.flight.ground.rotor_watch import RotorWatch
-from mavsysid.flight.ground.tlog_writer import LinkClock
 from mavsysid.flight.ground.vehicle_commands import CommandRejected, VehicleCommands
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.formats.flight_dir import read_meta

@@ -8,8 +8,8 @@ import time
 
 import pytest
 from mavsysid.flight.gc_freeze import frozen_collector
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost, LinkClosed, MavlinkLink
-from mavsysid.flight.ground.tlog_writer import LinkClock
 from mavsysid.flight.loopback_ports import free_tcp_port, free_udp_port
 from mavsysid.flight.mavlink_setup import load_mavutil
 

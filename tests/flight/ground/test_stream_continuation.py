@@ -9,13 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from mavsysid.flight.ground.continuation import FlightSoFar, NextSegment, combined_statistics
-from mavsysid.flight.ground.stream_job import run_stream
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+from mavsysid.pipeline.stream import run_stream
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 

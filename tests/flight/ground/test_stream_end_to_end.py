@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers.tlog import read_tlog as estimation_read_tlog
+from mavsysid.estimation.readers import READERS
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.poselog import read_pose_log
@@ -115,7 +115,7 @@ def test_tlog_holds_both_directions(ardupilot_flight):
     assert len(local) == pytest.approx(meta["samples"], abs=5)
     stamps = [t for t, _ in records]
     assert stamps == sorted(stamps)
-    streams = estimation_read_tlog(directory / "flight.tlog", load_vehicle("firefly"))
+    streams = READERS[".tlog"](directory / "flight.tlog", load_vehicle("firefly"))
     assert streams.pose is not None and streams.rotors
 
 
@@ -123,8 +123,8 @@ def test_estimate_reads_the_streamed_tlog(ardupilot_flight, tmp_path):
     """`estimate` reads the streamer's flight.tlog (slow telemetry before the rates are
     raised included): by default only the trajectory window of meta.json, else the GUIDED
     span of the HEARTBEATs; the refined θ within 5 % of the sim's truth."""
-    from mavsysid.estimation.estimate_job import run_estimate
     from mavsysid.estimation.readers import load_flight
+    from mavsysid.pipeline.estimate import run_estimate
 
     from mavsysid.errors import JobFailedError
 

@@ -7,8 +7,8 @@ import time
 
 import pytest
 from mavsysid.flight.autopilot_modes import ARDUCOPTER_MODES, PX4_MODES
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
-from mavsysid.flight.ground.tlog_writer import LinkClock
 from mavsysid.flight.ground.vehicle_commands import CommandRejected, VehicleCommands
 from mavsysid.flight.loopback_ports import free_udp_port
 

@@ -4,15 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.readers.motor_curve import rotor_speed_from_pwm
-from mavsysid.flight.offline.autopilot_log import (
-    check_motor_order,
-    pwm_from_rotor_speed,
-    sample_indices,
-)
+from mavsysid.flight.offline.autopilot_log import check_motor_order, sample_indices
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.phased_flight import FlightPhases, phased_trajectory
-from mavsysid.vehicle.config import load_vehicle
 
 
 def test_calibration_part_is_flown_between_take_off_and_landing():
@@ -49,13 +43,6 @@ def test_calibration_part_below_the_ground_is_refused():
 def test_phases_must_follow_each_other():
     with pytest.raises(ValueError, match="follow"):
         FlightPhases(0.0, 5.0, 4.0, 9.0)
-
-
-def test_pwm_is_the_inverse_of_the_readers_motor_curve():
-    vehicle = load_vehicle("quad_x")
-    n = np.random.default_rng(2).uniform(0.0, vehicle.limits.rotor_speed_max, (50, 4))
-    np.testing.assert_allclose(rotor_speed_from_pwm(pwm_from_rotor_speed(n, vehicle), vehicle),
-                               n, rtol=1e-9, atol=1e-6)
 
 
 def test_motor_order_must_be_a_permutation():

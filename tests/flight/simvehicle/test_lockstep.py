@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.flight.ground import tlog_writer
-from mavsysid.flight.ground.tlog_writer import LinkClock
+from mavsysid.flight.ground import link_clock
+from mavsysid.flight.ground.link_clock import LinkClock
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.flight.simvehicle import clock as sim_clock
 from mavsysid.flight.simvehicle.clock import LOCKSTEP_FRAME_US, SimClock, is_lockstep_stamp
@@ -140,8 +140,8 @@ def test_streamer_clock_stamps_receipt_no_earlier_than_sent():
 def test_streamer_clock_runs_when_a_vehicle_sends_no_frames(monkeypatch):
     """A vehicle that speaks but sends no frames (no lock-step): the wall clock after
     `FRAME_GRACE`; nothing heard at all: after `START_GRACE`."""
-    monkeypatch.setattr(tlog_writer, "FRAME_GRACE", 0.02)
-    monkeypatch.setattr(tlog_writer, "START_GRACE", 0.2)
+    monkeypatch.setattr(link_clock, "FRAME_GRACE", 0.02)
+    monkeypatch.setattr(link_clock, "START_GRACE", 0.2)
     silent, spoken = LinkClock(lockstep=True), LinkClock(lockstep=True)
     spoken.observe(M.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3))
     time.sleep(0.06)
@@ -151,7 +151,7 @@ def test_streamer_clock_runs_when_a_vehicle_sends_no_frames(monkeypatch):
 
 
 def test_streamer_clock_goes_on_when_frames_stop(monkeypatch):
-    monkeypatch.setattr(tlog_writer, "FRAME_GRACE", 0.02)
+    monkeypatch.setattr(link_clock, "FRAME_GRACE", 0.02)
     clock = LinkClock(speedup=2.0, lockstep=True)
     clock.observe(_frame(1000))
     t0 = clock.now()

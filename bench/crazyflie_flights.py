@@ -1,0 +1,296 @@
+"""Real Crazyflie flights, converted on the fly: what `estimate` says and what the balance says.
+
+IMRCLab's ``crazyflie-data-collection`` has no licence, so nothing of it enters this
+repository: this bench reads a checkout given on the command line, imports the
+checkout's own uSD-log decoder (``scripts/cfusdlog.py``) at run time, and converts each
+flight into a temporary directory:
+
+* ``pose.csv`` (docs/architecture.md, "Pose log"): every row of the 500 Hz
+  ``fixedFrequency`` event, t = timestamp (ms → s), position ``stateEstimate.x/y/z``
+  (the on-board estimator fused with motion capture; world z up), quaternion
+  ``stateEstimate.qw..qz`` (body → world, verified against the gyroscope), rotor speeds
+  ``rpm.m1..m4`` (rpm → rad/s) in the vehicle file's rotor order M1..M4. Rows are written
+  as logged, repeated poses and dead rotor channels included: that is the tool's input;
+* a vehicle TOML: mass from the flights' READMEs (34.7 g brushed, 37 g brushless), the X
+  layout of FIELD-NOTES (arm 0.046 m; M1 front right CCW, M2 back right CW, M3 back left
+  CCW, M4 front left CW), ``rotor_speed_max`` the highest speed of the thrust stand, and
+  a **generic prior θ**, what a user who knows mass, arm and top rotor speed would write:
+  c_T for a thrust-to-weight ratio of 2 at top speed (2 m g = 4 c_T n_max²), c_M a 1 cm
+  torque-to-thrust ratio, c_D = 0.01 s/m, and J of a uniform box spanning the motors
+  (side 2 × arm, 2 cm high). It is 30–70 % off the references, in both directions.
+
+References: c_T by least squares of the stand's total thrust on Σ n² (brushed: both files
+of ``system-id/data/cf21_bitcraze2021``, F = weight · g; brushless: the scale readings of
+``manual_data_calib_brushless.csv`` against motor 4's median speed at each PWM step of
+``data_calib_brushless.csv``, the motor the repository's own fit uses, F/4 per rotor);
+j_x, j_y, j_z of Förster (2015, Crazyflie 2.0, bifilar pendulum), a weaker reference for
+the brushless airframe; c_M and c_D are not measured.
+
+Each flight runs (a) today's ``mavsysid estimate`` library path (`run_estimate`) and
+(b) the force and torque balance (`fit_wrench_balance`). Printed per flight: duration,
+per parameter the error against the reference, σ, status (D = determined), whether the
+95 % interval covers the reference, the held-out RMSE ratio, run times.
+
+    nice python bench/crazyflie_flights.py --repo /path/to/crazyflie-data-collection \\
+        [--json out.json] [--markdown table.md] [--flights jana0,eckart1] [--jobs 2]
+        [--no-tool]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from mavsysid.estimation.estimate_job import run_estimate
+from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.parameter_status import widened_sigma
+from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.results import Z95
+from mavsysid.estimation.wrench_balance import fit_wrench_balance
+from mavsysid.formats.poselog import read_pose_log
+from mavsysid.formats.poselog_writer import PoseLogWriter
+from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, vehicle_to_toml
+from mavsysid.vehicle.config_types import RotorConfig
+from mavsysid.vehicle.constants import GRAVITY, RPM_TO_RAD_S
+
+from bench.crazyflie_report import markdown_table, print_summary, print_table
+from mavsysid.cli.main import exit_code
+from mavsysid.errors import LogFormatError, MavsysidError
+
+#: Per vehicle: data folder, file prefix, mass (kg).
+VEHICLES = {"brushed": ("brushed_flights/data", "jana", 0.0347),
+            "brushless": ("brushless_flights/data", "eckart", 0.037)}
+#: Förster (2015) inertia, kg·m².
+FOERSTER_J = (16.571710e-6, 16.655602e-6, 29.261652e-6)
+ARM = 0.046
+#: M1..M4: (x, y) signs and spin direction (+1 counter-clockwise seen from above).
+LAYOUT = (((1, -1), 1), ((-1, -1), -1), ((-1, 1), 1), ((1, 1), -1))
+
+
+def load_decoder(repo: Path):
+    """The checkout's own ``scripts/cfusdlog.py``, imported from the checkout."""
+    path = repo / "scripts" / "cfusdlog.py"
+    spec = importlib.util.spec_from_file_location("cfusdlog_checkout", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def stand_thrust_coefficient(repo: Path, vehicle: str) -> tuple[float, list[float]]:
+    """c_T of the thrust stand (module docstring) and the per-file values (brushed)."""
+    k = RPM_TO_RAD_S
+    if vehicle == "brushed":
+        base = repo / "system-id/data/cf21_bitcraze2021"
+        forces, sums, per_file = [], [], []
+        for name in ("cf2.1-stock-prop.csv", "cf21_stock2.csv"):
+            d = np.genfromtxt(base / name, delimiter=",", names=True)
+            f = d["weightg"] * 1e-3 * GRAVITY
+            s = sum((d[f"rpm{i}"] * k) ** 2 for i in range(1, 5))
+            forces.append(f)
+            sums.append(s)
+            per_file.append(float(f @ s / (s @ s)))
+        f, s = np.concatenate(forces), np.concatenate(sums)
+        return float(f @ s / (s @ s)), per_file
+    base = repo / "brushless_calibration/data"
+    log = np.genfromtxt(base / "data_calib_brushless.csv", delimiter=",", names=True)
+    scale = np.genfromtxt(base / "manual_data_calib_brushless.csv", delimiter=",", names=True)
+    f = scale["weightg"] * 1e-3 * GRAVITY
+    n = np.array([np.median(log["rpm4"][log["pwm"] == p]) for p in scale["rpm"]]) * k
+    s = 4.0 * n**2
+    return float(f @ s / (s @ s)), []
+
+
+def stand_top_speed(repo: Path, vehicle: str) -> float:
+    """The highest rotor speed the stand data record, rad/s (the vehicle's n_max)."""
+    if vehicle == "brushed":
+        d = np.genfromtxt(repo / "system-id/data/cf21_bitcraze2021/cf2.1-stock-prop.csv",
+                          delimiter=",", names=True)
+        return float(max(d[f"rpm{i}"].max() for i in range(1, 5)) * RPM_TO_RAD_S)
+    d = np.genfromtxt(repo / "brushless_calibration/data/data_calib_brushless.csv",
+                      delimiter=",", names=True)
+    top = d["pwm"].max()
+    return float(np.median(d["rpm4"][d["pwm"] == top]) * RPM_TO_RAD_S)
+
+
+def prior_theta(mass: float, n_max: float) -> np.ndarray:
+    """The generic prior θ of the module docstring."""
+    c_t = 2.0 * mass * GRAVITY / (4.0 * n_max**2)
+    side, height = 2.0 * ARM, 0.02
+    j_xy = mass * (side**2 + height**2) / 12.0
+    j_z = mass * 2.0 * side**2 / 12.0
+    return np.array([c_t, 0.01, 0.01 * c_t, j_xy, j_xy, j_z])
+
+
+def vehicle_toml(name: str, mass: float, theta: np.ndarray, n_max: float) -> str:
+    """The vehicle file of the module docstring, written by the project's TOML writer."""
+    base = load_vehicle("micro_quad")
+    a = ARM / np.sqrt(2.0)
+    rotors = tuple(RotorConfig((float(sx * a), float(sy * a), 0.0), d)
+                   for (sx, sy), d in LAYOUT)
+    config = replace(base, name=name, mass=mass, rotors=rotors, source="",
+                     limits=replace(base.limits, rotor_speed_max=float(n_max)))
+    return vehicle_to_toml(config.with_parameters(np.asarray(theta, float)))
+
+
+def convert(decoded: dict, directory: Path) -> tuple[Path, int, float]:
+    """Write ``pose.csv`` from the decoded ``fixedFrequency`` event; (path, rows, duration)."""
+    ff = decoded["fixedFrequency"]
+    t = np.asarray(ff["timestamp"], float) * 1e-3
+    keep = np.concatenate([[True], np.diff(t) > 1e-6])
+    p = np.column_stack([ff[f"stateEstimate.{a}"] for a in "xyz"])
+    q = np.column_stack([ff[f"stateEstimate.q{a}"] for a in "wxyz"])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    n = np.column_stack([ff[f"rpm.m{i}"] for i in range(1, 5)]) * RPM_TO_RAD_S
+    path = directory / "pose.csv"
+    with PoseLogWriter(path, 4) as writer:
+        writer.write_rows(t[keep], p[keep], q[keep], n[keep])
+    return path, int(keep.sum()), float(t[-1] - t[0])
+
+
+def _scored(value: np.ndarray, sigma: np.ndarray, reference: np.ndarray) -> dict:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        error = value / reference - 1.0
+        covered = np.abs(value - reference) <= Z95 * sigma
+    return {"value": value.tolist(), "sigma": sigma.tolist(),
+            "error": [None if not np.isfinite(e) else float(e) for e in error],
+            "covered": [None if not np.isfinite(r) else bool(c)
+                        for r, c in zip(reference, covered, strict=True)]}
+
+
+def run_tool(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
+    """Today's ``mavsysid estimate`` path on the converted flight."""
+    t0 = time.perf_counter()
+    try:
+        final = run_estimate(pose, vehicle=vehicle).result.final
+    except MavsysidError as error:
+        return {"code": exit_code(error), "message": str(error).splitlines()[0],
+                "seconds": time.perf_counter() - t0}
+    except Exception as error:  # a bug is a finding of this bench, not a crash of it
+        return {"code": 1, "message": f"internal {type(error).__name__}: {error}",
+                "seconds": time.perf_counter() - t0}
+    out = _scored(final.value, final.sigma, reference)
+    out.update(code=0, seconds=time.perf_counter() - t0)
+    return out
+
+
+def _flight(pose: Path, config) -> tuple[FlightData, str | None]:
+    """The flight as `estimate` reads it; if the reader refuses, the pose log as written.
+
+    The second value is the reader's refusal (then the balance runs on the unchecked log,
+    to show what the estimator itself does with it).
+    """
+    try:
+        return load_flight(pose, config), None
+    except LogFormatError as error:
+        log = read_pose_log(pose, config.rotor_count)
+        return (FlightData(log.t, log.position, log.quaternion, log.rotor_speeds, str(pose)),
+                str(error).splitlines()[0])
+
+
+def run_balance(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
+    """`fit_wrench_balance` on the converted flight, read as `estimate` reads it."""
+    t0 = time.perf_counter()
+    config = load_vehicle(vehicle)
+    flight, reader_refusal = _flight(pose, config)
+    try:
+        result = fit_wrench_balance(flight, config)
+    except MavsysidError as error:
+        return {"code": exit_code(error), "message": str(error).splitlines()[0],
+                "reader_refusal": reader_refusal, "seconds": time.perf_counter() - t0}
+    out = _scored(result.estimate.value, result.estimate.sigma, reference)
+    parts = result.sigma_parts
+    c = result.choices
+    out.update(
+        code=0, seconds=time.perf_counter() - t0, status=list(result.status),
+        reader_refusal=reader_refusal,
+        data=_scored(result.data.value, widened_sigma(parts), reference),
+        sigma_parts=parts.tolist(), combinations=result.data.combinations.tolist(),
+        combination_sigma=result.combination_sigma.tolist(),
+        window_s=c.window, delay_s=c.delay, delay_sigma_s=result.delay_sigma,
+        roll_pitch_band=None if c.roll_pitch is None else [c.roll_pitch.low, c.roll_pitch.high],
+        yaw_band=None if c.yaw is None else [c.yaw.low, c.yaw.high],
+        force_cut_hz=None if c.force is None else c.force.high,
+        holdout=None if result.holdout is None else result.holdout.as_dict())
+    return out
+
+
+def run_flight(job: tuple) -> dict:
+    """Decode, convert and estimate one flight (a worker's task)."""
+    repo, vehicle, path, references, prior, n_max, with_tool = job
+    row = {"flight": path.name, "vehicle": vehicle}
+    if path.stat().st_size == 0:
+        return {**row, "skipped": "empty file (a recording that failed)"}
+    decoded = load_decoder(repo).decode(str(path))
+    if not decoded or "fixedFrequency" not in decoded:
+        return {**row, "skipped": "the decoder found no fixedFrequency event"}
+    with tempfile.TemporaryDirectory(prefix="cf-") as tmp:
+        pose, rows, duration = convert(decoded, Path(tmp))
+        toml = Path(tmp) / f"{vehicle}.toml"
+        toml.write_text(vehicle_toml(f"cf21_{vehicle}", VEHICLES[vehicle][2], prior, n_max),
+                        encoding="utf-8")
+        row.update(rows=rows, duration=duration)
+        row["balance"] = run_balance(pose, toml, references)
+        if with_tool:
+            row["tool"] = run_tool(pose, toml, references)
+    return row
+
+
+def _flights(repo: Path, patterns: list[str]) -> list[tuple[str, Path]]:
+    out = []
+    for vehicle, (folder, prefix, _) in VEHICLES.items():
+        for path in sorted((repo / folder).glob(f"{prefix}*")):
+            if path.suffix or not path.is_file():
+                continue
+            if not patterns or any(p in path.name for p in patterns):
+                out.append((vehicle, path))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repo", type=Path, required=True,
+                        help="a checkout of IMRCLab/crazyflie-data-collection")
+    parser.add_argument("--json", type=Path, help="write the per-flight results here")
+    parser.add_argument("--flights", default="", help="comma-separated name filters")
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--markdown", type=Path, help="write the per-flight table (Markdown)")
+    parser.add_argument("--no-tool", action="store_true",
+                        help="skip today's `estimate` path (the balance only)")
+    args = parser.parse_args()
+    repo = args.repo.resolve()
+    refs, stand, jobs = {}, {}, []
+    for vehicle in VEHICLES:
+        c_t, per_file = stand_thrust_coefficient(repo, vehicle)
+        n_max = stand_top_speed(repo, vehicle)
+        stand[vehicle] = {"c_T": c_t, "per_file": per_file, "n_max": n_max,
+                          "prior": prior_theta(VEHICLES[vehicle][2], n_max).tolist()}
+        refs[vehicle] = np.array([c_t, np.nan, np.nan, *FOERSTER_J])
+    for vehicle, path in _flights(repo, [p for p in args.flights.split(",") if p]):
+        prior = np.array(stand[vehicle]["prior"])
+        jobs.append((repo, vehicle, path, refs[vehicle], prior, stand[vehicle]["n_max"],
+                     not args.no_tool))
+    print(f"references: {json.dumps(stand)}")
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        rows = list(pool.map(run_flight, jobs))
+    print_table(rows, PARAMETER_NAMES)
+    print_summary(rows, refs)
+    if args.json:
+        args.json.write_text(json.dumps({"references": stand, "flights": rows}, indent=1),
+                             encoding="utf-8")
+    if args.markdown:
+        args.markdown.write_text(markdown_table(rows), encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,226 @@
+"""The force and torque balance of a flight as linear regressions in θ-derived coefficients.
+
+The model (paper Eqs. drag, newton, euler) is linear in c_T, c_T c_D and c_M once the
+rotor speeds and the vehicle's states are given, and Euler's equation solved per axis,
+
+    ω̇_x = (c_T/j_x) τ_x − ((j_z − j_y)/j_x) ω_y ω_z,   and cyclically,
+
+is linear in the ratios c_T/j_x, c_T/j_y, c_M/j_z and the gyroscopic coefficients. The
+unit wrenches come from the model's own kernel (`mavsysid.vehicle.mav_model.rotor_wrench`
+at θ = e_c_T, e_c_T + e_c_D and e_c_M), so no law is written twice. Terms beyond the
+paper's model enter as nuisance coefficients, so that they are not taken for inertia:
+the rotors' own angular momentum h = J_r Σ ε_i n_i e_z, whose change J_r Σ ε_i ṅ_i turns
+the body about z (a rotor speeding up turns the body the other way; on small vehicles it
+rivals the drag moment) and whose precession −ω × h acts about x and y; and the rotor
+drag's yaw moment (coefficient c_T c_D / j_z).
+
+Each model column goes through the same smoother as the measured side
+(`mavsysid.estimation.equation_error.body_force_readout`, `body_rotation_readout`), so the
+smoother's attenuation and the rotation to the body frame act alike on both. The force
+rows are [f_x, f_y, f_z] (m/s²), the torque rows [ω̇_x, ω̇_y, ω̇_z] (rad/s²).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from mavsysid.estimation.equation_error import (
+    SmootherSettings,
+    acceleration_kernel,
+    body_force_readout,
+    body_rotation_readout,
+    smooth_pose,
+)
+from mavsysid.estimation.uniform_pose import UniformSegment
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.mav_model import rotor_wrench
+
+__all__ = ["FORCE_COEFFICIENTS", "ROTOR_FORCE_COLUMNS", "ROTOR_TORQUE_COLUMNS",
+           "STACKED_COEFFICIENTS", "TORQUE_AXIS", "TORQUE_COEFFICIENTS", "BalanceBuilder",
+           "BalanceRows", "BandFilter"]
+
+#: Coefficients of the force rows: c_T and c_T c_D.
+FORCE_COEFFICIENTS = ("c_T", "c_T*c_D")
+#: Coefficients of the torque rows, in column order. ``g_*`` are the gyroscopic
+#: coefficients −(j_z − j_y)/j_x, −(j_x − j_z)/j_y, −(j_y − j_x)/j_z; ``rotor_gyro_x`` is
+#: −J_r/j_x on Σε_i n_i ω_y, ``rotor_gyro_y`` is J_r/j_y on Σε_i n_i ω_x; ``drag_z`` is
+#: c_T c_D / j_z (the rotor drag's yaw moment); ``rotor_inertia_z`` is −J_r / j_z on
+#: Σ ε_i ṅ_i.
+TORQUE_COEFFICIENTS = ("c_T/j_x", "g_x", "rotor_gyro_x", "c_T/j_y", "g_y", "rotor_gyro_y",
+                       "c_M/j_z", "drag_z", "g_z", "rotor_inertia_z")
+#: Which torque axis each torque coefficient's column acts on (0 = x, 1 = y, 2 = z).
+TORQUE_AXIS = (0, 0, 0, 1, 1, 1, 2, 2, 2, 2)
+#: Columns of the torque rows that depend on the rotor speeds (the rest on the pose only).
+ROTOR_TORQUE_COLUMNS = (0, 2, 3, 5, 6, 7, 9)
+#: Columns of the force rows that depend on the rotor speeds.
+ROTOR_FORCE_COLUMNS = (0, 1)
+#: All coefficients, force then torque: the stacked vector of `parameter_status`.
+STACKED_COEFFICIENTS = FORCE_COEFFICIENTS + TORQUE_COEFFICIENTS
+
+
+@dataclass(frozen=True)
+class BalanceRows:
+    """The measured side and the model columns of one segment (N rows, smoother edges cut).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        s.
+    force : ndarray, shape (N, 3)
+        Measured body specific force, m/s².
+    force_columns : ndarray, shape (N, 3, 2)
+        Model body specific force per unit of each `FORCE_COEFFICIENTS` entry.
+    torque : ndarray, shape (N, 3)
+        Measured body angular acceleration minus the model's rate term, rad/s².
+    torque_columns : ndarray, shape (N, 3, 10)
+        Model angular acceleration per unit of each `TORQUE_COEFFICIENTS` entry.
+    """
+
+    t: np.ndarray
+    force: np.ndarray
+    force_columns: np.ndarray
+    torque: np.ndarray
+    torque_columns: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def rows(self, keep: np.ndarray | slice) -> BalanceRows:
+        """A subset of the rows."""
+        return BalanceRows(self.t[keep], self.force[keep], self.force_columns[keep],
+                           self.torque[keep], self.torque_columns[keep])
+
+
+class BandFilter(Protocol):
+    """A zero-phase linear filter along time (axis 0), and how long its edges settle."""
+
+    def apply(self, x: np.ndarray, dt: float) -> np.ndarray:
+        """``x`` filtered along axis 0, same shape."""
+
+    def settle(self) -> float:
+        """Time to cut off each end after filtering, s."""
+
+
+def _unit_wrenches(n: np.ndarray, config: VehicleConfig, v_b: np.ndarray, w: np.ndarray
+                   ) -> tuple[np.ndarray, ...]:
+    """Body force and torque per unit c_T, per unit c_T c_D (drag) and per unit c_M."""
+    r, eps = config.rotor_positions, config.rotor_directions
+    e = np.eye(6)
+    f_t, m_t = rotor_wrench(n, e[0], r, eps, v_b, w)
+    f_td, m_td = rotor_wrench(n, e[0] + e[1], r, eps, v_b, w)
+    _, m_m = rotor_wrench(n, e[2], r, eps, v_b, w)
+    return f_t, f_td - f_t, m_t, m_td - m_t, m_m
+
+
+def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """The z row replaced by magnitudes: |f| against |thrust + c_D drag| per unit c_T.
+
+    An attitude error ε turns the measured specific force out of z_B and shortens its z
+    component by cos ε ≈ 1 − ε²/2: with a noisy attitude (an on-board estimator's, 1°) the
+    z row alone would bias c_T low by σ_ε². The magnitude is free of it. The rotor drag,
+    perpendicular to the thrust, lengthens it at second order, so the model's magnitude
+    includes it at the given c_D (linear in c_T; the drag column leaves this row).
+    """
+    force, cols = force.copy(), cols.copy()
+    force[:, 2] = np.linalg.norm(force, axis=1)
+    cols[:, 2, 0] = np.linalg.norm(cols[:, :, 0] + c_d * cols[:, :, 1], axis=1)
+    cols[:, 2, 1:] = 0.0
+    return force, cols
+
+
+class BalanceBuilder:
+    """Builds `BalanceRows` of one segment for any delay, smoothing the pose once.
+
+    Parameters
+    ----------
+    segment : UniformSegment
+        Fresh pose on a uniform grid, and the rotor speeds.
+    config : VehicleConfig
+        Mass, rotor positions and spin directions.
+    window : float
+        Savitzky–Golay window (cubic), s.
+    """
+
+    def __init__(self, segment: UniformSegment, config: VehicleConfig, window: float
+                 ) -> None:
+        self.segment, self.config, self.dt = segment, config, segment.dt
+        self.settings = SmootherSettings(window=window, polyorder=3)
+        self.pose = smooth_pose(segment.t, segment.position, segment.quaternion,
+                                self.settings, "flight segment")
+        self.kernel = acceleration_kernel(self.settings, self.dt)
+        w = self.pose.rates
+        self._rate_term = body_rotation_readout(self.pose, self.pose, np.zeros_like(w),
+                                                self.kernel)
+        products = np.column_stack([w[:, 1] * w[:, 2], w[:, 2] * w[:, 0], w[:, 0] * w[:, 1]])
+        self._gyroscopic = {col: self._readout(axis, products[:, axis])
+                            for col, axis in ((1, 0), (4, 1), (8, 2))}
+
+    def _readout(self, axis: int, values: np.ndarray) -> np.ndarray:
+        omega_dot = np.zeros((len(values), 3))
+        omega_dot[:, axis] = values
+        return body_rotation_readout(self.pose, self.pose, omega_dot, self.kernel,
+                                     rate_term=False)
+
+    @property
+    def edge(self) -> int:
+        """Samples at each end where the smoother is one-sided."""
+        return self.settings.samples(self.dt)
+
+    def rows(self, delay: float, c_d: float, roll_pitch: BandFilter | None = None,
+             yaw: BandFilter | None = None, force: BandFilter | None = None,
+             trim: float = 0.0, magnitude: bool = True) -> BalanceRows:
+        """The balance rows at ``delay`` (module docstring).
+
+        Parameters
+        ----------
+        delay : float
+            The pose lags the rotor speeds by this much, s.
+        c_d : float
+            c_D used to add the rotor drag's roll and pitch moment to the thrust torque,
+            s/m (zero when the rotors lie in the plane of the centre of gravity).
+        roll_pitch, yaw, force : BandFilter, optional
+            Applied to both sides of the ω̇_x, ω̇_y rows, the ω̇_z rows and the force rows.
+        trim : float
+            Time cut off each end, s, beyond the smoother's and the filters' edges.
+        magnitude : bool
+            Make the thrust row the specific force's magnitude (else its z component).
+        """
+        n = self.segment.rotor_speeds(delay)
+        n_dot = np.gradient(n, self.dt, axis=0)
+        pose, config = self.pose, self.config
+        f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, pose.velocity_body(), pose.rates)
+        force_cols = np.stack([body_force_readout(pose, pose, f / config.mass, self.kernel)
+                               for f in (f_t, f_d)], axis=-1)
+        thrust_torque = m_t + c_d * m_d
+        spin = n @ config.rotor_directions
+        w = pose.rates
+        rotor_cols = {0: (0, thrust_torque[:, 0]), 2: (0, spin * w[:, 1]),
+                      3: (1, thrust_torque[:, 1]), 5: (1, spin * w[:, 0]),
+                      6: (2, m_m[:, 2]), 7: (2, m_d[:, 2]),
+                      9: (2, n_dot @ config.rotor_directions)}
+        torque_cols = np.empty((len(n), 3, len(TORQUE_COEFFICIENTS)))
+        for col, (axis, values) in rotor_cols.items():
+            torque_cols[:, :, col] = self._readout(axis, values)
+        for col, readout in self._gyroscopic.items():
+            torque_cols[:, :, col] = readout
+        torque = pose.angular_acceleration - self._rate_term
+        specific_force = pose.specific_force()
+        edge, settle = self.edge, trim
+        if force is not None:
+            specific_force = force.apply(specific_force, self.dt)
+            force_cols = force.apply(force_cols, self.dt)
+            settle = max(settle, trim + force.settle())
+        if magnitude:
+            specific_force, force_cols = _thrust_row_as_magnitude(specific_force, force_cols,
+                                                                  c_d)
+        for band, axes in ((roll_pitch, [0, 1]), (yaw, [2])):
+            if band is not None:
+                torque[:, axes] = band.apply(torque[:, axes], self.dt)
+                torque_cols[:, axes] = band.apply(torque_cols[:, axes], self.dt)
+                settle = max(settle, trim + band.settle())
+        edge = max(edge, int(np.ceil(settle / self.dt)))
+        rows = BalanceRows(self.segment.t, specific_force, force_cols, torque, torque_cols)
+        return rows.rows(slice(edge, max(edge, len(n) - edge)))

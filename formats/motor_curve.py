@@ -1,0 +1,171 @@
+"""The motor curve: rotor speed ↔ the motor output an autopilot logs, both ways.
+
+A log that has no ESC rpm still has what the autopilot sent to the motors: a PWM pulse
+width or a normalised output. With throttle u in [0, 1] and ArduPilot's MOT_THST_EXPO
+(PX4's THR_MDL_FAC has the same meaning) e, thrust ∝ (1 − e) u + e u², and thrust ∝ n², so
+
+    n = rotor_speed_max · sqrt((1 − e) u + e u²).
+
+Readers of logs (`mavsysid.formats.tlog`, `mavsysid.formats.ulog`,
+`mavsysid.formats.dataflash`) apply it to motor outputs; writers of simulated logs
+(`mavsysid.flight.offline`) apply its inverse to commanded rotor speeds. This is a
+commanded speed through a nominal curve, not a measured one: the `[motor]` keys of the
+vehicle config (``pwm_min``, ``pwm_max``, ``thrust_expo``) set it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mavsysid.vehicle.config import VehicleConfig
+
+__all__ = ["describe_curve", "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
+           "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
+
+
+def throttle_from_pwm(pwm: np.ndarray, pwm_min: float, pwm_max: float) -> np.ndarray:
+    """Throttle u from a PWM pulse width.
+
+    Parameters
+    ----------
+    pwm : array_like, any shape
+        Motor output pulse width, µs. 0 (an output that is off) gives u = 0.
+    pwm_min, pwm_max : float
+        Pulse widths of zero and full throttle, µs, ``pwm_min < pwm_max``.
+
+    Returns
+    -------
+    ndarray, same shape
+        u in [0, 1] (values outside the PWM range are clipped).
+    """
+    u = (np.asarray(pwm, dtype=float) - pwm_min) / (pwm_max - pwm_min)
+    return np.clip(u, 0.0, 1.0)
+
+
+def rotor_speed_from_throttle(u: np.ndarray, rotor_speed_max: float,
+                              thrust_expo: float) -> np.ndarray:
+    """Rotor speed from throttle through the thrust curve.
+
+    Parameters
+    ----------
+    u : array_like, any shape
+        Throttle, clipped to [0, 1]. NaN stays NaN (PX4 marks unused motors so).
+    rotor_speed_max : float
+        Rotor speed at full throttle, rad/s.
+    thrust_expo : float
+        e in [0, 1]: thrust ∝ (1 − e) u + e u².
+
+    Returns
+    -------
+    ndarray, same shape
+        n = rotor_speed_max · sqrt((1 − e) u + e u²), rad/s.
+    """
+    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    return rotor_speed_max * np.sqrt((1.0 - thrust_expo) * u + thrust_expo * u * u)
+
+
+def rotor_speed_from_pwm(pwm: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
+    """Rotor speed from PWM with the vehicle's `[motor]` curve.
+
+    Parameters
+    ----------
+    pwm : array_like, any shape
+        Motor output pulse width, µs.
+    vehicle : VehicleConfig
+        ``[motor]`` pwm_min, pwm_max, thrust_expo and ``[limits]`` rotor_speed_max.
+
+    Returns
+    -------
+    ndarray, same shape
+        Rotor speed, rad/s.
+    """
+    motor = vehicle.motor
+    u = throttle_from_pwm(pwm, motor.pwm_min, motor.pwm_max)
+    return rotor_speed_from_throttle(u, vehicle.limits.rotor_speed_max, motor.thrust_expo)
+
+
+def throttle_from_rotor_speed(n: np.ndarray, rotor_speed_max: float,
+                              thrust_expo: float) -> np.ndarray:
+    """Throttle u for rotor speeds n: the inverse of `rotor_speed_from_throttle`.
+
+    Thrust ∝ (1 − e) u + e u² ∝ n², so u solves e u² + (1 − e) u − (n / n_max)² = 0.
+
+    Parameters
+    ----------
+    n : array_like, any shape
+        Rotor speeds, rad/s (clipped to [0, rotor_speed_max]).
+    rotor_speed_max : float
+        Rotor speed at full throttle, rad/s.
+    thrust_expo : float
+        e in [0, 1].
+
+    Returns
+    -------
+    ndarray, same shape
+        u in [0, 1]; with e = 0 the relative thrust (n / n_max)².
+    """
+    e = thrust_expo
+    s = np.clip(np.asarray(n, dtype=float) / rotor_speed_max, 0.0, 1.0) ** 2
+    return s if e == 0.0 else (-(1.0 - e) + np.sqrt((1.0 - e) ** 2 + 4.0 * e * s)) / (2.0 * e)
+
+
+def pwm_from_rotor_speed(n: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
+    """Motor output pulse width, µs, for rotor speeds n (rad/s), with the `[motor]` curve.
+
+    The inverse of `rotor_speed_from_pwm`: PWM = pwm_min + u (pwm_max − pwm_min), u from
+    `throttle_from_rotor_speed`.
+
+    Parameters
+    ----------
+    n : ndarray, any shape
+        Rotor speeds, rad/s.
+    vehicle : VehicleConfig
+        ``[motor]`` pwm_min, pwm_max, thrust_expo and ``[limits]`` rotor_speed_max.
+
+    Returns
+    -------
+    ndarray, same shape
+        PWM, µs, within [pwm_min, pwm_max].
+    """
+    motor = vehicle.motor
+    u = throttle_from_rotor_speed(n, vehicle.limits.rotor_speed_max, motor.thrust_expo)
+    return motor.pwm_min + u * (motor.pwm_max - motor.pwm_min)
+
+
+def describe_curve(vehicle: VehicleConfig, pwm: bool) -> str:
+    """The curve in words for a warning: its formula and the config values it used.
+
+    Parameters
+    ----------
+    vehicle : VehicleConfig
+        Its ``[motor]`` curve and ``rotor_speed_max``.
+    pwm : bool
+        The outputs are PWM (through the whole curve); else relative thrust commands.
+
+    Returns
+    -------
+    str
+    """
+    motor, n_max = vehicle.motor, vehicle.limits.rotor_speed_max
+    if pwm:
+        return (f"n = {n_max:g} rad/s · sqrt((1 − e) u + e u²), e = [motor].thrust_expo = "
+                f"{motor.thrust_expo:g}, u = (PWM − {motor.pwm_min:g}) / "
+                f"({motor.pwm_max:g} − {motor.pwm_min:g}) µs")
+    return f"n = {n_max:g} rad/s · sqrt(u), u the relative thrust command (0..1)"
+
+
+def pwm_curve_caveat(vehicle: VehicleConfig) -> str:
+    """What rotor speeds read from PWM outputs are, for a note: how and how far to trust them.
+
+    Parameters
+    ----------
+    vehicle : VehicleConfig
+        Its ``[motor]`` curve and ``rotor_speed_max``.
+
+    Returns
+    -------
+    str
+        "through the motor curve …: commanded, not measured, and only as right as the
+        [motor] keys of the vehicle config".
+    """
+    return (f"through the motor curve {describe_curve(vehicle, pwm=True)}: commanded, not "
+            "measured, and only as right as the [motor] keys of the vehicle config")

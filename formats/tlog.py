@@ -1,0 +1,298 @@
+"""MAVLink telemetry logs (``.tlog``): the record format, the messages read, writer and reader.
+
+A ``.tlog`` is the ground-station convention pymavlink and MAVProxy read: records of an
+8-byte big-endian timestamp (µs since the Unix epoch, the receipt time) followed by one
+MAVLink packet as sent on the wire. `TlogWriter` writes each record with a single
+unbuffered ``write``, so the file is complete up to the last packet whenever the process
+dies; `read_tlog` reads a log with pymavlink.
+
+Messages read (MAVLink common and ardupilotmega dialects):
+
+- Pose: ATT_POS_MOCAP (motion capture forwarded to the vehicle; x, y, z NED, q [w, x, y,
+  z] FRD → NED) if present, else LOCAL_POSITION_NED with ATTITUDE_QUATERNION (or
+  ATTITUDE Euler angles), the autopilot's own estimate.
+- Rotor speeds: ESC_TELEMETRY_1_TO_4 / _5_TO_8 / _9_TO_12 ``rpm`` (`ESC_TELEMETRY`: ESC i
+  is motor output i + 1), else the SERVO_OUTPUT_RAW port 0 channels that move (the
+  motors), PWM through the motor curve (a note says so).
+- Modes: the autopilot's HEARTBEAT custom mode, named by pymavlink.
+
+Time base: the autopilot's clock (s since boot), because the pose messages carry it
+(``time_boot_ms``). ESC_TELEMETRY and ATT_POS_MOCAP carry no autopilot time (the mocap
+``time_usec`` is the sender's clock), so they are stamped with the tlog's receipt time
+mapped onto the autopilot clock: receipt − time_boot_ms over all autopilot messages
+with a ``time_boot_ms`` is the clock offset plus that message's link latency, and its
+minimum (the fastest message) is taken as the offset. Stamps mapped so are late by their
+own latency minus the smallest one, typically a few ms on a direct link; clock drift
+(tens of ppm) is ignored. SERVO_OUTPUT_RAW carries the autopilot's ``time_usec``, used
+as is (and in the offset estimate). Without any autopilot time the receipt times are
+used, from the first message.
+
+Only messages from the autopilot (the sender of the first HEARTBEAT from an autopilot)
+count as the vehicle's, except ATT_POS_MOCAP, which a ground station or companion sends.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+from collections import defaultdict
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Protocol
+
+import numpy as np
+from mavsysid.formats.bounded_parse import import_parser, parsing
+from mavsysid.formats.motor_curve import pwm_curve_caveat, rotor_speed_from_pwm
+from mavsysid.formats.parsed_log import (
+    ModeChanges,
+    ParsedLog,
+    PoseSource,
+    Series,
+    motor_output_count,
+)
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.constants import RPM_TO_RAD_S
+from mavsysid.vehicle.frames import euler_ned_to_quaternion
+
+from mavsysid.errors import InputError, LogFormatError
+
+__all__ = ["ESC_TELEMETRY", "EpochClock", "TlogWriter", "read_tlog"]
+
+#: ESC telemetry messages → the motor output (0-based) of their first ``rpm`` entry; each
+#: carries four.
+ESC_TELEMETRY: dict[str, int] = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_8": 4,
+                                 "ESC_TELEMETRY_9_TO_12": 8}
+_CLOCKED = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE", "SYSTEM_TIME",
+            "GLOBAL_POSITION_INT")
+_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", *_CLOCKED, *ESC_TELEMETRY]
+_POSE_HINT = "no ATT_POS_MOCAP, nor LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE"
+
+# (receipt time s, (system, component), message) per message type.
+_Messages = dict[str, list[tuple[float, tuple[int, int], Any]]]
+# pose (m = 7) or position and attitude, and where the pose comes from.
+_Pose = tuple[Series | None, Series | None, Series | None, PoseSource]
+
+
+class EpochClock(Protocol):
+    """What stamps tlog records: `epoch_us` gives the time now, µs since the Unix epoch."""
+
+    def epoch_us(self) -> int:
+        """The stamp of a record written now, µs since the Unix epoch."""
+        ...
+
+
+# --- writing -----------------------------------------------------------------------------
+
+
+class TlogWriter:
+    """Appends timestamped raw packets to a new ``.tlog`` (thread-safe).
+
+    Parameters
+    ----------
+    path : Path
+        The file to create (an existing file is an `InputError`: never overwrite a log).
+    clock : EpochClock
+        Stamps each record with its ``epoch_us()`` (the streamer's
+        `mavsysid.flight.ground.link_clock.LinkClock`).
+    """
+
+    def __init__(self, path: Path, clock: EpochClock) -> None:
+        self.path = Path(path)
+        self.clock = clock
+        self.records = 0
+        self._lock = threading.Lock()
+        try:
+            # Unbuffered: each record reaches the OS in one write() as it is made.
+            self._file = open(self.path, "xb", buffering=0)  # noqa: SIM115 - closed by close()
+        except FileExistsError:
+            raise InputError(f"{self.path}: exists; refusing to overwrite a flight log") from None
+
+    def write(self, packet: bytes | bytearray) -> None:
+        """Record one packet, stamped now."""
+        data = bytes(packet)
+        with self._lock:
+            # Stamped under the lock, so records from the heartbeat thread and the main
+            # loop stay in time order in the file.
+            if not self._file.closed:
+                self._file.write(struct.pack(">Q", self.clock.epoch_us()) + data)
+                self.records += 1
+
+    def close(self) -> None:
+        """Close the file. Harmless twice."""
+        with self._lock:
+            self._file.close()
+
+
+# --- reading -----------------------------------------------------------------------------
+
+
+def _collect(path: Path) -> _Messages:
+    """All messages of the types used here, by type."""
+    mavutil = import_parser("pymavlink.mavutil", path)
+    found: _Messages = defaultdict(list)
+    with parsing(path, "a MAVLink telemetry log"):
+        log = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+        try:
+            while (m := log.recv_match(type=_TYPES)) is not None:
+                if m.get_type() in _TYPES:
+                    found[m.get_type()].append(
+                        (float(m._timestamp), (m.get_srcSystem(), m.get_srcComponent()), m))
+        finally:
+            log.close()
+    if not found:
+        raise LogFormatError(f"{path}: no MAVLink messages with pose, rotor speeds or motor "
+                             "outputs (is it a telemetry log?)")
+    return found
+
+
+def _from_autopilot(found: _Messages, mavlink: ModuleType) -> _Messages:
+    """The messages sent by the autopilot (all of them if no autopilot HEARTBEAT).
+
+    ``mavlink`` is pymavlink's dialect module, for the MAVLink enums: a ground station's
+    HEARTBEAT says type GCS or autopilot INVALID.
+    """
+    beats = [src for _, src, m in found.get("HEARTBEAT", [])
+             if m.autopilot != mavlink.MAV_AUTOPILOT_INVALID and m.type != mavlink.MAV_TYPE_GCS]
+    if not beats:
+        return found
+    return {name: [row for row in rows if row[1] == beats[0]] for name, rows in found.items()}
+
+
+def _clock_offset(own: _Messages) -> float | None:
+    """Receipt time minus autopilot time, s (see the module docstring), or None."""
+    lags = [receipt - m.time_boot_ms * 1e-3
+            for name in _CLOCKED for receipt, _, m in own.get(name, [])]
+    # SERVO_OUTPUT_RAW's time_usec is the same clock (it wraps, but that only raises lags).
+    lags += [receipt - m.time_usec * 1e-6 for receipt, _, m in own.get("SERVO_OUTPUT_RAW", [])]
+    return min(lags) if lags else None
+
+
+def _unwrap_us(ticks: np.ndarray) -> np.ndarray:
+    """A uint32 microsecond counter (wraps every 71.6 min) made monotonic, in s."""
+    steps = np.diff(ticks, prepend=ticks[:1])
+    wraps = np.cumsum(steps < -(2.0**31))
+    return (ticks + wraps * 2.0**32) * 1e-6
+
+
+def _pose(found: _Messages, own: _Messages, offset: float) -> _Pose:
+    """Motion-capture pose, else local position and attitude (NED/FRD); the pose's origin."""
+    mocap = found.get("ATT_POS_MOCAP", [])
+    if mocap:
+        t = np.array([r for r, _, _ in mocap]) - offset
+        p = np.array([[m.x, m.y, m.z] for _, _, m in mocap], dtype=float)
+        q = np.array([list(m.q) for _, _, m in mocap], dtype=float)
+        return Series(t, np.column_stack([p, q]), "ATT_POS_MOCAP"), None, None, "motion_capture"
+    local = own.get("LOCAL_POSITION_NED", [])
+    if not local:
+        return None, None, None, "autopilot"
+    position = Series(np.array([m.time_boot_ms * 1e-3 for _, _, m in local]),
+                      np.array([[m.x, m.y, m.z] for _, _, m in local], dtype=float),
+                      "LOCAL_POSITION_NED")
+    if own.get("ATTITUDE_QUATERNION"):
+        rows = own["ATTITUDE_QUATERNION"]
+        q = np.array([[m.q1, m.q2, m.q3, m.q4] for _, _, m in rows], dtype=float)
+        label = "ATTITUDE_QUATERNION"
+    elif own.get("ATTITUDE"):
+        rows = own["ATTITUDE"]
+        q = euler_ned_to_quaternion(*np.array([[m.roll, m.pitch, m.yaw] for _, _, m in rows],
+                                              dtype=float).T)
+        label = "ATTITUDE"
+    else:
+        return None, None, None, "autopilot"
+    attitude = Series(np.array([m.time_boot_ms * 1e-3 for _, _, m in rows]), q, label)
+    return None, position, attitude, "autopilot"
+
+
+def _esc_rotors(path: Path, own: _Messages, offset: float,
+                k: int) -> tuple[Series, ...]:
+    """Rotor speeds from ESC_TELEMETRY_*: as many rotors as ESCs that ever turned."""
+    present = {name: own[name] for name in ESC_TELEMETRY if own.get(name)}
+    turned = [base + j for name, base in ESC_TELEMETRY.items() if name in present
+              for j in range(4) if any(m.rpm[j] for _, _, m in present[name])]
+    # An ESC never turning is a rotor of this vehicle only if the config says so.
+    count = max(turned) + 1 if turned else k
+    series = []
+    for name, base in ESC_TELEMETRY.items():
+        if base >= count:
+            break
+        rows = present.get(name)
+        if not rows:
+            raise LogFormatError(f"{path}: ESC rpm for rotors {base + 1}..{base + 4} missing "
+                                 f"(no {name}) while rotors up to {count} report theirs")
+        width = min(4, count - base)
+        t = np.array([r for r, _, _ in rows]) - offset
+        rpm = np.array([list(m.rpm)[:width] for _, _, m in rows], dtype=float)
+        series.append(Series(t, rpm * RPM_TO_RAD_S, f"{name} rpm"))
+    return tuple(series)
+
+
+def _servo_rotors(own: _Messages, vehicle: VehicleConfig) -> Series | None:
+    """Rotor speeds from SERVO_OUTPUT_RAW port 0, channels 1..k, via the motor curve."""
+    rows = [m for _, _, m in own.get("SERVO_OUTPUT_RAW", []) if m.port == 0]
+    if not rows:
+        return None
+    pwm = np.array([[getattr(m, f"servo{i}_raw", 0) or 0 for i in range(1, 17)] for m in rows],
+                   dtype=float)
+    count = motor_output_count(pwm)
+    if count == 0:
+        return None
+    t = _unwrap_us(np.array([m.time_usec for m in rows], dtype=float))
+    return Series(t, rotor_speed_from_pwm(pwm[:, :count], vehicle), "SERVO_OUTPUT_RAW PWM")
+
+
+def _modes(own: _Messages, mavutil: ModuleType, offset: float) -> ModeChanges | None:
+    """The modes of the autopilot's HEARTBEATs, periodic reports; None without any."""
+    beats = own.get("HEARTBEAT", [])
+    if not beats:
+        return None
+    t = np.array([r for r, _, _ in beats]) - offset
+    modes = tuple(mavutil.mode_string_v10(m) for _, _, m in beats)
+    return ModeChanges(t=t, modes=modes, events=False, end=float(t[-1]))
+
+
+def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
+    """Read the pose, rotor speeds and modes of a telemetry log.
+
+    Parameters
+    ----------
+    path : Path
+        The ``.tlog`` file.
+    vehicle : VehicleConfig
+        The vehicle: its rotor count and motor curve (for SERVO_OUTPUT_RAW).
+
+    Returns
+    -------
+    ParsedLog
+        NED/FRD, rad/s, the autopilot's motor numbering, on the autopilot's clock (see
+        the module docstring); with the modes of its HEARTBEATs.
+
+    Raises
+    ------
+    LogFormatError
+        An unreadable file, or neither ESC rpm nor motor outputs.
+    """
+    found = _collect(path)
+    mavutil = import_parser("pymavlink.mavutil", path)
+    own = _from_autopilot(found, mavutil.mavlink)
+    notes: list[str] = []
+    offset = _clock_offset(own)
+    if offset is None:
+        offset = min(rows[0][0] for rows in found.values())
+        notes.append(f"{path}: no autopilot time_boot_ms in the log; times are its receipt "
+                     "times from the first message")
+    rotor_notes = []
+    with parsing(path, "a MAVLink telemetry log with the usual message fields"):
+        pose, position, attitude, pose_source = _pose(found, own, offset)
+        if any(own.get(name) for name in ESC_TELEMETRY):
+            rotors = _esc_rotors(path, own, offset, vehicle.rotor_count)
+        elif (servo := _servo_rotors(own, vehicle)) is not None:
+            rotors = (servo,)
+            rotor_notes.append(f"{path}: no ESC rpm; rotor speeds are motor outputs "
+                               f"(SERVO_OUTPUT_RAW) {pwm_curve_caveat(vehicle)}")
+        else:
+            raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
+                                 "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")
+        modes = _modes(own, mavutil, offset)
+    return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,
+                     pose_source=pose_source, pose_hint=_POSE_HINT, rotors=rotors,
+                     notes=tuple(notes), rotor_notes=tuple(rotor_notes), modes=modes)

@@ -1,0 +1,48 @@
+"""The motor curve n = n_max · sqrt((1 − e) u + e u²) and its PWM mapping."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mavsysid.formats.motor_curve import (
+    pwm_from_rotor_speed,
+    rotor_speed_from_pwm,
+    rotor_speed_from_throttle,
+    throttle_from_pwm,
+)
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+
+
+@pytest.mark.parametrize(("u", "expo", "expected"), [
+    (0.0, 0.65, 0.0),
+    (1.0, 0.65, 1.0),
+    (0.25, 0.0, 0.5),  # linear thrust: n ∝ sqrt(u)
+    (0.25, 1.0, 0.25),  # quadratic thrust: n ∝ u
+    (0.5, 0.65, np.sqrt(0.35 * 0.5 + 0.65 * 0.25)),
+    (1.7, 0.65, 1.0),  # clipped
+])
+def test_rotor_speed_from_throttle(u: float, expo: float, expected: float) -> None:
+    """The curve gives n_max · sqrt((1 − e) u + e u²) with u clipped to [0, 1]."""
+    assert rotor_speed_from_throttle(np.array(u), 800.0, expo) == pytest.approx(800.0 * expected)
+
+
+@pytest.mark.parametrize(("pwm", "u"), [(0.0, 0.0), (900.0, 0.0), (1000.0, 0.0), (1250.0, 0.25),
+                                        (2000.0, 1.0), (2100.0, 1.0)])
+def test_throttle_from_pwm(pwm: float, u: float) -> None:
+    """PWM maps linearly onto [0, 1] between pwm_min and pwm_max, clipped outside."""
+    assert throttle_from_pwm(np.array(pwm), 1000.0, 2000.0) == pytest.approx(u)
+
+
+def test_rotor_speed_from_pwm_uses_the_vehicle_curve(firefly: VehicleConfig) -> None:
+    """The vehicle's [motor] defaults give 0 at 1000 µs, n_max at 2000 µs, increasing between."""
+    pwm = np.linspace(1000.0, 2000.0, 101)
+    n = rotor_speed_from_pwm(pwm, firefly)
+    assert n[0] == 0.0 and n[-1] == pytest.approx(firefly.limits.rotor_speed_max)
+    assert (np.diff(n) > 0).all()
+
+
+def test_pwm_is_the_inverse_of_the_readers_motor_curve():
+    vehicle = load_vehicle("quad_x")
+    n = np.random.default_rng(2).uniform(0.0, vehicle.limits.rotor_speed_max, (50, 4))
+    np.testing.assert_allclose(rotor_speed_from_pwm(pwm_from_rotor_speed(n, vehicle), vehicle),
+                               n, rtol=1e-9, atol=1e-6)

@@ -1,0 +1,154 @@
+"""Re-planning in flight: a 6 s opening, estimate, plan the rest, fly it, in one stream run
+against `mavsysid sim` (lock-step, its own process); the belief the rest is planned from."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.flight.ground.stream_session import StreamSettings
+from mavsysid.flight.loopback_ports import free_udp_port
+from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.poselog import read_pose_log
+from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+from mavsysid.pipeline.replanned_stream import (
+    ReplanSettings,
+    belief_after_opening,
+    prior_estimate,
+    relative_covariance,
+    run_replanned_stream,
+    snapshot_pose,
+)
+from mavsysid.planner.results import PlannerSettings
+from mavsysid.vehicle.config import load_vehicle
+
+from mavsysid.errors import JobFailedError
+from tests.support.stream_flights import BOX, SimProcess
+
+SPEEDUP = 4.0
+BUDGET = 14.0
+#: A gentle 6 s figure: the opening.
+OPENING = ExcitationSpec(duration=6.0, ramp=1.5, amplitude=(0.6, 0.5, 0.2))
+
+
+def _opening(path):
+    write_trajectory_file(path, trajectory_file_for(excitation_trajectory(OPENING),
+                                                    load_vehicle("firefly"), box=BOX))
+    return path
+
+
+@pytest.mark.slow
+def test_opening_then_replanned_rest_in_one_flight(tmp_path):
+    """Both parts flown into one flight directory; the rest starts where the opening
+    ended, lasts what the budget left, stays inside the box; the pose runs through."""
+    port = free_udp_port()
+    said: list[str] = []
+    stream = StreamSettings(connect=f"udp:127.0.0.1:{port}", speedup=SPEEDUP, lockstep=True,
+                            log_dir=tmp_path / "logs", box=BOX, heartbeat_timeout=300.0)
+    replan = ReplanSettings(budget=BUDGET, planner=PlannerSettings(
+        planning_time=math.inf, max_samples=300, refine_steps=50, seed=3))
+    with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
+                    f"{SPEEDUP:g}", "--theta-scale", "1,1.2,0.85,1.1,1.05,0.95"):
+        outcome = run_replanned_stream(_opening(tmp_path / "opening.json"), stream, replan,
+                                       say=said.append, progress=False)
+    meta = read_meta(outcome.directory / "meta.json")
+    assert meta["status"] == "complete", (meta.get("reason"), said)
+    kinds = [s["kind"] for s in meta["segments"]]
+    assert kinds == ["opening", "replanned", "end"], said
+    rest = meta["segments"][1]
+    assert rest["planner"]["budget"] == pytest.approx(BUDGET - 6.0)
+    assert 0.0 < rest["duration"] <= BUDGET - 6.0 + 1e-6
+    assert rest["hold_s"] > 0.0 and rest["planning_s"] > 0.0 and rest["estimation_s"] > 0.0
+    theta = np.array(rest["estimate"]["theta"])
+    sigma = np.array(rest["estimate"]["sigma"])
+    assert np.all(np.isfinite(theta)) and np.all(sigma < 0.5 * theta)  # narrower than the prior
+    end = excitation_trajectory(OPENING).flat_outputs(np.array([OPENING.duration]))
+    assert rest["planner"]["start"][:3] == pytest.approx(end.position[0].tolist(), abs=1e-9)
+    log = read_pose_log(outcome.directory / "pose.csv", 6)
+    assert np.max(np.diff(log.t)) < 0.1
+    assert np.max(np.linalg.norm(np.diff(log.position, axis=0), axis=1)) < 0.05
+    w = rest["window"]
+    on = (log.t >= w["start"]) & (log.t <= w["end"]) & (log.extra["t_traj"] >= 0.0)
+    assert on.sum() == pytest.approx(50 * rest["duration"], rel=0.05)
+    ref = np.column_stack([log.extra[k] for k in ("x_ref", "y_ref", "z_ref")])[on]
+    assert np.all(ref >= np.array(BOX[:3])) and np.all(ref <= np.array(BOX[3:]))
+    assert abs(log.position[-1, 2]) < 0.05  # landed
+    assert meta["trajectory_window"]["end"] == pytest.approx(w["end"])
+
+
+def test_snapshot_leaves_out_a_half_written_row(tmp_path):
+    """The copy ends at the last complete line."""
+    source = tmp_path / "live" / "pose.csv"
+    source.parent.mkdir()
+    source.write_text("t,x\n0.0,1.0\n0.1,1.")
+    (tmp_path / "copy").mkdir()
+    assert snapshot_pose(source, tmp_path / "copy").read_text() == "t,x\n0.0,1.0\n"
+
+
+def test_budget_not_longer_than_the_opening_is_refused_before_connecting(tmp_path):
+    """Exit 2, one line, no flight directory."""
+    opening = _opening(tmp_path / "opening.json")
+    result = subprocess.run(
+        [sys.executable, "-m", "mavsysid", "stream", str(opening), "--replan-budget", "5",
+         "--box", ",".join(str(v) for v in BOX), "--log-dir", str(tmp_path / "logs")],
+        capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 2, result.stderr
+    assert "--replan-budget 5: must exceed the opening's 6.0 s" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "logs").exists()
+
+
+def _random_estimate(rng: np.random.Generator) -> ParameterEstimate:
+    theta = load_vehicle("firefly").theta * rng.uniform(0.6, 1.4, 6)
+    a = rng.normal(size=(6, 6)) * 0.05
+    return ParameterEstimate(theta, (a @ a.T + 1e-4 * np.eye(6)) * np.outer(theta, theta))
+
+
+def test_relative_covariance_is_the_posterior_seen_from_its_mean():
+    rng = np.random.default_rng(11)
+    estimate = _random_estimate(rng)
+    rel = relative_covariance(estimate)
+    config = load_vehicle("firefly").with_parameters(estimate.value)
+    back = prior_estimate(config, PlannerSettings(prior_covariance=rel))
+    np.testing.assert_allclose(back.value, estimate.value, rtol=1e-12)
+    np.testing.assert_allclose(back.covariance, estimate.covariance, rtol=1e-10, atol=0.0)
+    np.testing.assert_allclose(np.sqrt(np.diag(rel)), estimate.relative_sigma, rtol=1e-12)
+
+
+def test_relative_covariance_refuses_a_non_positive_estimate():
+    estimate = _random_estimate(np.random.default_rng(12))
+    value = estimate.value.copy()
+    value[1] = -value[1]
+    with pytest.raises(JobFailedError, match="non-positive"):
+        relative_covariance(ParameterEstimate(value, estimate.covariance))
+
+
+def test_an_accepted_opening_estimate_is_the_belief():
+    """An estimate that is not refused is the rest's belief, with no refusal."""
+    estimate = _random_estimate(np.random.default_rng(3))
+    prior = _random_estimate(np.random.default_rng(4))
+    belief, refusal = belief_after_opening(lambda: estimate, prior)
+    assert belief is estimate and refusal is None
+
+
+def test_a_refused_opening_estimate_falls_back_to_the_prior():
+    """A refused estimate leaves the prior belief and the refusal's first line."""
+    prior = _random_estimate(np.random.default_rng(4))
+
+    def refused() -> ParameterEstimate:
+        raise JobFailedError("pose.csv: the parameter filter diverged\ndetails")
+
+    belief, refusal = belief_after_opening(refused, prior)
+    assert belief is prior and refusal == "pose.csv: the parameter filter diverged"
+
+
+def test_default_prior_estimate_is_the_settings_relative_sigma():
+    config = load_vehicle("firefly")
+    est = prior_estimate(config, PlannerSettings(prior_relative_sigma=0.3))
+    np.testing.assert_allclose(est.relative_sigma, 0.3, rtol=1e-12)
+    assert np.count_nonzero(est.covariance - np.diag(np.diag(est.covariance))) == 0
