@@ -83,7 +83,7 @@ class DiagnosisSettings:
     holdout : float
         Fraction of the flight (its end) kept out of all fitting.
     candidates : tuple of str or None
-        Candidate effect names (all nine by default).
+        Candidate effect names (the whole catalogue by default).
     window : float
         Length of the time windows of the "where" report, s.
     """

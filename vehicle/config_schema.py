@@ -108,6 +108,8 @@ EFFECT_PARAMETER_SIGNS: dict[tuple[str, str], str] = {
     ("body_drag", "k"): "nonnegative",
     ("rotor_drag_linear", "k"): "nonnegative",
     ("rotor_drag_linear", "k_z"): "nonnegative",
+    ("rotor_inertia", "J_r"): "nonnegative",
+    ("rotor_speed_lag", "tau"): "nonnegative",
 }
 
 

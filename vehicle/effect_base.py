@@ -25,6 +25,7 @@ __all__ = [
     "cross3",
     "hub_forces_wrench",
     "rotor_force_wrench",
+    "time_derivative",
     "total_wrench",
     "zero_wrench",
 ]
@@ -72,6 +73,11 @@ class EffectInputs:
         θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI.
     rotor_positions : ndarray, shape (k, 3)
         Rotor hubs in the body frame, m.
+    rotor_directions : ndarray, shape (k,), optional
+        Spin directions ε_i (+1 counter-clockwise seen from above); an effect that needs
+        them (rotor inertia) adds nothing without them.
+    rotor_speed_rates : ndarray, shape (N, k), optional
+        ṅ, rad/s²; without it `rotor_accelerations` differentiates ``rotor_speeds``.
     """
 
     t: np.ndarray
@@ -82,6 +88,8 @@ class EffectInputs:
     rotor_speeds: np.ndarray
     theta: np.ndarray
     rotor_positions: np.ndarray
+    rotor_directions: np.ndarray | None = None
+    rotor_speed_rates: np.ndarray | None = None
 
     def rotation(self) -> np.ndarray:
         """R(q) body → world, shape (N, 3, 3)."""
@@ -91,6 +99,12 @@ class EffectInputs:
         """v_B + ω × r_i of every rotor hub, shape (N, k, 3), m/s."""
         return self.velocity[:, None, :] + cross3(self.rates[:, None, :],
                                                     self.rotor_positions[None, :, :])
+
+    def rotor_accelerations(self) -> np.ndarray:
+        """ṅ of every rotor, shape (N, k), rad/s²: given, or `time_derivative` of the speeds."""
+        if self.rotor_speed_rates is not None:
+            return self.rotor_speed_rates
+        return time_derivative(self.t, self.rotor_speeds)
 
     def rotor_thrusts(self) -> np.ndarray:
         """c_T n_i², shape (N, k), N."""
@@ -110,6 +124,22 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1] = a2 * b0 - a0 * b2
     out[..., 2] = a0 * b1 - a1 * b0
     return out
+
+
+def time_derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """dx/dt along axis 0 by central differences (one-sided at the ends), shape of x.
+
+    Times that do not increase (a repeated row) would divide by zero: the samples are then
+    taken as evenly spaced at the median step. Fewer than two samples give zeros.
+    """
+    x = np.asarray(x, dtype=float)
+    if len(t) < 2:
+        return np.zeros_like(x)
+    dt = np.diff(t)
+    if np.all(dt > 0.0):
+        return np.gradient(x, t, axis=0)
+    step = float(np.median(dt))
+    return np.gradient(x, step if step > 0.0 else 1.0, axis=0)
 
 
 def zero_wrench(inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:

@@ -2,8 +2,9 @@
 
 Each effect of docs/architecture.md's stable list (``body_drag``, ``rotor_drag_linear``,
 ``motor_lag``, ``pose_delay``, ``marker_offset``, ``cog_offset``, ``wind``,
-``thrust_drift``, ``ground_effect``) is a `ModelEffect` subclass carrying its parameter
-values. An effect enters the model through up to three channels:
+``thrust_drift``, ``ground_effect``, ``rotor_inertia``, ``rotor_speed_lag``) is a
+`ModelEffect` subclass carrying its parameter values. An effect enters the model through
+up to three channels:
 
 * ``wrench`` — an extra body-frame force and torque added to the paper's F_B and M_B,
   evaluated on arrays of N samples (`EffectInputs`);
@@ -29,6 +30,7 @@ from mavsysid.vehicle.effect_base import (
     ModelEffect,
     hub_forces_wrench,
     rotor_force_wrench,
+    time_derivative,
     total_wrench,
 )
 from mavsysid.vehicle.rotation import quat_normalize, quat_to_matrix
@@ -47,9 +49,12 @@ __all__ = [
     "MotorLag",
     "PoseDelay",
     "RotorDragLinear",
+    "RotorInertia",
+    "RotorSpeedLag",
     "ThrustDrift",
     "Wind",
     "effect_from_values",
+    "lag_step",
     "parse_effect",
     "total_wrench",
 ]
@@ -100,6 +105,31 @@ class RotorDragLinear(ModelEffect):
         return hub_forces_wrench(inputs, forces)
 
 
+def lag_step(dt: float | np.ndarray, tau: float, y: np.ndarray, x: np.ndarray,
+             x_next: np.ndarray) -> np.ndarray:
+    """One step of τ ẏ = x − y with x linear over the step (first-order hold), exact.
+
+    Parameters
+    ----------
+    dt : float or ndarray
+        Step, s (> 0).
+    tau : float
+        Time constant, s; ≤ 0 follows x at once.
+    y, x, x_next : ndarray
+        Output now, input now and input at the step's end (same shapes).
+
+    Returns
+    -------
+    ndarray
+        The output at the step's end.
+    """
+    if tau <= 0.0:
+        return np.asarray(x_next, dtype=float)
+    a = np.exp(-dt / tau)
+    b = 1.0 - tau / dt * (1.0 - a)
+    return a * y + (1.0 - a) * x + b * (x_next - x)
+
+
 class MotorLag(ModelEffect):
     """First-order motor lag: the log holds commanded speeds; τ ṅ = n_logged − n acts."""
 
@@ -133,8 +163,7 @@ class MotorLag(ModelEffect):
             out[1:] = lfilter([b0, 1.0 - a0 - b0], [1.0, -a0], x[1:], axis=0, zi=zi)[0]
             return out
         for i in range(1, len(t)):
-            out[i] = (a[i - 1] * out[i - 1] + (1.0 - a[i - 1]) * logged[i - 1]
-                      + b[i - 1] * (logged[i] - logged[i - 1]))
+            out[i] = lag_step(dt[i - 1], tau, out[i - 1], logged[i - 1], logged[i])
         return out
 
 
@@ -288,10 +317,68 @@ class GroundEffect(ModelEffect):
         return hub_forces_wrench(inputs, forces)
 
 
+class RotorInertia(ModelEffect):
+    """The rotors' own inertia J_r: spinning rotor i up takes a torque whose reaction on the
+    body is −ε_i J_r ṅ_i about z_B, beside the drag moment −ε_i c_M n_i².
+
+    Both act about the rotor axis with the same sign per rotor, so the yaw channel leads:
+    the body yaws as the rotors accelerate, before the drag moments change (the yaw rate
+    follows the motor command more than the rotor speed). J_r is rotor and motor bell
+    together; the rotors' gyroscopic moment (ω × ε_i J_r n_i z_B) is left out: its sum over
+    a balanced vehicle's rotors is about zero (Σ ε_i n_i ≈ 0).
+    """
+
+    name = "rotor_inertia"
+    title = "rotor inertia"
+    description = ("each rotor's moment of inertia J_r: accelerating a rotor turns the body "
+                   "the other way, a yaw torque -sum eps_i J_r dn_i/dt")
+    parameters = (EffectParameter("J_r", "kg·m²", "moment of inertia of one rotor and its "
+                                  "motor bell about its axis", 1e-5),)
+    channels = frozenset({"wrench"})
+
+    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
+        force = np.zeros((len(inputs.t), 3))
+        torque = np.zeros_like(force)
+        if inputs.rotor_directions is not None:
+            eps = np.asarray(inputs.rotor_directions, dtype=float)
+            torque[:, 2] = -self.values[0] * (inputs.rotor_accelerations() @ eps)
+        return force, torque
+
+
+class RotorSpeedLag(ModelEffect):
+    """The logged rotor speeds lag the true ones: τ ṅ_logged = n − n_logged.
+
+    A speed sensor that averages (an RPM deck counting commutations, an ESC's telemetry
+    filter) reports a first-order lag of the speed acting on the body; its exact inverse
+    n = n_logged + τ ṅ_logged is what acts. The opposite of `MotorLag`: there the body
+    follows the logged speeds late, here the log follows the body late.
+    """
+
+    name = "rotor_speed_lag"
+    title = "rotor-speed sensing lag"
+    description = ("the measured rotor speeds lag the true ones with a first-order lag of "
+                   "time constant tau: the speeds acting are n_logged + tau dn_logged/dt")
+    parameters = (EffectParameter("tau", "s", "time constant of the speed measurement",
+                                  0.01),)
+    channels = frozenset({"rotor_speeds"})
+
+    def acting_rotor_speeds(self, t: np.ndarray, logged: np.ndarray) -> np.ndarray:
+        tau = self.values[0]
+        if tau == 0.0:
+            return logged
+        return logged + tau * time_derivative(t, logged)
+
+    def logged_step(self, dt: float, logged: np.ndarray, acting: np.ndarray,
+                    acting_next: np.ndarray) -> np.ndarray:
+        """Acting → logged over one step dt, s: the next logged speeds (k,), rad/s."""
+        return lag_step(dt, float(self.values[0]), logged, acting, acting_next)
+
+
 #: The catalogue, by stable name (docs/architecture.md).
 EFFECTS: dict[str, type[ModelEffect]] = {
     cls.name: cls for cls in (BodyDrag, RotorDragLinear, MotorLag, PoseDelay, MarkerOffset,
-                              CogOffset, Wind, ThrustDrift, GroundEffect)
+                              CogOffset, Wind, ThrustDrift, GroundEffect, RotorInertia,
+                              RotorSpeedLag)
 }
 
 

@@ -64,7 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="add a model effect to the truth only, as NAME:KEY=VALUE,... "
                         "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2; names: "
                         "body_drag, rotor_drag_linear, motor_lag, pose_delay, marker_offset, "
-                        "cog_offset, wind, thrust_drift, ground_effect")
+                        "cog_offset, wind, thrust_drift, ground_effect, rotor_inertia, "
+                        "rotor_speed_lag")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default: 0)")
     parser.add_argument("--physics-rate", type=float, default=1000.0, metavar="HZ",
                         help="truth integration rate, >= 500 Hz (default: 1000)")

@@ -8,7 +8,10 @@ from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.model_effects import (
     BodyDrag,
     EffectInputs,
+    MotorLag,
     RotorDragLinear,
+    RotorInertia,
+    RotorSpeedLag,
     Wind,
     total_wrench,
 )
@@ -62,3 +65,46 @@ def test_wind_reaches_every_airspeed_effect(airspeed_effect):
     still = airspeed_effect.wrench(inputs)
     assert not np.allclose(still[0], airspeed_effect.wrench(air)[0])
     np.testing.assert_array_equal(total_wrench([airspeed_effect], inputs)[0], still[0])
+
+
+def test_rotor_inertia_is_the_reaction_of_spinning_the_rotors_up():
+    """Yaw torque −J_r Σ ε_i ṅ_i with ṅ from the speeds' time series; no force, no roll/pitch."""
+    config = load_vehicle("quad_x")
+    t = np.arange(200) * 0.002
+    rng = np.random.default_rng(3)
+    slopes = rng.uniform(-500.0, 500.0, config.rotor_count)  # rad/s², each rotor ramping
+    n = 600.0 + t[:, None] * slopes
+    inputs = EffectInputs(t, np.zeros((200, 3)), np.tile([1.0, 0, 0, 0], (200, 1)),
+                          np.zeros((200, 3)), np.zeros((200, 3)), n, config.theta,
+                          config.rotor_positions, rotor_directions=config.rotor_directions)
+    force, torque = RotorInertia(J_r=3e-5).wrench(inputs)
+    assert np.all(force == 0.0) and np.all(torque[:, :2] == 0.0)
+    expected = -3e-5 * float(np.dot(config.rotor_directions, slopes))
+    assert abs(expected) > 0.0
+    np.testing.assert_allclose(torque[:, 2], expected, rtol=1e-9)
+    # Given rates are used as they are; without spin directions there is no torque.
+    given = EffectInputs(t, inputs.position, inputs.quaternion, inputs.velocity,
+                         inputs.rates, n, config.theta, config.rotor_positions,
+                         rotor_directions=config.rotor_directions,
+                         rotor_speed_rates=np.zeros_like(n))
+    assert np.all(RotorInertia(J_r=3e-5).wrench(given)[1] == 0.0)
+    blind = EffectInputs(t, inputs.position, inputs.quaternion, inputs.velocity,
+                         inputs.rates, n, config.theta, config.rotor_positions)
+    assert np.all(RotorInertia(J_r=3e-5).wrench(blind)[1] == 0.0)
+
+
+@pytest.mark.parametrize("tau", [0.01, 0.03])
+def test_rotor_speed_lag_inverts_the_sensors_lag(tau):
+    """Lagging true speeds by τ (the sensor) and applying the effect gives the true speeds."""
+    t = np.arange(2000) * 0.002
+    true = 700.0 + 80.0 * np.sin(2.0 * np.pi * 1.5 * t)[:, None] * [1.0, -0.5, 0.8, -1.2]
+    logged = MotorLag(tau=tau).acting_rotor_speeds(t, true)  # the same first-order lag
+    assert np.abs(logged - true)[500:].max() > 0.5 * 80.0 * 2.0 * np.pi * 1.5 * tau
+    acting = RotorSpeedLag(tau=tau).acting_rotor_speeds(t, logged)
+    # Central differences of a 1.5 Hz sine at 500 Hz: error ≪ the lag's.
+    np.testing.assert_allclose(acting[1:-1], true[1:-1], atol=0.05)
+    # The step of the simulator's sensor is the same recursion.
+    y = logged[0].copy()
+    for i in range(1, 50):
+        y = RotorSpeedLag(tau=tau).logged_step(t[i] - t[i - 1], y, true[i - 1], true[i])
+    np.testing.assert_allclose(y, logged[49], rtol=1e-12)
