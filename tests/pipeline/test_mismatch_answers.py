@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.pipeline.diagnose import run_diagnose
 from mavsysid.discrepancy.diagnosis import diagnose_flight
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.pipeline.diagnose import run_diagnose
 from mavsysid.vehicle.config import GRAVITY, load_vehicle
 from mavsysid.vehicle.model_effects import RotorDragLinear, effect_from_values
 
