@@ -24,6 +24,7 @@ from mavsysid.discrepancy.candidates import Candidate
 from mavsysid.discrepancy.regression import Regression, lr_p, profile_interval, refine_minimum
 from mavsysid.discrepancy.residuals import ResidualProblem
 from mavsysid.discrepancy.selection_model import SelectionModel
+from mavsysid.vehicle.config_schema import EFFECT_PARAMETER_SIGNS
 from mavsysid.vehicle.model_effects import ModelEffect
 from scipy.stats import chi2
 
@@ -249,7 +250,8 @@ def _score_candidates(
     trial : dict
         ``{name: (ΔBIC, values (P,))}``.
     weak : set of str
-        Linear candidates whose parameters are not jointly distinguishable from zero.
+        Linear candidates whose parameters are not jointly distinguishable from zero, or
+        break a sign their physics has (`EFFECT_PARAMETER_SIGNS`).
     """
     r0, cols, extra = design
     k = model.k()
@@ -264,7 +266,7 @@ def _score_candidates(
             # the effects already named; the Wald test on the block-inflated covariance
             # (the reported CIs) must agree, or the effect is not named.
             wald = float(b @ np.linalg.solve(c, b))
-            if chi2.sf(wald, cand.size) > wald_p:
+            if chi2.sf(wald, cand.size) > wald_p or _wrong_sign(cand, b):
                 weak.add(cand.name)
         else:
             dev = model.profile(reg, cand, cand.grid, cols, model.effects)
@@ -274,6 +276,19 @@ def _score_candidates(
                 v, dev_v = float(cand.grid[int(np.argmin(dev))]), float(dev.min())
             trial[cand.name] = (dev_v + reg.penalty(k + 1) - current, np.array([v]))
     return trial, weak
+
+
+def _wrong_sign(candidate: Candidate, values: np.ndarray) -> bool:
+    """Whether ``values`` break a sign the effect's physics has (a drag or an inertia < 0).
+
+    Such a fit is a shape of the residual, not the effect: a negative rotor inertia is a
+    lag of the yaw response, what a late pose gives.
+    """
+    for p, v in zip(candidate.effect.parameters, values, strict=True):
+        sign = EFFECT_PARAMETER_SIGNS.get((candidate.name, p.name))
+        if sign is not None and v < 0.0:
+            return True
+    return False
 
 
 def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
