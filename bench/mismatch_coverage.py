@@ -110,7 +110,8 @@ def run(truth: str, seed: int, root: str, reestimate: bool = False
     try:
         result = (estimate_with_named_effects(flight, prior)[0] if reestimate
                   else estimate_parameters(flight, prior))
-        check_result(flight.source, result)  # what `mavsysid estimate` refuses
+        # what `mavsysid estimate` refuses
+        check_result(flight.source, result, prior.limits.rotor_speed_max)
     except JobFailedError:  # refused (exit 3): scored as not covering, error NaN
         return config.theta, np.full(6, np.nan), np.full(6, np.nan)
     return (config.theta, *scored(result, prior))

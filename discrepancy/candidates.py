@@ -10,7 +10,8 @@ so that r(0) ≈ A v (the effect explains the residual with v). The same finite
 difference of the model gives the θ columns (relative step) that every regression
 carries, so a candidate is never credited with what a small change of θ explains.
 A *profile* candidate (motor lag, pose delay, ground effect: nonlinear in their one
-parameter) is evaluated on a grid of values, each giving a new residual.
+parameter; rotor-speed lag, whose negative values would pass for a motor lag) is
+evaluated on a grid of values, each giving a new residual.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ PROFILE_GRIDS: dict[str, np.ndarray] = {
     "motor_lag": np.arange(0.0, 0.1201, 0.006),
     "pose_delay": np.arange(0.0, 0.0801, 0.005),
     "ground_effect": np.arange(0.0, 0.2501, 0.0125),
+    # A lead of the logged speeds' own: negative values would be a motor lag.
+    "rotor_speed_lag": np.arange(0.0, 0.0601, 0.004),
 }
 
 @dataclass(frozen=True)
@@ -67,7 +70,7 @@ class Candidate:
 
 
 def candidate_library(names: Sequence[str] | None = None) -> tuple[Candidate, ...]:
-    """The candidates (all nine catalogue effects by default), in catalogue order."""
+    """The candidates (every catalogue effect by default), in catalogue order."""
     chosen = list(EFFECTS) if names is None else list(names)
     return tuple(
         Candidate(EFFECTS[n], "profile", PROFILE_GRIDS[n]) if n in PROFILE_GRIDS

@@ -1,6 +1,7 @@
 """The model-discrepancy workflow behind ``mavsysid diagnose``.
 
 1. *Where they disagree*: the identified model is replayed along the logged rotor speeds
+   (a log faster than `mavsysid.discrepancy.resample.DIAGNOSIS_RATE` averaged down to it)
    and compared with the accelerations of the smoothed pose (`mavsysid.discrepancy.residuals`,
    statistics in `mavsysid.discrepancy.residual_stats`):
    residual per axis, its whiteness (Ljung–Box), the time windows and flight regimes
@@ -20,8 +21,9 @@ from typing import Any
 
 import numpy as np
 from mavsysid.discrepancy.candidates import candidate_library
+from mavsysid.discrepancy.filter_nis import nis_pair
 from mavsysid.discrepancy.regression import fit_theta
-from mavsysid.discrepancy.resample import resample_flight
+from mavsysid.discrepancy.resample import average_blocks, resample_flight
 from mavsysid.discrepancy.residual_stats import (
     AxisStats,
     Where,
@@ -39,6 +41,13 @@ from mavsysid.discrepancy.selection import (
     forward_select,
 )
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.plausibility import (
+    check_plausible,
+    implausibility,
+    vanishing_floor,
+    vanishing_parameters,
+)
+from mavsysid.estimation.progress import report_stage
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
@@ -49,6 +58,7 @@ __all__ = [
     "Diagnosis",
     "DiagnosisSettings",
     "Gap",
+    "check_refits",
     "diagnose_flight",
     "reestimate",
 ]
@@ -73,7 +83,7 @@ class DiagnosisSettings:
     holdout : float
         Fraction of the flight (its end) kept out of all fitting.
     candidates : tuple of str or None
-        Candidate effect names (all nine by default).
+        Candidate effect names (the whole catalogue by default).
     window : float
         Length of the time windows of the "where" report, s.
     """
@@ -139,6 +149,8 @@ class Diagnosis:
     split_time : float
         Start of the held-out part, s.
     notes : tuple of str
+    theta_after_sigma : ndarray, shape (6,) or None
+        Standard error of ``theta_after`` (None when no effect was named), SI.
     """
 
     effects: tuple[FittedEffect, ...]
@@ -157,48 +169,12 @@ class Diagnosis:
     used: np.ndarray
     split_time: float
     notes: tuple[str, ...] = field(default_factory=tuple)
+    theta_after_sigma: np.ndarray | None = None
 
     @property
     def significant(self) -> bool:
         """True when at least one effect was named."""
         return bool(self.effects)
-
-
-def _nis(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
-         grid: np.ndarray) -> np.ndarray:
-    """The parameter EKF's NIS with ``effects`` in the model at their values, on ``grid``.
-
-    The estimator's effect channels (`mavsysid.estimation.estimator.estimate_with_effects`, held
-    values, filter only) carry every catalogue effect, wrenches included. The filter runs
-    on the logged samples (it needs no uniform rate); each grid sample of a resampled
-    flight takes the NIS of the logged sample nearest to it.
-    """
-    from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
-
-    result = estimate_with_effects(flight, config, tuple(effects),
-                                   EstimatorSettings(refine=False), fit_effects=False)
-    nis = np.asarray(result.history.nis, float)
-    if grid is flight.t:
-        return nis
-    t = flight.t
-    i = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
-    nearest = np.where(grid - t[i - 1] <= t[i] - grid, i - 1, i)
-    return nis[nearest]
-
-
-def _nis_pair(flight: FlightData, config: VehicleConfig, known: tuple[ModelEffect, ...],
-              fitted: tuple[ModelEffect, ...], grid: np.ndarray
-              ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
-    """NIS without and with the named effects on ``grid`` (`_nis`), and notes.
-
-    An EKF that cannot follow the log (`JobFailedError`, a diverged filter) is not caught:
-    such a log contradicts the model so grossly (a wrong vehicle, rotor order, or time on
-    the ground) that "no significant discrepancy" from the residual regression would be
-    a confident wrong answer, so the diagnosis is refused (exit 3) with the filter's reason.
-    """
-    before = _nis(flight, config, known, grid)
-    after = _nis(flight, config, (*known, *fitted), grid) if fitted else before
-    return before, after, []
 
 
 def _split(problem: ResidualProblem, used: np.ndarray, settings: DiagnosisSettings
@@ -264,7 +240,8 @@ def diagnose_flight(
     known_effects : sequence of ModelEffect
         Effects already in the model (not candidates).
     progress : callable, optional
-        Receives one-line progress messages.
+        Receives one-line progress messages (default: the estimator's stage listener,
+        `mavsysid.estimation.progress.report_stage`).
     with_nis : bool
         Run the parameter EKF for the NIS (needs its compiled kernels).
 
@@ -288,20 +265,21 @@ def diagnose_flight(
     names = settings.candidates
     known_names = {e.name for e in known}
     library = tuple(c for c in candidate_library(names) if c.name not in known_names)
-    uniform, resampling = resample_flight(flight)
+    say = progress or report_stage
+    uniform, resampling = average_blocks(*resample_flight(flight))
     problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling)
     used = problem.keep()
     t = uniform.t
     split, train, test = _split(problem, used, settings)
-    if progress:
-        progress("fitting θ to the flight's accelerations")
+    say(f"fitting θ to the flight's accelerations ({len(t)} samples at "
+        f"{1.0 / problem.dt:.4g} Hz)")
     base, weights = fit_theta(problem, train)
-    selection = forward_select(base, library, train, weights, settings.selection, progress)
+    selection = forward_select(base, library, train, weights, settings.selection, say)
     fitted = tuple(f.effect for f in selection.effects)
     measured, model, pose = base.evaluate()
     r_before = measured - model
     r_after = base.residual(fitted, selection.theta_after)
-    nis_before, nis_after, nis_notes = (_nis_pair(flight, config, known, fitted, t)
+    nis_before, nis_after, nis_notes = (nis_pair(flight, config, known, fitted, t)
                                         if with_nis else (None, None, []))
     before = AxisStats(axis_rms(r_before[test]), ljung_box(r_before[test], base.block),
                        *nis_stats(nis_before, test))
@@ -311,15 +289,59 @@ def diagnose_flight(
     flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
     gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
     where = where_large(base, pose, r_before, used, noise, train, settings.window)
-    notes = [MASS_NOTE, *([resampling.describe()] if resampling.resampled else []),
+    changed = resampling.resampled or resampling.averaged > 1
+    notes = [MASS_NOTE, *([resampling.describe()] if changed else []),
              *nis_notes]
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
         where=where, theta_identified=theta0, theta_before=selection.theta_before,
         theta_after=selection.theta_after, augmented_effects=(*known, *fitted), t=t,
         residual_before=r_before, residual_after=r_after, pose=pose, used=used,
-        split_time=split, notes=tuple(notes),
+        split_time=split, notes=tuple(notes), theta_after_sigma=selection.theta_after_sigma,
     )
+
+
+def check_refits(source: str, diagnosis: Diagnosis, config: VehicleConfig) -> tuple[str, ...]:
+    """Refuse (`JobFailedError`, one line) an answer that is physically impossible.
+
+    The answer is θ refitted with the named effects, judged under all of the model's
+    effects: an entry the named effects take over (c_D when ``rotor_drag_linear`` carries
+    the rotor drag) may then be ≈ 0, within its σ (`mavsysid.estimation.plausibility`).
+    θ refitted *without* them is what the mismatch does to the paper's model: with effects
+    named, an impossible one is a note (the named effects explain it), not a refusal;
+    with none named it is the answer itself.
+
+    Parameters
+    ----------
+    source : str
+        The log, named first in a refusal.
+    diagnosis : Diagnosis
+    config : VehicleConfig
+        The vehicle: its θ is the prior, its top rotor speed bounds a vanishing c_D.
+
+    Returns
+    -------
+    tuple of str
+        Notes for the diagnosis (θ refitted without the named effects impossible).
+    """
+    prior, n_max = config.theta, config.limits.rotor_speed_max
+    after = diagnosis.augmented_effects
+    check_plausible(source, diagnosis.theta_after, diagnosis.theta_after_sigma, prior,
+                    what="θ refitted with the named effects" if diagnosis.effects
+                    else "θ refitted without effects",
+                    may_vanish=vanishing_parameters(e.name for e in after),
+                    floor=vanishing_floor(after, float(diagnosis.theta_after[0]), n_max))
+    if not diagnosis.effects:
+        return ()
+    known = after[:len(after) - len(diagnosis.effects)]
+    reason = implausibility(diagnosis.theta_before, None, prior,
+                            may_vanish=vanishing_parameters(e.name for e in known),
+                            floor=vanishing_floor(known, float(diagnosis.theta_before[0]),
+                                                  n_max))
+    if reason is None:
+        return ()
+    return (f"θ refitted without the named effects is not physically possible ({reason}): "
+            "the mismatch they explain",)
 
 
 def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],

@@ -42,6 +42,9 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
+#: Smoothed poses kept (each a few MB at most): the pose effects of one selection step.
+_SMOOTHED_CACHE = 32
+
 __all__ = [
     "AXIS_NAMES",
     "AXIS_UNITS",
@@ -71,6 +74,11 @@ class ResidualProblem:
     resampling : Resampling, optional
         How ``flight`` was put on its uniform grid (`mavsysid.discrepancy.resample`);
         None: ``flight`` must be uniformly sampled.
+    smoothed : dict
+        The pose smoothed per set of pose-channel effects (their names and values), shared
+        by the copies `dataclasses.replace` makes for other θ: the selection re-evaluates
+        the residual hundreds of times with the same pose effects, and smoothing is most
+        of an evaluation's cost.
     """
 
     flight: FlightData
@@ -79,6 +87,7 @@ class ResidualProblem:
     settings: SmootherSettings = field(default_factory=SmootherSettings)
     known_effects: tuple[ModelEffect, ...] = ()
     resampling: Resampling | None = None
+    smoothed: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         _ = self.dt  # refuses a log sampled at a non-uniform rate
@@ -91,6 +100,11 @@ class ResidualProblem:
         if self.resampling is not None:
             return self.resampling.dt
         return uniform_step(self.flight.t, self.flight.source)
+
+    @property
+    def stamp_dt(self) -> float:
+        """The log's own sample interval, s (before any averaging of `resampling`)."""
+        return self.resampling.log_dt if self.resampling is not None else self.dt
 
     @property
     def window_samples(self) -> int:
@@ -131,16 +145,19 @@ class ResidualProblem:
         for effect in all_effects:
             if "rotor_speeds" in effect.channels:
                 n = effect.acting_rotor_speeds(fl.t, n)
-        for effect in all_effects:
-            if "pose" in effect.channels:
-                t, p, q = effect.corrected_pose(t, p, q)
+        pose_effects = [e for e in all_effects if "pose" in e.channels]
+        for effect in pose_effects:
+            t, p, q = effect.corrected_pose(t, p, q)
         if t is not fl.t:
             # A delayed pose belongs to earlier times: the rotor speeds are read there.
             n = np.column_stack([np.interp(t, fl.t, n[:, i]) for i in range(n.shape[1])])
-        if p is fl.position and q is fl.quaternion and t is fl.t:
-            pose, inputs = self._smoothed_log
-        else:
-            pose, inputs = self._smooth(t, p, q)
+        key = tuple((e.name, e.values.tobytes()) for e in pose_effects)
+        if key not in self.smoothed:
+            if len(self.smoothed) >= _SMOOTHED_CACHE:
+                # The oldest entry that is not the log itself (key ()) goes.
+                self.smoothed.pop(next(k for k in self.smoothed if k))
+            self.smoothed[key] = self._smooth(t, p, q)
+        pose, inputs = self.smoothed[key]
         model = model_accelerations(inputs, n, theta, self.config, all_effects)
         measured, model = consistent_accelerations(pose, inputs, model, self.settings,
                                                   self.dt)
@@ -152,12 +169,6 @@ class ResidualProblem:
         source = self.flight.source
         return (smooth_pose(t, p, q, self.settings, source),
                 smooth_pose(t, p, q, light, source))
-
-    @cached_property
-    def _smoothed_log(self) -> tuple[SmoothedPose, SmoothedPose]:
-        """The logged pose smoothed (long and light windows), computed once per problem."""
-        fl = self.flight
-        return self._smooth(fl.t, fl.position, fl.quaternion)
 
     def residual(self, effects: Sequence[ModelEffect] = (), theta: np.ndarray | None = None
                  ) -> np.ndarray:

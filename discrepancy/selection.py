@@ -25,6 +25,7 @@ from mavsysid.discrepancy.candidates import Candidate
 from mavsysid.discrepancy.regression import Regression, lr_p, profile_interval, refine_minimum
 from mavsysid.discrepancy.residuals import ResidualProblem
 from mavsysid.discrepancy.selection_model import SelectionModel
+from mavsysid.vehicle.config_schema import EFFECT_PARAMETER_SIGNS
 from mavsysid.vehicle.model_effects import ModelEffect
 from scipy.stats import chi2
 
@@ -138,8 +139,10 @@ class SelectionResult:
         1/σ of each axis used in the regression.
     block : int
         Effective-sample block D (smoother window, samples).
-    coefficients : ndarray
-        Final regression coefficients [Δθ (6), linear effect parameters …].
+    theta_after_sigma : ndarray, shape (6,) or None
+        Standard error of ``theta_after`` from the final regression (block-inflated, so
+        it includes the collinearity of θ with the named effects), SI; None when no
+        effect was named.
     """
 
     effects: tuple[FittedEffect, ...]
@@ -151,6 +154,7 @@ class SelectionResult:
     bic_after: float
     weights: np.ndarray
     block: int
+    theta_after_sigma: np.ndarray | None = None
 
 
 def forward_select(
@@ -188,6 +192,8 @@ def forward_select(
     bic_before = current = reg.bic(reg.fit(*reg.stack(r0, cols))[0], 6)
     for step in range(settings.max_effects):
         remaining = [c for c in candidates if c.name not in {e.name for e in model.effects}]
+        if progress is not None:
+            progress(f"step {step + 1}: scoring {len(remaining)} candidate effects")
         if step > 0:
             r0, cols, extra = model.design(remaining)
         trial, weak = _score_candidates(model, reg, remaining, (r0, cols, extra), current,
@@ -245,7 +251,8 @@ def _score_candidates(
     trial : dict
         ``{name: (ΔBIC, values (P,))}``.
     weak : set of str
-        Linear candidates whose parameters are not jointly distinguishable from zero.
+        Linear candidates whose parameters are not jointly distinguishable from zero, or
+        break a sign their physics has (`EFFECT_PARAMETER_SIGNS`).
     """
     r0, cols, extra = design
     k = model.k()
@@ -260,7 +267,7 @@ def _score_candidates(
             # the effects already named; the Wald test on the block-inflated covariance
             # (the reported CIs) must agree, or the effect is not named.
             wald = float(b @ np.linalg.solve(c, b))
-            if chi2.sf(wald, cand.size) > wald_p:
+            if chi2.sf(wald, cand.size) > wald_p or _wrong_sign(cand, b):
                 weak.add(cand.name)
         else:
             dev = model.profile(reg, cand, cand.grid, cols, model.effects)
@@ -270,6 +277,19 @@ def _score_candidates(
                 v, dev_v = float(cand.grid[int(np.argmin(dev))]), float(dev.min())
             trial[cand.name] = (dev_v + reg.penalty(k + 1) - current, np.array([v]))
     return trial, weak
+
+
+def _wrong_sign(candidate: Candidate, values: np.ndarray) -> bool:
+    """Whether ``values`` break a sign the effect's physics has (a drag or an inertia < 0).
+
+    Such a fit is a shape of the residual, not the effect: a negative rotor inertia is a
+    lag of the yaw response, what a late pose gives.
+    """
+    for p, v in zip(candidate.effect.parameters, values, strict=True):
+        sign = EFFECT_PARAMETER_SIGNS.get((candidate.name, p.name))
+        if sign is not None and v < 0.0:
+            return True
+    return False
 
 
 def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
@@ -327,7 +347,7 @@ def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
             # (MAVLink's ESC_TELEMETRY_* messages carry no time stamp and are stamped on
             # receipt); a time-like parameter cannot be resolved better: uniform ±dt/2,
             # σ = dt/√12, in quadrature.
-            extra = 1.96 * model.problem.dt / np.sqrt(12.0)
+            extra = 1.96 * model.problem.stamp_dt / np.sqrt(12.0)
             lo = v - float(np.hypot(v - lo, extra))
             hi = v + float(np.hypot(hi - v, extra))
         fitted[e.name] = FittedEffect(
@@ -339,4 +359,5 @@ def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
         theta_before=theta_base, theta_after=model.problem.theta + beta[:6],
         bic_before=float(bic_before), bic_after=float(reg.bic(rss, model.k())),
         weights=reg.weights, block=reg.block,
+        theta_after_sigma=np.sqrt(np.diag(np.asarray(cov))[:6]),
     )

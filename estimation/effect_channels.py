@@ -105,7 +105,8 @@ def _wrench(model_flight: FlightData, log_start: float, effects: Sequence[ModelE
         t=model_flight.t - log_start, position=x[:, 0:3], quaternion=x[:, 6:10],
         velocity=x[:, 3:6], rates=x[:, 10:13], rotor_speeds=model_flight.rotor_speeds,
         theta=np.asarray(reference.theta, float),
-        rotor_positions=np.asarray(config.rotor_positions, float))
+        rotor_positions=np.asarray(config.rotor_positions, float),
+        rotor_directions=np.asarray(config.rotor_directions, float))
     force, torque = total_wrench(list(effects), inputs)
     return np.ascontiguousarray(np.hstack([force, torque]))
 

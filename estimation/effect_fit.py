@@ -22,10 +22,11 @@ defined once, in numpy, for truth and model (`mavsysid.vehicle.model_effects`). 
 needs only to *evaluate* an effect at given values, so every catalogue effect (and any
 added later) is fitted the same way, and the filter kernel stays the paper's.
 
-The optimiser is a damped Newton method in scaled units (ψ / the parameter's ``scale``,
-log10 s) with a finite-difference Hessian. The ψ–s cross terms are taken as zero: in a
-Gaussian likelihood, parameters of the mean and of the covariance are (asymptotically)
-orthogonal, and this halves the evaluations. s starts at the config's densities (1).
+The optimiser is a damped Newton method in scaled units (ψ / the size of the effect's
+starting values, `fit_scales`; log10 s) with a finite-difference Hessian. The ψ–s cross
+terms are taken as zero: in a Gaussian likelihood, parameters of the mean and of the
+covariance are (asymptotically) orthogonal, and this halves the evaluations. s starts at
+the config's densities (1).
 
 Cost: one filter pass per evaluation (≈ 0.1 s for 30 s at 100 Hz); a Newton iteration
 takes 2(P + 1) + 2P(P − 1) passes for P effect parameters, 2–4 iterations usually. Wrench
@@ -55,7 +56,7 @@ from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.config_schema import EFFECT_PARAMETER_SIGNS
 from mavsysid.vehicle.model_effects import ModelEffect
 
-__all__ = ["EffectFit", "EffectFitSettings", "fit_effects", "reference_terms"]
+__all__ = ["EffectFit", "EffectFitSettings", "fit_effects", "fit_scales", "reference_terms"]
 
 _StateSigma = tuple[float, float, float, float]
 
@@ -129,6 +130,22 @@ def _lower_bounds(effect: ModelEffect) -> np.ndarray:
     signs = [EFFECT_PARAMETER_SIGNS.get((effect.name, p.name)) for p in effect.parameters]
     return np.array([-np.inf if s is None else 0.0 if s == "nonnegative" else 1e-6 * p.scale
                      for s, p in zip(signs, effect.parameters, strict=True)])
+
+
+def fit_scales(effect: ModelEffect) -> np.ndarray:
+    """The unit each parameter is fitted in (SI, shape (P,)): the size of its effect's start.
+
+    The search steps by a tenth of a unit at first, at most `EffectFitSettings.max_step`
+    units per iteration. The catalogue's scales are those of a 1–2 kg vehicle; a
+    Crazyflie's linear rotor drag is 100× smaller, and a first step of the catalogue's
+    size makes its drag ten times the truth and the filter overflow. The largest starting
+    value of the effect's parameters (they share a unit: offsets, wind, drag terms) is the
+    vehicle's own size; a start at zero, or below 10⁻³ of the catalogue scale, keeps the
+    catalogue's.
+    """
+    catalogue = effect.parameter_scales()
+    size = float(np.max(np.abs(effect.values))) if effect.values.size else 0.0
+    return np.where(size > 1e-3 * catalogue, size, catalogue)
 
 
 def _filter(config: VehicleConfig, prior: ParameterEstimate, sigma: tuple[float, float],
@@ -287,7 +304,7 @@ def fit_effects(
     """
     settings = settings or EffectFitSettings()
     effects = tuple(effects)
-    scales = np.concatenate([e.parameter_scales() for e in effects])
+    scales = np.concatenate([fit_scales(e) for e in effects])
     sizes = [len(e.parameters) for e in effects]
     starts = np.cumsum([0, *sizes])
 

@@ -241,7 +241,7 @@ def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.
     force, torque = rotor_wrench(rotor_speeds, theta, r, config.rotor_directions, v_b, w)
     if effects:
         inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, rotor_speeds,
-                              theta, r)
+                              theta, r, rotor_directions=config.rotor_directions)
         f_e, m_e = total_wrench(list(effects), inputs)
         force = force + f_e
         torque = torque + m_e

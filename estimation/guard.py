@@ -14,11 +14,16 @@ measure the pose noise the filter met, which a smoothed on-board pose hides from
 log's white residual (`mavsysid.estimation.pose_noise`).
 
 Contradiction. The final θ and the equation-error θ (`mavsysid.estimation.equation_error_fit`)
-are two estimates from one log. A parameter contradicts the force balance when they
-differ by more than `AGREEMENT_SIGMAS` × √(σ² + σ_EE²) *and* by more than the relative
-tolerance `AGREEMENT_TOLERANCE` (5 %, c_D 15 %: the accuracy asked of the estimator,
-below which model mismatch biases both fits by different amounts without either being
-wrong).
+are two estimates from one log, both consistent when the model fits it. They disagree
+when they differ by more than `AGREEMENT_SIGMAS` × √(σ² + σ_EE²) *and* by more than the
+relative tolerance `AGREEMENT_TOLERANCE` (5 %, c_D 15 %: the accuracy asked of the
+estimator, below which model mismatch biases both fits by different amounts without
+either being wrong). A disagreement is what a model mismatch looks like (a motor lag, a
+body drag, a drag law linear in rotor speed): the estimator has widened that parameter's
+σ to hold it (`mavsysid.estimation.robust_covariance.disagreement_widening`) and says
+so, and `mavsysid diagnose` takes it from there. Only a disagreement as large as
+`UNDETERMINED_RELATIVE` of the value (σ widened to half the value: the log determines
+nothing about the parameter) is refused.
 """
 
 from __future__ import annotations
@@ -33,7 +38,8 @@ from scipy.stats import chi2
 from mavsysid.errors import JobFailedError
 
 __all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "CORRELATED_RHO", "NIS_FACTOR",
-           "NIS_WINDOW", "check_agreement", "correlated_noise_sigma", "divergence", "nis_level"]
+           "NIS_WINDOW", "UNDETERMINED_RELATIVE", "check_agreement", "correlated_noise_sigma",
+           "disagreements", "divergence", "nis_level"]
 
 #: Window of the NIS mean, s.
 NIS_WINDOW = 1.0
@@ -50,6 +56,11 @@ _RHO_MAX = 0.999
 #: Agreement rule of the cross-check: sigmas and relative tolerance per parameter.
 AGREEMENT_SIGMAS = 3.0
 AGREEMENT_TOLERANCE = np.array([0.05, 0.15, 0.05, 0.05, 0.05, 0.05])
+
+#: A disagreement of this fraction of the value leaves the parameter undetermined (the
+#: σ that holds it is half the value: `mavsysid.estimation.plausibility`'s "the log does
+#: not determine it"), and the estimate is refused.
+UNDETERMINED_RELATIVE = 0.5
 
 
 def nis_level(t: np.ndarray, nis: np.ndarray) -> tuple[float, float]:
@@ -119,7 +130,8 @@ def correlated_noise_sigma(innovation: np.ndarray) -> tuple[float, float]:
 
 
 def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
-               prior: ParameterEstimate, may_vanish: np.ndarray | None = None) -> str | None:
+               prior: ParameterEstimate, may_vanish: np.ndarray | None = None,
+               floor: np.ndarray | None = None) -> str | None:
     """Why a filter run counts as diverged, as one phrase; None when it did not.
 
     Parameters
@@ -134,8 +146,11 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
         The prior (the vehicle file's θ and σ).
     may_vanish : ndarray of bool, shape (6,), optional
         θ entries the model lets be ≈ 0 (`mavsysid.estimation.plausibility.vanishing_parameters`).
+    floor : ndarray, shape (6,), optional
+        Their least possible values (`mavsysid.estimation.plausibility.vanishing_floor`).
     """
-    reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish)
+    reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish,
+                            floor)
     if reason is not None:
         return reason
     level, bound = nis_level(t, nis)
@@ -145,24 +160,42 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
     return None
 
 
+def disagreements(final: ParameterEstimate, ee: ParameterEstimate) -> np.ndarray:
+    """Which parameters the two estimates disagree on (the rule above), bool (6,).
+
+    Parameters
+    ----------
+    final, ee : ParameterEstimate
+        The estimator's θ (σ before any widening) and the equation-error θ, SI.
+    """
+    delta = np.abs(final.value - ee.value)
+    spread = np.sqrt(final.sigma**2 + ee.sigma**2)
+    return (delta > AGREEMENT_SIGMAS * spread) & (delta > AGREEMENT_TOLERANCE * np.abs(ee.value))
+
+
 def check_agreement(source: str, final: ParameterEstimate, ee: ParameterEstimate) -> None:
-    """Refuse (`JobFailedError`, one line) a final θ the equation-error fit contradicts.
+    """Refuse (`JobFailedError`, one line) a final θ the equation-error fit leaves undetermined.
+
+    A parameter on which the two disagree (`disagreements`) by at least
+    `UNDETERMINED_RELATIVE` of the final value is refused; a smaller disagreement is a
+    model mismatch the estimator reports with a widened σ.
 
     Parameters
     ----------
     source : str
         The log, named first.
     final, ee : ParameterEstimate
-        The estimator's θ and the equation-error θ, SI.
+        The estimator's θ (σ before any widening) and the equation-error θ, SI.
     """
     delta = final.value - ee.value
     spread = np.sqrt(final.sigma**2 + ee.sigma**2)
-    bad = (np.abs(delta) > AGREEMENT_SIGMAS * spread) & (
-        np.abs(delta) > AGREEMENT_TOLERANCE * np.abs(ee.value))
+    bad = disagreements(final, ee) & (np.abs(delta) >= UNDETERMINED_RELATIVE
+                                      * np.abs(final.value))
     for i in np.flatnonzero(bad):
         name, unit = PARAMETER_NAMES[i], PARAMETER_UNITS[PARAMETER_NAMES[i]]
         raise JobFailedError(
             f"{source}: the estimate {name} = {final.value[i]:.4g} ± {final.sigma[i]:.2g} "
             f"{unit} contradicts the log's force and torque balance ({name} = "
             f"{ee.value[i]:.4g} ± {ee.sigma[i]:.2g} {unit}, {abs(delta[i]) / spread[i]:.1f} σ "
-            "apart); the model does not fit this log as the filter assumed")
+            "apart), so far that the log does not determine it; the model does not fit this "
+            "log as the filter assumed (mavsysid diagnose names what it misses)")

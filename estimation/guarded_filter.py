@@ -19,7 +19,7 @@ from mavsysid.estimation.ekf import FilterOverflow, FilterRun
 from mavsysid.estimation.equation_error_fit import EquationErrorFit
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.guard import correlated_noise_sigma, divergence, nis_level
-from mavsysid.estimation.plausibility import vanishing_parameters
+from mavsysid.estimation.plausibility import vanishing_floor, vanishing_parameters
 from mavsysid.estimation.pose_noise import NOISE_TOLERANCE
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.vehicle.config import VehicleConfig
@@ -47,7 +47,8 @@ def filter_attempt(
 ) -> tuple[ModelTerms | None, FilterRun | None, str | None]:
     """One filter run: terms, run and why it diverged (None: it did not).
 
-    An entry of θ that ``effects`` let vanish (c_D with ``rotor_drag_linear``) may be ≈ 0.
+    An entry of θ that ``effects`` let vanish (c_D with ``rotor_drag_linear``) may be ≈ 0,
+    or as low as physics allows beside them (`mavsysid.estimation.plausibility`).
     """
     terms, run, reason, _ = _attempt(flight, effects, config, start, prior, sigma)
     return terms, run, reason
@@ -68,8 +69,10 @@ def _attempt(
     except JobFailedError:
         return None, None, "the state overflowed", np.empty((0, MEAS_DIM))
     may_vanish = vanishing_parameters(e.name for e in effects)
+    floor = vanishing_floor(effects, float(run.estimate.value[0]),
+                            config.limits.rotor_speed_max)
     return terms, run, divergence(run.history.t, run.history.nis, run.estimate, prior,
-                                  may_vanish), run.history.innovation
+                                  may_vanish, floor), run.history.innovation
 
 
 def decorrelated_attempt(

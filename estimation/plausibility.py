@@ -14,7 +14,11 @@ An estimate is refused (`JobFailedError`, exit 3) when
 An entry the model lets vanish (``may_vanish``; `vanishing_parameters` of the model's
 effects: c_D when ``rotor_drag_linear`` carries the rotor drag) may be ≈ 0: a value
 within `VANISH_SIGMAS` σ of 0, or any positive value below the prior, is then the right
-answer and not refused.
+answer and not refused. Beside a linear rotor drag c_D is the quadratic correction to it
+and may be negative as far as physics allows (``floor``, `vanishing_floor`): the rotor
+drag k n + c_T c_D n² must stay a drag up to the top rotor speed. (Its σ alone is no
+guide there: a filter with k held finds c_D's σ without k's, and the two are nearly
+collinear.)
 
 A parameter the prior holds fixed (prior σ = 0, value 0) is the user's choice, not an
 estimate, and is not checked. The first problem found is reported, in θ order.
@@ -28,11 +32,12 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
 from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK, triangle_violation
+from mavsysid.vehicle.model_effects import ModelEffect
 
 from mavsysid.errors import JobFailedError
 
 __all__ = ["PRIOR_FACTOR_MAX", "VANISHES_WITH", "VANISH_SIGMAS", "check_plausible",
-           "implausibility", "vanishing_parameters"]
+           "implausibility", "vanishing_floor", "vanishing_parameters"]
 
 #: An estimate more than this factor above or below its prior is "far outside the prior".
 #: Why 10: with the default prior σ of 50 %, a factor 10 above is 18 σ away and a factor 10
@@ -73,9 +78,35 @@ def vanishing_parameters(effect_names: Iterable[str]) -> np.ndarray:
     return mask
 
 
-def _vanishes(v: float, s: float | None) -> bool:
-    """Whether ``v`` ± ``s`` is ≈ 0: positive, or within `VANISH_SIGMAS` σ below 0."""
-    return v > 0.0 or (s is not None and v >= -VANISH_SIGMAS * s)
+def vanishing_floor(effects: Iterable[ModelEffect], c_T: float, rotor_speed_max: float
+                    ) -> np.ndarray:
+    """The least physically possible value of each θ entry beside ``effects``, SI (6,).
+
+    0 for every entry, except c_D beside ``rotor_drag_linear`` (in-plane k): the rotor
+    drag per rotor and unit hub speed, k n + c_T c_D n², stays ≥ 0 for every n up to the
+    top rotor speed n_max when c_D ≥ −k / (c_T n_max).
+
+    Parameters
+    ----------
+    effects : iterable of ModelEffect
+        The model's effects at their values.
+    c_T : float
+        Thrust coefficient, N/(rad/s)².
+    rotor_speed_max : float
+        Top rotor speed n_max, rad/s.
+    """
+    floor = np.zeros(len(PARAMETER_NAMES))
+    for effect in effects:
+        if effect.name == "rotor_drag_linear" and c_T > 0.0 and rotor_speed_max > 0.0:
+            floor[PARAMETER_NAMES.index("c_D")] = min(
+                0.0, -max(float(effect.values[0]), 0.0) / (c_T * rotor_speed_max))
+    return floor
+
+
+def _vanishes(v: float, s: float | None, floor: float) -> bool:
+    """Whether ``v`` ± ``s`` is ≈ 0: positive, within `VANISH_SIGMAS` σ below 0, or not
+    below ``floor``."""
+    return v > 0.0 or v >= floor or (s is not None and v >= -VANISH_SIGMAS * s)
 
 
 def _quantity(name: str, value: float, sigma: float | None) -> str:
@@ -113,6 +144,7 @@ def implausibility(
     value: Sequence[float] | np.ndarray, sigma: Sequence[float] | np.ndarray | None,
     prior: Sequence[float] | np.ndarray, prior_sigma: Sequence[float] | np.ndarray | None = None,
     may_vanish: Sequence[bool] | np.ndarray | None = None,
+    floor: Sequence[float] | np.ndarray | None = None,
 ) -> str | None:
     """What makes θ physically impossible or implausible, as one phrase; None if nothing.
 
@@ -128,7 +160,11 @@ def implausibility(
         The prior's σ, SI; a parameter with prior σ 0 and value 0 is held, not checked.
     may_vanish : array_like of bool, shape (6,), optional
         Entries the model lets vanish (`vanishing_parameters`): ≤ 0 within `VANISH_SIGMAS`
-        σ of 0 is accepted, and so is any value below the prior; default none.
+        σ of 0 or not below ``floor`` is accepted, and so is any value below the prior;
+        default none.
+    floor : array_like, shape (6,), optional
+        Least physically possible value of a vanishing entry (`vanishing_floor`), SI;
+        default 0.
 
     Returns
     -------
@@ -142,6 +178,7 @@ def implausibility(
     held = np.zeros(6, bool) if prior_sigma is None else (
         (np.asarray(prior_sigma, dtype=float).reshape(6) == 0.0) & (nominal == 0.0))
     vanish = np.zeros(6, bool) if may_vanish is None else np.asarray(may_vanish, bool).reshape(6)
+    least = np.zeros(6) if floor is None else np.asarray(floor, float).reshape(6)
     for i, name in enumerate(PARAMETER_NAMES):
         if held[i]:
             continue
@@ -149,7 +186,7 @@ def implausibility(
         v = float(theta[i])
         if not math.isfinite(v) or (s is not None and not math.isfinite(s)):
             return f"{_quantity(name, v, s)} is not a finite estimate; the filter failed"
-        if v <= 0.0 and not (vanish[i] and _vanishes(v, s)):
+        if v <= 0.0 and not (vanish[i] and _vanishes(v, s, float(least[i]))):
             return (f"{_quantity(name, v, s)} is not positive, which is physically "
                     f"impossible; {_why(s, v)}")
     violation = triangle_violation(theta[_J_FIRST:])
@@ -175,6 +212,7 @@ def check_plausible(
     source: str, value: Sequence[float] | np.ndarray, sigma: Sequence[float] | np.ndarray | None,
     prior: Sequence[float] | np.ndarray, prior_sigma: Sequence[float] | np.ndarray | None = None,
     what: str = "", may_vanish: Sequence[bool] | np.ndarray | None = None,
+    floor: Sequence[float] | np.ndarray | None = None,
 ) -> None:
     """Raise `JobFailedError` in one line naming ``source`` if θ is implausible.
 
@@ -182,7 +220,7 @@ def check_plausible(
     ----------
     source : str
         The log (or estimate file) the θ comes from, named first in the message.
-    value, sigma, prior, prior_sigma, may_vanish
+    value, sigma, prior, prior_sigma, may_vanish, floor
         As for `implausibility`.
     what : str
         Optional qualifier after the file name (e.g. ``"θ refitted without effects"``).
@@ -192,7 +230,7 @@ def check_plausible(
     JobFailedError
         ``"<source>: [<what>: ]<reason>"``, exit code 3.
     """
-    reason = implausibility(value, sigma, prior, prior_sigma, may_vanish)
+    reason = implausibility(value, sigma, prior, prior_sigma, may_vanish, floor)
     if reason is not None:
         head = f"{source}: {what}: " if what else f"{source}: "
         raise JobFailedError(" ".join((head + reason).split()))

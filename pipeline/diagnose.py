@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +18,16 @@ import numpy as np
 from mavsysid.discrepancy.diagnosis import (
     Diagnosis,
     DiagnosisSettings,
+    check_refits,
     diagnose_flight,
     reestimate,
 )
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.plausibility import check_plausible
+from mavsysid.estimation.plausibility import (
+    check_plausible,
+    vanishing_floor,
+    vanishing_parameters,
+)
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.tilt_consistency import check_kinematics
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
@@ -106,13 +111,15 @@ def run_diagnose(
         theta, estimated = read_estimate(estimate)
         known = estimated or known
         # The config's own θ is the prior, checked (and warned about) when loaded.
-        check_plausible(str(estimate), theta, None, config.theta, what="identified θ")
+        check_plausible(str(estimate), theta, None, config.theta, what="identified θ",
+                        may_vanish=vanishing_parameters(e.name for e in known),
+                        floor=vanishing_floor(known, float(theta[0]),
+                                              config.limits.rotor_speed_max))
     flight = load_flight(log, config, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
     diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
-    for what, refit in (("θ refitted without effects", diagnosis.theta_before),
-                        ("θ refitted with the named effects", diagnosis.theta_after)):
-        check_plausible(flight.source, refit, None, config.theta, what=what)
+    notes = check_refits(flight.source, diagnosis, config)
+    diagnosis = replace(diagnosis, notes=(*diagnosis.notes, *notes))
     return DiagnoseRun(config, flight, diagnosis)
 
 

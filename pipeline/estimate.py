@@ -17,7 +17,11 @@ from pathlib import Path
 from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.guard import check_agreement
-from mavsysid.estimation.plausibility import check_plausible, vanishing_parameters
+from mavsysid.estimation.plausibility import (
+    check_plausible,
+    vanishing_floor,
+    vanishing_parameters,
+)
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import EstimationResult, ParameterEstimate
 from mavsysid.estimation.robust_covariance import widened
@@ -84,11 +88,12 @@ def run_estimate(
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
     result = (estimate or estimate_parameters)(flight, config, settings)
-    check_result(flight.source, result)
+    check_result(flight.source, result, config.limits.rotor_speed_max)
     return EstimateRun(config, flight, result)
 
 
-def check_result(source: str, result: EstimationResult) -> None:
+def check_result(source: str, result: EstimationResult,
+                 rotor_speed_max: float | None = None) -> None:
     """Refuse, in one line naming ``source``, a result `run_estimate` would not print.
 
     The final θ must be physically possible and near the prior
@@ -108,8 +113,11 @@ def check_result(source: str, result: EstimationResult) -> None:
     JobFailedError
     """
     final = result.final
+    effects = [e.effect for e in result.effects]
+    floor = (None if rotor_speed_max is None else
+             vanishing_floor(effects, float(final.value[0]), rotor_speed_max))
     check_plausible(source, final.value, final.sigma, result.prior.value, result.prior.sigma,
-                    may_vanish=vanishing_parameters(e.name for e in result.effects))
+                    may_vanish=vanishing_parameters(e.name for e in effects), floor=floor)
     if result.equation_error is not None:
         unwidened = final if result.mismatch_widening is None else ParameterEstimate(
             final.value, widened(final.covariance, 1.0 / result.mismatch_widening))

@@ -158,6 +158,9 @@ EFFECT_PARAMETER_SIGNS: dict[tuple[str, str], str] = {
     ("ground_effect", "rotor_radius"): "positive",
     ("body_drag", "k"): "nonnegative",
     ("rotor_drag_linear", "k"): "nonnegative",
+    ("rotor_drag_linear", "k_z"): "nonnegative",
+    ("rotor_inertia", "J_r"): "nonnegative",
+    ("rotor_speed_lag", "tau"): "nonnegative",
 }
 
 

@@ -9,7 +9,7 @@ acting on the body).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -25,6 +25,7 @@ __all__ = [
     "cross3",
     "hub_forces_wrench",
     "rotor_force_wrench",
+    "time_derivative",
     "total_wrench",
     "zero_wrench",
 ]
@@ -72,6 +73,11 @@ class EffectInputs:
         θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI.
     rotor_positions : ndarray, shape (k, 3)
         Rotor hubs in the body frame, m.
+    rotor_directions : ndarray, shape (k,), optional
+        Spin directions ε_i (+1 counter-clockwise seen from above); an effect that needs
+        them (rotor inertia) adds nothing without them.
+    rotor_speed_rates : ndarray, shape (N, k), optional
+        ṅ, rad/s²; without it `rotor_accelerations` differentiates ``rotor_speeds``.
     """
 
     t: np.ndarray
@@ -82,6 +88,8 @@ class EffectInputs:
     rotor_speeds: np.ndarray
     theta: np.ndarray
     rotor_positions: np.ndarray
+    rotor_directions: np.ndarray | None = None
+    rotor_speed_rates: np.ndarray | None = None
 
     def rotation(self) -> np.ndarray:
         """R(q) body → world, shape (N, 3, 3)."""
@@ -91,6 +99,12 @@ class EffectInputs:
         """v_B + ω × r_i of every rotor hub, shape (N, k, 3), m/s."""
         return self.velocity[:, None, :] + cross3(self.rates[:, None, :],
                                                     self.rotor_positions[None, :, :])
+
+    def rotor_accelerations(self) -> np.ndarray:
+        """ṅ of every rotor, shape (N, k), rad/s²: given, or `time_derivative` of the speeds."""
+        if self.rotor_speed_rates is not None:
+            return self.rotor_speed_rates
+        return time_derivative(self.t, self.rotor_speeds)
 
     def rotor_thrusts(self) -> np.ndarray:
         """c_T n_i², shape (N, k), N."""
@@ -115,6 +129,22 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1] = a2 * b0 - a0 * b2
     out[..., 2] = a0 * b1 - a1 * b0
     return out
+
+
+def time_derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """dx/dt along axis 0 by central differences (one-sided at the ends), shape of x.
+
+    Times that do not increase (a repeated row) would divide by zero: the samples are then
+    taken as evenly spaced at the median step. Fewer than two samples give zeros.
+    """
+    x = np.asarray(x, dtype=float)
+    if len(t) < 2:
+        return np.zeros_like(x)
+    dt = np.diff(t)
+    if np.all(dt > 0.0):
+        return np.gradient(x, t, axis=0)
+    step = float(np.median(dt))
+    return np.gradient(x, step if step > 0.0 else 1.0, axis=0)
 
 
 def zero_wrench(inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
@@ -188,6 +218,9 @@ class ModelEffect:
     #: Channels through which the effect enters: a subset of {"wrench", "pose",
     #: "rotor_speeds"}.
     channels: ClassVar[frozenset[str]] = frozenset()
+    #: Whether the wrench acts on the velocity through the air: with a wind in the model
+    #: (`air_velocity`), `total_wrench` evaluates it at the airspeed.
+    airspeed: ClassVar[bool] = False
 
     def __init__(self, **values: float) -> None:
         known = {p.name for p in self.parameters}
@@ -243,6 +276,10 @@ class ModelEffect:
         """
         return zero_wrench(inputs)
 
+    def air_velocity(self, inputs: EffectInputs) -> np.ndarray | None:
+        """The body's velocity through the air v_B − Rᵀ w (N, 3), m/s; None: still air."""
+        return None
+
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
         """Truth → measurement: the pose reported at times t given the true pose at t.
@@ -293,6 +330,10 @@ def total_wrench(effects: tuple[ModelEffect, ...] | list[ModelEffect], inputs: E
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Sum of the wrenches of ``effects`` at ``inputs``: force and torque (N, 3) each.
 
+    An effect that moves the air (a wind: `ModelEffect.air_velocity`) changes what every
+    airspeed effect (`ModelEffect.airspeed`: body drag, linear rotor drag) sees: those are
+    evaluated at the airspeed, so each is written once for still air.
+
     Parameters
     ----------
     effects : sequence of ModelEffect
@@ -301,9 +342,14 @@ def total_wrench(effects: tuple[ModelEffect, ...] | list[ModelEffect], inputs: E
         State, rotor speeds and vehicle at N samples.
     """
     force, torque = zero_wrench(inputs)
+    air = inputs
+    for effect in effects:
+        velocity = effect.air_velocity(inputs)
+        if velocity is not None:
+            air = replace(inputs, velocity=velocity)
     for effect in effects:
         if "wrench" in effect.channels:
-            f, m = effect.wrench(inputs)
+            f, m = effect.wrench(air if effect.airspeed else inputs)
             force += f
             torque += m
     return force, torque

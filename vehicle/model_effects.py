@@ -2,8 +2,9 @@
 
 Each effect of docs/architecture.md's stable list (``body_drag``, ``rotor_drag_linear``,
 ``motor_lag``, ``pose_delay``, ``marker_offset``, ``cog_offset``, ``wind``,
-``thrust_drift``, ``ground_effect``) is a `ModelEffect` subclass carrying its parameter
-values. An effect enters the model through up to three channels:
+``thrust_drift``, ``ground_effect``, ``rotor_inertia``, ``rotor_speed_lag``) is a
+`ModelEffect` subclass carrying its parameter values. An effect enters the model through
+up to three channels:
 
 * ``wrench`` — an extra body-frame force and torque added to the paper's F_B and M_B,
   evaluated on arrays of N samples (`EffectInputs`);
@@ -29,6 +30,7 @@ from mavsysid.vehicle.effect_base import (
     ModelEffect,
     hub_forces_wrench,
     rotor_force_wrench,
+    time_derivative,
     total_wrench,
 )
 from mavsysid.vehicle.rotation import quat_normalize, quat_to_matrix
@@ -47,9 +49,12 @@ __all__ = [
     "MotorLag",
     "PoseDelay",
     "RotorDragLinear",
+    "RotorInertia",
+    "RotorSpeedLag",
     "ThrustDrift",
     "Wind",
     "effect_from_values",
+    "lag_step",
     "parse_effect",
     "total_wrench",
 ]
@@ -64,6 +69,7 @@ class BodyDrag(ModelEffect):
                    "(F = -k |v| v at the centre of gravity)")
     parameters = (EffectParameter("k", "kg/m", "drag force per squared airspeed", 0.02),)
     channels = frozenset({"wrench"})
+    airspeed = True
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         v = inputs.velocity
@@ -72,21 +78,56 @@ class BodyDrag(ModelEffect):
 
 
 class RotorDragLinear(ModelEffect):
-    """Rotor drag linear in rotor speed (RotorS/RotorPy form): F_i = −k n_i P(v_B + ω × r_i)."""
+    """Rotor drag linear in rotor speed (RotorS/RotorPy form): F_i = −n_i K (v_B + ω × r_i).
+
+    K = diag(k, k, k_z): k is the in-plane drag of blade flapping and induced drag (the
+    H-force), k_z the loss of thrust with the axial inflow through the rotor (induced
+    inflow), which also damps roll and pitch through the arms. RotorPy's rotor drag matrix
+    (its ``k_d``, ``k_z``) exactly.
+    """
 
     name = "rotor_drag_linear"
     title = "rotor drag linear in rotor speed"
     description = ("blade flapping and induced drag of each rotor, proportional to its speed "
-                   "and to the in-plane hub velocity (F_i = -k n_i (v + w x r_i)_xy)")
-    parameters = (EffectParameter("k", "N·s/(m·rad)", "drag force per rotor speed and speed",
-                                  1e-4),)
+                   "and to the hub velocity: in plane (k) and along the rotor axis (k_z, "
+                   "the induced inflow), F_i = -n_i diag(k, k, k_z) (v + w x r_i)")
+    parameters = (EffectParameter("k", "N·s/(m·rad)", "in-plane drag force per rotor speed "
+                                  "and speed", 1e-4),
+                  EffectParameter("k_z", "N·s/(m·rad)", "axial (inflow) force per rotor speed "
+                                  "and speed", 1e-4))
     channels = frozenset({"wrench"})
+    airspeed = True
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         hub = inputs.hub_velocities()
-        forces = -self.values[0] * inputs.rotor_speeds[..., None] * hub
-        forces[..., 2] = 0.0
+        forces = -inputs.rotor_speeds[..., None] * hub * np.array(
+            [self.values[0], self.values[0], self.values[1]])
         return hub_forces_wrench(inputs, forces)
+
+
+def lag_step(dt: float | np.ndarray, tau: float, y: np.ndarray, x: np.ndarray,
+             x_next: np.ndarray) -> np.ndarray:
+    """One step of τ ẏ = x − y with x linear over the step (first-order hold), exact.
+
+    Parameters
+    ----------
+    dt : float or ndarray
+        Step, s (> 0).
+    tau : float
+        Time constant, s; ≤ 0 follows x at once.
+    y, x, x_next : ndarray
+        Output now, input now and input at the step's end (same shapes).
+
+    Returns
+    -------
+    ndarray
+        The output at the step's end.
+    """
+    if tau <= 0.0:
+        return np.asarray(x_next, dtype=float)
+    a = np.exp(-dt / tau)
+    b = 1.0 - tau / dt * (1.0 - a)
+    return a * y + (1.0 - a) * x + b * (x_next - x)
 
 
 class MotorLag(ModelEffect):
@@ -122,8 +163,7 @@ class MotorLag(ModelEffect):
             out[1:] = lfilter([b0, 1.0 - a0 - b0], [1.0, -a0], x[1:], axis=0, zi=zi)[0]
             return out
         for i in range(1, len(t)):
-            out[i] = (a[i - 1] * out[i - 1] + (1.0 - a[i - 1]) * logged[i - 1]
-                      + b[i - 1] * (logged[i] - logged[i - 1]))
+            out[i] = lag_step(dt[i - 1], tau, out[i - 1], logged[i - 1], logged[i])
         return out
 
 
@@ -205,10 +245,12 @@ class CogOffset(ModelEffect):
 
 
 class Wind(ModelEffect):
-    """Constant horizontal wind w (world ENU): the rotor drag sees airspeed v_B − Rᵀ w.
+    """Constant horizontal wind w (world ENU): the drags see the airspeed v_B − Rᵀ w.
 
-    The paper's rotor drag has no component along z_B, so a vertical wind is not
-    observable through it and is not a parameter.
+    Its wrench is the change of the paper's rotor drag; the airspeed effects in the same
+    model (body drag, linear rotor drag) see the wind too (`total_wrench`). The paper's
+    rotor drag has no component along z_B, so a vertical wind is not observable through it
+    and is not a parameter.
     """
 
     name = "wind"
@@ -219,10 +261,14 @@ class Wind(ModelEffect):
                   EffectParameter("y", "m/s", "wind towards +y (north)", 0.5))
     channels = frozenset({"wrench"})
 
-    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
+    def air_velocity(self, inputs: EffectInputs) -> np.ndarray:
         w_body = np.einsum("nji,j->ni", inputs.rotation(), np.append(self.values, 0.0))
-        # The paper's rotor drag at the airspeed v_B − Rᵀ w, less the model's at v_B.
-        air_force, air_torque = rotor_force_wrench(inputs, velocity=inputs.velocity - w_body)
+        return inputs.velocity - w_body
+
+    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
+        # The paper's rotor drag at the airspeed v_B − Rᵀ w, less the model's at v_B (the
+        # airspeed effects see the wind through `total_wrench`).
+        air_force, air_torque = rotor_force_wrench(inputs, velocity=self.air_velocity(inputs))
         force, torque = rotor_force_wrench(inputs)
         return air_force - force, air_torque - torque
 
@@ -271,10 +317,68 @@ class GroundEffect(ModelEffect):
         return hub_forces_wrench(inputs, forces)
 
 
+class RotorInertia(ModelEffect):
+    """The rotors' own inertia J_r: spinning rotor i up takes a torque whose reaction on the
+    body is −ε_i J_r ṅ_i about z_B, beside the drag moment −ε_i c_M n_i².
+
+    Both act about the rotor axis with the same sign per rotor, so the yaw channel leads:
+    the body yaws as the rotors accelerate, before the drag moments change (the yaw rate
+    follows the motor command more than the rotor speed). J_r is rotor and motor bell
+    together; the rotors' gyroscopic moment (ω × ε_i J_r n_i z_B) is left out: its sum over
+    a balanced vehicle's rotors is about zero (Σ ε_i n_i ≈ 0).
+    """
+
+    name = "rotor_inertia"
+    title = "rotor inertia"
+    description = ("each rotor's moment of inertia J_r: accelerating a rotor turns the body "
+                   "the other way, a yaw torque -sum eps_i J_r dn_i/dt")
+    parameters = (EffectParameter("J_r", "kg·m²", "moment of inertia of one rotor and its "
+                                  "motor bell about its axis", 1e-5),)
+    channels = frozenset({"wrench"})
+
+    def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
+        force = np.zeros((len(inputs.t), 3))
+        torque = np.zeros_like(force)
+        if inputs.rotor_directions is not None:
+            eps = np.asarray(inputs.rotor_directions, dtype=float)
+            torque[:, 2] = -self.values[0] * (inputs.rotor_accelerations() @ eps)
+        return force, torque
+
+
+class RotorSpeedLag(ModelEffect):
+    """The logged rotor speeds lag the true ones: τ ṅ_logged = n − n_logged.
+
+    A speed sensor that averages (an RPM deck counting commutations, an ESC's telemetry
+    filter) reports a first-order lag of the speed acting on the body; its exact inverse
+    n = n_logged + τ ṅ_logged is what acts. The opposite of `MotorLag`: there the body
+    follows the logged speeds late, here the log follows the body late.
+    """
+
+    name = "rotor_speed_lag"
+    title = "rotor-speed sensing lag"
+    description = ("the measured rotor speeds lag the true ones with a first-order lag of "
+                   "time constant tau: the speeds acting are n_logged + tau dn_logged/dt")
+    parameters = (EffectParameter("tau", "s", "time constant of the speed measurement",
+                                  0.01),)
+    channels = frozenset({"rotor_speeds"})
+
+    def acting_rotor_speeds(self, t: np.ndarray, logged: np.ndarray) -> np.ndarray:
+        tau = self.values[0]
+        if tau == 0.0:
+            return logged
+        return logged + tau * time_derivative(t, logged)
+
+    def logged_step(self, dt: float, logged: np.ndarray, acting: np.ndarray,
+                    acting_next: np.ndarray) -> np.ndarray:
+        """Acting → logged over one step dt, s: the next logged speeds (k,), rad/s."""
+        return lag_step(dt, float(self.values[0]), logged, acting, acting_next)
+
+
 #: The catalogue, by stable name (docs/architecture.md).
 EFFECTS: dict[str, type[ModelEffect]] = {
     cls.name: cls for cls in (BodyDrag, RotorDragLinear, MotorLag, PoseDelay, MarkerOffset,
-                              CogOffset, Wind, ThrustDrift, GroundEffect)
+                              CogOffset, Wind, ThrustDrift, GroundEffect, RotorInertia,
+                              RotorSpeedLag)
 }
 
 

@@ -37,7 +37,14 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
-from mavsysid.vehicle.model_effects import EffectInputs, ModelEffect, MotorLag, PoseDelay
+from mavsysid.vehicle.model_effects import (
+    EffectInputs,
+    ModelEffect,
+    MotorLag,
+    PoseDelay,
+    RotorInertia,
+    RotorSpeedLag,
+)
 
 if TYPE_CHECKING:
     from mavsysid.vehicle.config import VehicleConfig
@@ -80,8 +87,9 @@ class TruthEffect:
             Physics step, s.
         """
 
-    def bind(self, true_theta: np.ndarray, rotor_positions: np.ndarray) -> None:
-        """Learn the truth's θ (6,) and rotor hubs (k, 3), m, before a flight.
+    def bind(self, true_theta: np.ndarray, rotor_positions: np.ndarray,
+             rotor_directions: np.ndarray | None = None) -> None:
+        """Learn the truth's θ (6,), rotor hubs (k, 3), m, and spin directions (k,).
 
         Parameters
         ----------
@@ -89,6 +97,8 @@ class TruthEffect:
             The truth's θ, SI.
         rotor_positions : ndarray, shape (k, 3)
             Rotor hubs, m, body FLU.
+        rotor_directions : ndarray, shape (k,), optional
+            Spin directions, +1 counter-clockwise seen from above, −1 clockwise.
         """
 
     def motor_time_constant(self) -> float | None:
@@ -213,7 +223,9 @@ class CatalogEffect(TruthEffect):
     control tick on the true state, actual rotor speeds, true θ and the time since the
     flight started), its ``measured_pose`` (a delay interpolates a history of the true
     poses passed to `measure_pose`), and its rotor-speed channel (a `MotorLag` makes the
-    truth's motors lag with its tau and the log report the commanded speeds).
+    truth's motors lag with its tau and the log report the commanded speeds; a
+    `RotorSpeedLag` makes the log report a first-order lag of the actual speeds). A
+    `RotorInertia` sees ṅ as the change of the actual speeds since the previous tick.
 
     Parameters
     ----------
@@ -232,7 +244,10 @@ class CatalogEffect(TruthEffect):
         self.hidden = hidden
         self._theta = np.full(6, np.nan)
         self._rotors = np.zeros((0, 3))
+        self._directions: np.ndarray | None = None
         self._history: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+        self._last_speeds: tuple[float, np.ndarray] | None = None
+        self._lagged: tuple[float, np.ndarray, np.ndarray] | None = None
 
     def __repr__(self) -> str:
         return f"CatalogEffect({self.effect!r}, hidden={self.hidden})"
@@ -240,12 +255,17 @@ class CatalogEffect(TruthEffect):
     def parameters(self) -> dict[str, float | list[float]]:
         return dict(self.effect.as_dict())
 
-    def bind(self, true_theta: np.ndarray, rotor_positions: np.ndarray) -> None:
+    def bind(self, true_theta: np.ndarray, rotor_positions: np.ndarray,
+             rotor_directions: np.ndarray | None = None) -> None:
         self._theta = np.asarray(true_theta, dtype=float).reshape(6).copy()
         self._rotors = np.ascontiguousarray(rotor_positions, dtype=float)
+        self._directions = (None if rotor_directions is None
+                            else np.asarray(rotor_directions, dtype=float).copy())
 
     def reset(self, physics_dt: float) -> None:
         self._history.clear()
+        self._last_speeds = None
+        self._lagged = None
 
     def motor_time_constant(self) -> float | None:
         if isinstance(self.effect, MotorLag):
@@ -264,9 +284,17 @@ class CatalogEffect(TruthEffect):
         n : ndarray, shape (k,)
             Actual rotor speeds, rad/s.
         """
+        rates = None
+        if isinstance(self.effect, RotorInertia):
+            # ṅ over the last tick: the wrench is held over the tick's physics steps.
+            last, self._last_speeds = self._last_speeds, (t, np.array(n, dtype=float))
+            rates = np.zeros((1, len(n)))
+            if last is not None and t > last[0]:
+                rates[0] = (n - last[1]) / (t - last[0])
         return _OneSample(np.array([t]), x[None, 0:3], x[None, 6:10], x[None, 3:6],
                           x[None, 10:13], n[None, :], self._theta, self._rotors,
-                          _rotation_1x3x3(x[6:10].tolist()))
+                          rotor_directions=self._directions, rotor_speed_rates=rates,
+                          matrix=_rotation_1x3x3(x[6:10].tolist()))
 
     def wrench(
         self, t: float, x: np.ndarray, n: np.ndarray
@@ -299,9 +327,22 @@ class CatalogEffect(TruthEffect):
     def logged_rotor_speeds(
         self, t: float, actual: np.ndarray, commanded: np.ndarray
     ) -> np.ndarray:
+        if isinstance(self.effect, RotorSpeedLag):
+            return self._lag(t, np.array(actual, dtype=float))
         if "rotor_speeds" in self.effect.channels:
             return np.array(commanded, dtype=float)
         return actual
+
+    def _lag(self, t: float, actual: np.ndarray) -> np.ndarray:
+        """One step of the sensor's first-order lag (the catalogue's recursion, input
+        linear between log samples)."""
+        if self._lagged is None or t <= self._lagged[0]:
+            self._lagged = (t, actual, actual)
+            return actual
+        t0, x0, y0 = self._lagged
+        y = self.effect.logged_step(t - t0, y0, x0, actual)  # type: ignore[attr-defined]
+        self._lagged = (t, actual, y)
+        return y
 
 
 def hidden_effect(effect: ModelEffect) -> CatalogEffect:

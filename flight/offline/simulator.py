@@ -293,7 +293,7 @@ class Simulator:
             step_effects=[e for e in effects if applies_wrench(e) and not e.wrench_per_tick],
         )
         for effect in effects:
-            effect.bind(self.true_theta, cfg.rotor_positions)
+            effect.bind(self.true_theta, cfg.rotor_positions, cfg.rotor_directions)
             effect.reset(dt)
         return truth
 

@@ -9,6 +9,7 @@ augmented vehicle config and the Rerun recording on request.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
@@ -19,6 +20,7 @@ from mavsysid.discrepancy.report import (
     format_reestimate,
     write_diagnosis_json,
 )
+from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
 from mavsysid.pipeline.diagnose import reestimate_comparison, run_diagnose
 from mavsysid.vehicle.config import save_vehicle
 
@@ -55,8 +57,12 @@ def main(args: argparse.Namespace) -> int:
     if args.mass_check:
         print(f"mass check: {MASS_NOTE}.")
         return 0
-    run = run_diagnose(args.log, args.vehicle, args.estimate,
-                       DiagnosisSettings(holdout=args.holdout), start=args.start, end=args.end)
+    show = progress_wanted(args.verbosity, sys.stderr)
+    with stage_listener(StageLog("mavsysid diagnose", sys.stderr) if show else None):
+        report_stage(f"reading {args.log}")
+        run = run_diagnose(args.log, args.vehicle, args.estimate,
+                           DiagnosisSettings(holdout=args.holdout), start=args.start,
+                           end=args.end)
     if args.output is not None:
         write_diagnosis_json(args.output, run.diagnosis, run.config, str(args.log))
     if args.write_config is not None:

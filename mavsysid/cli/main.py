@@ -70,7 +70,7 @@ _COMMANDS = (
      "Replay the identified model along the logged rotor speeds, compare it with the "
      "accelerations of the smoothed pose, and report where they disagree; name the "
      "physical effect(s) that explain the difference (forward selection on BIC over a "
-     "catalogue of nine), fit them with confidence intervals, and show how much the gap "
+     "catalogue of eleven), fit them with confidence intervals, and show how much the gap "
      "shrinks on held-out data (the last 30 % of the flight)."),
     ("plan", "mavsysid.cli.plan", "plan a maximally informative calibration flight",
      "Plan a calibration flight that minimises the predicted parameter uncertainty "

@@ -79,9 +79,13 @@ def test_estimate_json_gives_the_theta(lag_log, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_reestimate_moves_theta_towards_the_truth(lag_log, capsys):
-    """--reestimate: the EKF on the augmented model; θ closer to the simulated truth."""
-    assert main(["diagnose", str(lag_log), "--reestimate"]) == 0
-    text = capsys.readouterr().out
+    """--reestimate: the EKF on the augmented model; θ closer to the simulated truth; -v
+    shows the stages on stderr."""
+    assert main(["diagnose", str(lag_log), "--reestimate", "-v"]) == 0
+    captured = capsys.readouterr()
+    text = captured.out
+    assert "mavsysid diagnose: [" in captured.err
+    assert "scoring" in captured.err
     assert "Re-estimated by the EKF without → with the named effects" in text
     line = next(x for x in text.splitlines() if "mean |θ error|" in x)
     before, after = (float(v) for v in re.findall(r"(\d+\.\d+) %", line))

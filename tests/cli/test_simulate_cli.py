@@ -15,7 +15,7 @@ from tests.support.trajectories import ground_descent, write_trajectory_json
 @pytest.mark.parametrize(("spec", "detail"), [
     ("foo:x=1", "unknown effect 'foo'; expected one of body_drag, rotor_drag_linear, "
                 "motor_lag, pose_delay, marker_offset, cog_offset, wind, thrust_drift, "
-                "ground_effect"),
+                "ground_effect, rotor_inertia, rotor_speed_lag"),
     ("motor_lag:tua=0.04", "unknown parameter 'tua'; expected one of tau"),
     ("wind:x=two", "'x=two' is not KEY=NUMBER"),
     ("wind:x", "'x' is not KEY=NUMBER"),

@@ -39,6 +39,8 @@ CASES = {
     "wind": {"x": 1.6, "y": 1.2},  # 2 m/s
     "thrust_drift": {"rate": -0.08 / 30.0},  # −8 % over the 30 s flight
     "ground_effect": {"rotor_radius": 0.1},
+    "rotor_inertia": {"J_r": 1.7e-5},  # RotorS's Firefly rotor: 5 g at 0.1 m radius
+    "rotor_speed_lag": {"tau": 0.02},  # a speed sensor that averages over ~20 ms
 }
 PAIRS = (("motor_lag", "body_drag"), ("marker_offset", "wind"), ("thrust_drift", "cog_offset"))
 

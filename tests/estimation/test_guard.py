@@ -14,12 +14,14 @@ from mavsysid.estimation.guard import (
     AGREEMENT_TOLERANCE,
     NIS_FACTOR,
     check_agreement,
+    disagreements,
     divergence,
     nis_level,
 )
 from mavsysid.estimation.noise_fit import fit_noise_scale
 from mavsysid.estimation.plausibility import vanishing_parameters
 from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation.robust_covariance import disagreement_widening
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.linearization import MEAS_DIM
@@ -80,6 +82,21 @@ def test_agreement_within_the_rule_passes(seed):
     check_agreement("f", _estimate(near, 1e-4), ee)
     wide = THETA * (1.0 + 0.9 * AGREEMENT_SIGMAS * 0.02 * np.sqrt(2) * rng.choice([-1, 1], 6))
     check_agreement("f", _estimate(wide, 0.02), ee)
+
+
+@pytest.mark.parametrize(("index", "relative"), [(0, 0.2), (2, -0.25), (1, 0.3)])
+def test_mismatch_sized_disagreement_is_an_answer_not_a_refusal(index, relative):
+    """A disagreement far beyond 3σ but short of leaving the parameter undetermined (a
+    model mismatch: the estimator widens σ to hold it) is flagged, not refused."""
+    ee = _estimate(THETA, 0.01)
+    final_value = THETA.copy()
+    final_value[index] *= 1.0 - relative
+    final = _estimate(final_value, 0.01)
+    flagged = disagreements(final, ee)
+    assert flagged[index] and flagged.sum() == 1
+    check_agreement("flight.ulg", final, ee)
+    widened = disagreement_widening(final.value, final.sigma, ee.value, ee.sigma)
+    assert widened[index] * final.sigma[index] >= abs(final_value[index] - THETA[index])
 
 
 @pytest.mark.slow

@@ -8,6 +8,7 @@ from mavsysid.estimation.plausibility import (
     PRIOR_FACTOR_MAX,
     check_plausible,
     implausibility,
+    vanishing_floor,
     vanishing_parameters,
 )
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
@@ -148,3 +149,25 @@ def test_vanishing_c_d_may_be_far_below_its_prior_but_not_above() -> None:
     large = _theta(c_D=PRIOR[i] * 10 * PRIOR_FACTOR_MAX)
     assert "above the prior" in implausibility(large, PRIOR_SIGMA, PRIOR, PRIOR_SIGMA,
                                                may_vanish)
+
+
+@pytest.mark.parametrize(("fraction", "accepted"), [(0.5, True), (0.99, True), (1.5, False)])
+def test_c_d_below_zero_is_bounded_by_the_linear_drag_it_corrects(fraction, accepted):
+    """Beside rotor_drag_linear (k), c_D ≥ −k/(c_T n_max) keeps k n + c_T c_D n² a drag up
+    to the top rotor speed: accepted however small its σ; below that, refused."""
+    from mavsysid.vehicle.model_effects import RotorDragLinear
+
+    config = load_vehicle("quad_x")
+    k = 2e-4
+    floor = vanishing_floor([RotorDragLinear(k=k, k_z=1e-4)], PRIOR[0],
+                            config.limits.rotor_speed_max)
+    bound = -k / (PRIOR[0] * config.limits.rotor_speed_max)
+    assert floor[PARAMETER_NAMES.index("c_D")] == pytest.approx(bound)
+    assert np.count_nonzero(floor) == 1
+    theta = _theta(c_D=fraction * bound)
+    sigma = PRIOR_SIGMA.copy()
+    sigma[PARAMETER_NAMES.index("c_D")] = 1e-6
+    may_vanish = vanishing_parameters(["rotor_drag_linear"])
+    reason = implausibility(theta, sigma, PRIOR, PRIOR_SIGMA, may_vanish, floor)
+    assert (reason is None) is accepted
+    assert "is not positive" in implausibility(theta, sigma, PRIOR, PRIOR_SIGMA, may_vanish)

@@ -45,8 +45,33 @@ def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.setattr(diagnose_job, "load_flight",
                         lambda log, config, **kw: SimpleNamespace(source=str(log)))
     monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
+    named = SimpleNamespace(name="body_drag")
     monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
-        theta_before=PRIOR.copy(), theta_after=refit))
+        theta_before=PRIOR.copy(), theta_after=refit, theta_after_sigma=None,
+        effects=(named,), augmented_effects=(named,)))
     with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted with the named "
                        r"effects: c_T = .* is 500× below the prior"):
+        diagnose_job.run_diagnose("flight.ulg", "quad_x")
+
+
+def test_diagnose_notes_an_impossible_refit_the_named_effects_explain(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """θ refitted *without* the named effects breaking the triangle inequality is the
+    mismatch they explain: a note, and the diagnosis stands; with none named, a refusal."""
+    before = _theta(j_z=1.5 * (PRIOR[3] + PRIOR[4]))
+    monkeypatch.setattr(diagnose_job, "load_flight",
+                        lambda log, config, **kw: SimpleNamespace(source=str(log)))
+    monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
+    named = SimpleNamespace(name="body_drag")
+    diagnosis = SimpleNamespace(theta_before=before, theta_after=_theta(),
+                                theta_after_sigma=None, effects=(named,),
+                                augmented_effects=(named,), notes=())
+    monkeypatch.setattr(diagnose_job, "replace",
+                        lambda d, **kw: SimpleNamespace(**{**vars(d), **kw}))
+    monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: diagnosis)
+    notes = diagnose_job.run_diagnose("flight.ulg", "quad_x").diagnosis.notes
+    assert len(notes) == 1 and "triangle inequality" in notes[0]
+    monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
+        **{**vars(diagnosis), "theta_after": before, "effects": (), "augmented_effects": ()}))
+    with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted without effects: J"):
         diagnose_job.run_diagnose("flight.ulg", "quad_x")

@@ -28,7 +28,8 @@ __all__ = ["HIDDEN_MAGNITUDES", "ground_trajectory", "hidden_flight"]
 #: Every catalogue effect at the magnitude the tests and benches hide for the Firefly:
 #: motor τ 40 ms, pose delay 20 ms, body drag 5 % of the weight at 3 m/s, rotor drag
 #: linear in n, wind 2 m/s, marker offset 3 cm, CoG offset 1 cm, thrust −8 % over 30 s,
-#: ground effect (ρ = 0.1 m) near the ground.
+#: ground effect (ρ = 0.1 m) near the ground, rotor inertia of RotorS's Firefly rotor
+#: (5 g at 0.1 m: 1.7·10⁻⁵ kg·m²), rotor speeds sensed through a 20 ms lag.
 HIDDEN_MAGNITUDES: dict[str, dict[str, float]] = {
     "motor_lag": {"tau": 0.04},
     "pose_delay": {"delay": 0.02},
@@ -39,6 +40,8 @@ HIDDEN_MAGNITUDES: dict[str, dict[str, float]] = {
     "wind": {"x": 1.6, "y": 1.2},
     "thrust_drift": {"rate": -0.08 / 30.0},
     "ground_effect": {"rotor_radius": 0.1},
+    "rotor_inertia": {"J_r": 1.7e-5},
+    "rotor_speed_lag": {"tau": 0.02},
 }
 
 

@@ -106,6 +106,36 @@ def test_hidden_motor_lag_logs_commands_and_truth_follows_with_tau(firefly, tmp_
     assert read_meta(tmp_path / "f" / "meta.json")["truth"]["motor_time_constant_s"] == tau
 
 
+def test_hidden_rotor_speed_lag_logs_the_true_speeds_late(firefly, tmp_path):
+    """With rotor_speed_lag τ: pose.csv holds a first-order lag of the true speeds."""
+    tau = 0.02
+    settings = SimulationSettings(sensor_noise=False, log_rate=500.0)
+    result = Simulator(firefly, settings=settings,
+                       effects=[_effect(f"rotor_speed_lag:tau={tau}")]).run(
+        excitation_trajectory(), tmp_path / "f")
+    pose = read_pose_log(tmp_path / "f" / "pose.csv", firefly.rotor_count)
+    lagged = parse_effect("motor_lag:tau=0.02").acting_rotor_speeds(result.times,
+                                                                   result.rotor_speeds)
+    np.testing.assert_allclose(pose.rotor_speeds, lagged, atol=1e-3)
+    assert np.abs(pose.rotor_speeds - result.rotor_speeds).max() > 1.0
+
+
+def test_hidden_rotor_inertia_yaws_the_body_as_the_rotors_spin_up(firefly):
+    """A hidden J_r: the truth's yaw torque is −J_r Σ ε_i ṅ_i over the last tick."""
+    adapter = _effect("rotor_inertia:J_r=2e-5")
+    adapter.bind(firefly.theta, firefly.rotor_positions, firefly.rotor_directions)
+    adapter.reset(0.001)
+    x = np.zeros(13)
+    x[6] = 1.0
+    n0 = np.full(firefly.rotor_count, 500.0)
+    n1 = n0 + 0.5 * np.asarray(firefly.rotor_directions)  # a yaw command over 2 ms
+    assert np.all(adapter.wrench(0.0, x, n0)[1] == 0.0)  # no history yet
+    force, torque = adapter.wrench(0.002, x, n1)
+    assert np.all(force == 0.0)
+    rate = 0.5 / 0.002
+    np.testing.assert_allclose(torque, [0.0, 0.0, -2e-5 * rate * firefly.rotor_count])
+
+
 def test_thrust_drift_makes_the_controller_spin_up(firefly):
     """c_T falling 8 % over 30 s: hover needs n² higher by 1 / 0.92 at the end."""
     rate = -0.08 / 30.0
