@@ -16,7 +16,7 @@ def planned(monkeypatch: pytest.MonkeyPatch) -> list:
     """`run_plan` replaced by a fake that records the settings it gets."""
     calls: list = []
 
-    def run_plan(vehicle, settings, random=False, progress=True):
+    def run_plan(vehicle, settings, random=False, progress=True, say=None):
         calls.append(settings)
         from mavsysid.vehicle.config import load_vehicle
 

@@ -26,7 +26,7 @@ def planned(monkeypatch: pytest.MonkeyPatch) -> list:
 
     calls: list = []
 
-    def run_plan(vehicle, settings, random=False, progress=True):
+    def run_plan(vehicle, settings, random=False, progress=True, say=None):
         calls.append(settings)
         return fake_result(load_vehicle(vehicle), settings, "dopt")
 
