@@ -257,7 +257,17 @@ class PlanPreview:
 
 def preview_plan(trajectory: Trajectory, config: VehicleConfig) -> PlanPreview:
     """Peaks of ``trajectory`` (sampled at 100 Hz through the flatness map) and its
-    rotor saturation on the offline simulator with ``config`` (`PlanPreview`)."""
+    rotor saturation on the offline simulator with ``config`` (`PlanPreview`).
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The planned reference (flat outputs: position in m, world ENU, and yaw in rad,
+        over ``trajectory.duration`` s).
+    config : VehicleConfig
+        The vehicle the plan is for: its nominal θ, mass, rotors and motor lag drive both
+        the flatness map and the offline simulator.
+    """
     from mavsysid.flight.offline.simulator import Simulator
     from mavsysid.vehicle.flatness import flat_to_state
 

@@ -134,7 +134,16 @@ class GraphSearch:
         return np.array([*self.rng.uniform(lo, hi), self.rng.uniform(-np.pi, np.pi)])
 
     def longest_segment(self, a: VertexState, b: VertexState) -> float:
-        """The longest duration a segment a → b may have, s (`move_time.longest_segment`)."""
+        """The longest duration a segment a → b may have, s (`move_time.longest_segment`).
+
+        Parameters
+        ----------
+        a : VertexState
+            Start of the segment: flat state (position and derivatives, m, m/s, …; yaw
+            and derivatives, rad, rad/s, …).
+        b : VertexState
+            End of the segment; only its position (m) and yaw (rad) count.
+        """
         return longest_segment(a, b.position[0], float(b.yaw[0]), self.config.limits,
                                self.settings.autopilot_limits)
 
@@ -173,7 +182,15 @@ class GraphSearch:
 
     def refusal(self, segment: Segment) -> str:
         """Why ``segment`` is infeasible ("" when it is feasible): a constraint of
-        `check_segment`, or "autopilot QUANTITY" for an autopilot limit."""
+        `check_segment`, or "autopilot QUANTITY" for an autopilot limit.
+
+        Parameters
+        ----------
+        segment : Segment
+            The candidate polynomial segment (duration in s, position coefficients in
+            m/s^j, yaw coefficients in rad/s^j), checked against the box, the vehicle's
+            constraints and the autopilot's limits of the settings.
+        """
         result = check_segment(segment, self.config, self.box,
                                rotor_headroom=self.settings.rotor_headroom,
                                rotor_check=self.settings.rotor_check,
@@ -190,7 +207,14 @@ class GraphSearch:
         return not self.refusal(segment)
 
     def connects(self, segment: Segment) -> bool:
-        """`feasible` for a sampled connection, counting the refusals."""
+        """`feasible` for a sampled connection, counting the refusals.
+
+        Parameters
+        ----------
+        segment : Segment
+            The sampled connection; when infeasible, its reason (`refusal`) is counted in
+            ``refusals``.
+        """
         why = self.refusal(segment)
         if why:
             self.refusals[why] += 1

@@ -113,7 +113,21 @@ def longest_segment(a: VertexState, b_position: np.ndarray, b_yaw: float, limits
                     autopilot: KinematicLimits | None) -> float:
     """The longest a segment from ``a`` to (``b_position``, ``b_yaw``) may last, s:
     ``limits.segment_time_max``, or `MOVE_TIME_STRETCH` times the move's rest-to-rest time
-    within ``autopilot`` (None: no autopilot limits) when that is longer."""
+    within ``autopilot`` (None: no autopilot limits) when that is longer.
+
+    Parameters
+    ----------
+    a : VertexState
+        Start of the segment.
+    b_position : ndarray, shape (3,)
+        End position, m, world ENU.
+    b_yaw : float
+        End yaw, rad (on the branch the segment turns to).
+    limits : Limits
+        The vehicle's (its ``segment_time_max``, s, is used).
+    autopilot : KinematicLimits or None
+        The autopilot's envelope (None: ``limits.segment_time_max`` alone).
+    """
     move = _move_time(a, b_position, b_yaw, autopilot)
     return max(limits.segment_time_max, MOVE_TIME_STRETCH * move)
 

@@ -82,7 +82,25 @@ def plan(config: VehicleConfig, settings: PlannerSettings | None = None,
 
 
 def search_result(search: GraphSearch, kind: str, path: RefinablePath | None) -> PlanResult:
-    """The chosen flight: the (refined) best path plus its stop, with σ over time."""
+    """The chosen flight: the (refined) best path plus its stop, with σ over time.
+
+    Parameters
+    ----------
+    search : GraphSearch
+        The finished search: its vehicle, settings, model and θ for the σ propagation, and
+        its graph and counters for the statistics.
+    kind : str
+        "dopt" (the information-gathering planner) or "random" (the paper's baseline),
+        as `PlanResult.kind`.
+    path : RefinablePath or None
+        The best flight found, refined, with its stopping segment; None when no feasible
+        flight was found.
+
+    Raises
+    ------
+    JobFailedError
+        ``path`` is None: one line with the planning time and the graph's size.
+    """
     if path is None:
         raise JobFailedError(
             f"no feasible trajectory found in {search.elapsed():.1f} s of planning "

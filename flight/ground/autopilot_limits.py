@@ -264,7 +264,15 @@ def _peak_text(quantity: str, value: float) -> str:
 
 
 def limits_text(limits: KinematicLimits) -> str:
-    """The limited quantities of an envelope, in words with SI units (one line)."""
+    """The limited quantities of an envelope, in words with SI units (one line).
+
+    Parameters
+    ----------
+    limits : KinematicLimits
+        The envelope: speeds in m/s, accelerations in m/s², jerks in m/s³, tilt in rad,
+        yaw rate in rad/s and yaw acceleration in rad/s²; a None field is unlimited and
+        left out ("none" when all are).
+    """
     shown = [f"{KINEMATIC_WORDS[name]} {_peak_text(name, value)}"
              for name, value in vars(limits).items() if value is not None]
     return ", ".join(shown) if shown else "none"

@@ -58,7 +58,17 @@ def install_safety(session: Any, home: Sequence[float], say: Callable[[str], Non
 
 def before_arming(session: Any, home: Sequence[float]) -> str:
     """The line the operator reads before the vehicle arms: the box and where it came from,
-    the fence (or none) and the take-off point (``home``, m ENU)."""
+    the fence (or none) and the take-off point (``home``, m ENU).
+
+    Parameters
+    ----------
+    session : StreamSession
+        The flight's session: its ``box`` ([x_min, y_min, z_min, x_max, y_max, z_max], m,
+        world ENU), ``box_source``, and ``meta`` with the fence `install_safety` recorded
+        (None with ``--no-fence``).
+    home : sequence of 3 float
+        The vehicle's position on the ground before take-off, m, world ENU.
+    """
     fence = session.meta.get("fence")
     if fence:
         corners = fence["corners_enu_m"]

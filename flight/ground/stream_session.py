@@ -188,7 +188,25 @@ def load_plan(path: str | Path, vehicle: str | Path | None,
 
 def plan_box(path: str | Path, vehicle: str | Path | None, box: tuple[float, ...] | None
              ) -> tuple[TrajectoryFile, VehicleConfig, tuple[float, ...], str]:
-    """`load_plan` and where the box came from (``--box``, the vehicle's, narrowed…)."""
+    """`load_plan` and where the box came from (``--box``, the vehicle's, narrowed…).
+
+    Parameters
+    ----------
+    path : str or Path
+        The trajectory file.
+    vehicle : str, Path or None
+        Shipped vehicle name or TOML path; None: the configuration stored in the file.
+    box : tuple of 6 float or None
+        The operator's flight box, [x_min, y_min, z_min, x_max, y_max, z_max], m, world
+        ENU; None: the ``[flight] box`` of ``vehicle``. The file's own box only narrows it.
+
+    Returns
+    -------
+    plan, config, box
+        As `load_plan`.
+    source : str
+        Where the box came from, for messages and ``meta.json`` (`operator_box`).
+    """
     plan = read_trajectory(path)
     config = load_vehicle(vehicle) if vehicle is not None else _embedded_config(plan, str(path))
     # The operator's box (--box, else the chosen vehicle file's); the file's only narrows it.

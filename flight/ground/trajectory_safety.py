@@ -71,7 +71,13 @@ def _checked_box(box: Sequence[float], source: str) -> tuple[float, ...]:
 
 
 def format_box(box: Sequence[float]) -> str:
-    """``x -2..2, y -2..2, z 0.5..2.5 m``: a box for a one-line message."""
+    """``x -2..2, y -2..2, z 0.5..2.5 m``: a box for a one-line message.
+
+    Parameters
+    ----------
+    box : sequence of 6 float
+        [x_min, y_min, z_min, x_max, y_max, z_max], m, world ENU.
+    """
     return ", ".join(f"{axis} {box[k]:g}..{box[k + 3]:g}" for k, axis in enumerate("xyz")) \
         + " m"
 

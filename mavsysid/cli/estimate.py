@@ -78,7 +78,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def format_truth(final: ParameterEstimate, truth: np.ndarray) -> str:
-    """Each parameter against the simulator's truth: error and z = error / σ."""
+    """Each parameter against the simulator's truth: error and z = error / σ.
+
+    Parameters
+    ----------
+    final : ParameterEstimate
+        The estimate of θ = [c_T, c_D, c_M, j_x, j_y, j_z] with its covariance, SI units.
+    truth : ndarray, shape (6,)
+        The simulator's true θ in the same order and units (`read_truth`).
+    """
     lines = ["Against the truth", "  parameter   estimate          σ       true   error %       z"]
     for j, name in enumerate(PARAMETER_NAMES):
         value, sigma, true = float(final.value[j]), float(final.sigma[j]), float(truth[j])

@@ -29,7 +29,13 @@ __all__ = ["add_arguments", "format_report", "main"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``mavsysid experiment``."""
+    """Options of ``mavsysid experiment``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The ``experiment`` subcommand's parser; its options are added to it in place.
+    """
     allow_negative_values(parser)  # "--box -2,-2,0.5,2,2,2.5"
     parser.add_argument("--connect", required=True, metavar="LINK",
                         help="the vehicle: udp:HOST:PORT (listen), udpout:HOST:PORT, "
@@ -97,7 +103,17 @@ def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings
 
 
 def format_report(outcome: ExperimentOutcome, verbosity: int = 0) -> str:
-    """The text printed after an experiment (``verbosity`` < 0: the estimate file alone)."""
+    """The text printed after an experiment (``verbosity`` < 0: the estimate file alone).
+
+    Parameters
+    ----------
+    outcome : ExperimentOutcome
+        The finished experiment: its plan, the autopilot limits it was planned within,
+        the flight and the estimate with the path of the estimate file.
+    verbosity : int, optional
+        -1 with ``--quiet``: only the estimate file's path; 0 (default) or more, one per
+        ``-v``: the plan, the flight summary and the estimate table.
+    """
     if verbosity < 0:
         return str(outcome.estimate_file)
     plan = outcome.plan
@@ -115,7 +131,14 @@ def format_report(outcome: ExperimentOutcome, verbosity: int = 0) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run the command; returns the exit code."""
+    """Run the command; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line: the options of `add_arguments` and ``verbosity``
+        (-1 quiet, 0 default, more with ``-v``).
+    """
     planner, stream = _settings(args)
     verbose = args.verbosity >= 0
 

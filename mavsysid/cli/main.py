@@ -106,7 +106,14 @@ COMMAND_NAMES = tuple(name for name, *_ in _COMMANDS)
 
 
 def help_text(command: str | None = None) -> str:
-    """The ``--help`` text of ``command`` (of ``mavsysid`` itself when None)."""
+    """The ``--help`` text of ``command`` (of ``mavsysid`` itself when None).
+
+    Parameters
+    ----------
+    command : str, optional
+        A command name from `COMMAND_NAMES`, whose subcommand help is returned; the
+        top-level help listing all commands when None.
+    """
     parser = build_parser(command)
     if command is None:
         return parser.format_help()

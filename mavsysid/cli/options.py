@@ -31,7 +31,21 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
 def add_output_folder(parser: argparse.ArgumentParser, default: str, what: str,
                       old_names: tuple[str, ...] = ()) -> None:
     """``--log-dir DIR`` (`OUTPUT_OPTION`, into ``args.log_dir``): where the command
-    writes; ``old_names`` stay accepted, hidden from ``--help``."""
+    writes; ``old_names`` stay accepted, hidden from ``--help``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The command's parser; the option is added to it in place.
+    default : str
+        The folder used without the option (``args.log_dir`` is then ``Path(default)``).
+    what : str
+        The ``--help`` text of the option, e.g. "folder for the new flight directory";
+        " (default: DEFAULT)" is appended.
+    old_names : tuple of str, optional
+        Former spellings of the option (e.g. ``("--logs",)``), still accepted into
+        ``args.log_dir`` but not listed in ``--help``.
+    """
     parser.add_argument(OUTPUT_OPTION, dest="log_dir", type=Path, default=Path(default),
                         metavar="DIR", help=f"{what} (default: {default})")
     for name in old_names:

@@ -221,7 +221,14 @@ def main(args: argparse.Namespace) -> int:
 
 
 def saturation_warning(preview: PlanPreview) -> str | None:
-    """One line when the predicted rotor saturation is above `SATURATION_WARNING`."""
+    """One line when the predicted rotor saturation is above `SATURATION_WARNING`.
+
+    Parameters
+    ----------
+    preview : PlanPreview
+        What the plan asks of the vehicle (`preview_plan`); its ``saturation`` is the
+        share (0 to 1) of simulated control ticks with a rotor command clipped.
+    """
     if preview.saturation <= SATURATION_WARNING:
         return None
     return (f"rotors predicted saturated in {100 * preview.saturation:.1f} % of control "
@@ -230,7 +237,15 @@ def saturation_warning(preview: PlanPreview) -> str | None:
 
 
 def format_preview(preview: PlanPreview) -> str:
-    """The plan's peaks and its predicted rotor saturation, two lines."""
+    """The plan's peaks and its predicted rotor saturation, two lines.
+
+    Parameters
+    ----------
+    preview : PlanPreview
+        What the plan asks of the vehicle (`preview_plan`): peak speed (m/s), tilt (rad),
+        body rate (rad/s) and thrust (m g), saturated share of control ticks and largest
+        tracking error (m).
+    """
     return (f"  peaks      speed {preview.speed:.2f} m/s, tilt "
             f"{np.degrees(preview.tilt):.1f}°, body rate {preview.body_rate:.2f} rad/s, "
             f"thrust {preview.thrust:.2f} m g\n"

@@ -19,7 +19,13 @@ __all__ = ["add_arguments", "main"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``mavsysid restore``."""
+    """Options of ``mavsysid restore``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The ``restore`` subcommand's parser; its options are added to it in place.
+    """
     parser.add_argument("flight_dir", type=Path, metavar="FLIGHT_DIR",
                         help="the flight directory whose meta.json lists the parameters")
     parser.add_argument("--connect", default="udp:127.0.0.1:14550", metavar="LINK",
@@ -35,7 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run the command; returns the exit code."""
+    """Run the command; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line: the options of `add_arguments` and ``verbosity``
+        (-1 quiet, 0 default, more with ``-v``).
+    """
     key = None if args.signing_key is None else signing_key_from_file(args.signing_key)
 
     def say(text: str) -> None:

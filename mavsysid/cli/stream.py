@@ -59,7 +59,17 @@ def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
 
 
 def format_dry_run(outcome: StreamOutcome, verbosity: int = 0) -> str:
-    """The text printed after ``--dry-run``: the box, the fence and what would change."""
+    """The text printed after ``--dry-run``: the box, the fence and what would change.
+
+    Parameters
+    ----------
+    outcome : StreamOutcome
+        The dry run's flight directory and its ``meta.json`` (trajectory and box in m,
+        fence, and the autopilot parameters the flight would set).
+    verbosity : int, optional
+        -1 with ``--quiet``: only the flight directory; 0 (default) or more, one per
+        ``-v``: the full text.
+    """
     d, meta = outcome.directory, outcome.meta
     if verbosity < 0:
         return str(d)
