@@ -40,7 +40,9 @@ def print_table(rows: Sequence[dict], names: Sequence[str]) -> None:
     for row in rows:
         name = row["flight"]
         if "skipped" in row:
-            print(f"{name:9s} skipped: {row['skipped']}")
+            said = row.get("tool", {})
+            print(f"{name:9s} skipped: {row['skipped']}"
+                  + (f"; estimate exit {said['code']}: {said['message']}" if said else ""))
             continue
         b = row["balance"]
         line = f"{name:9s} {row['duration']:5.1f} "
