@@ -25,7 +25,7 @@ from mavsysid.errors import LogFormatError
 __all__ = [
     "FLYING_THRUST",
     "MAX_BODY_RATE",
-    "MIN_LIVE_SHARE",
+    "MIN_LIVE_TIME",
     "attitude_jumps",
     "dead_rotor_samples",
     "drop_unphysical_samples",
@@ -166,17 +166,17 @@ def _stuck_rotor_samples(t: np.ndarray, n: np.ndarray, airborne: np.ndarray,
     return frozen_samples(t, n, airborne & ~saturated, min_run)
 
 
-#: Share of the flying samples in which a rotor must read a speed for its dead readings to be
-#: filled from the others (`fill_dead_rotor`).
-MIN_LIVE_SHARE = 0.25
+#: Time at flying thrust in which a rotor must read a speed for its dead readings to be
+#: filled from the others (`fill_dead_rotor`), s: its ratio to them is a median over it.
+MIN_LIVE_TIME = 1.0
 
 
 def fill_dead_rotor(t: np.ndarray, n: np.ndarray, dead: np.ndarray, airborne: np.ndarray,
                     source: str) -> tuple[np.ndarray, str | None]:
     """One rotor's dead readings (0 while the vehicle flies) taken from the other rotors.
 
-    When every dead sample is one rotor w reading 0, and w reads a speed in at least
-    `MIN_LIVE_SHARE` of the flying samples, its speed in the dead samples is r × the
+    When every dead sample is one rotor w reading 0, and w reads a speed for at least
+    `MIN_LIVE_TIME` of the flight at flying thrust, its speed in the dead samples is r × the
     others' RMS speed, r the median of its ratio to them where it reads: the vehicle kept
     flying, so the channel, not the motor, is dead. The fill carries w's share of the
     thrust but none of its differential (roll, pitch and yaw) information; the note says
@@ -211,7 +211,8 @@ def fill_dead_rotor(t: np.ndarray, n: np.ndarray, dead: np.ndarray, airborne: np
     w = int(rotors[0])
     others = np.sqrt(np.mean(np.delete(n, w, axis=1) ** 2, axis=1))
     live = airborne & ~dead & (n[:, w] > 0.0) & (others > 0.0)
-    if live.sum() < MIN_LIVE_SHARE * max(int(airborne.sum()), 1) or live.sum() < 2:
+    period = float(np.median(np.diff(t))) if t.size > 1 else np.inf
+    if live.sum() < 2 or live.sum() * period < MIN_LIVE_TIME:
         return n, None
     ratio = float(np.median(n[live, w] / others[live]))
     filled = n.copy()
