@@ -239,8 +239,7 @@ def estimate_with_effects(
                      + "; ".join(repr(e) for e in effects))
     report_stage(f"filtering {len(flight)} samples")
     terms, run, start, sigma = guarded_filter(flight, effects, config, (prior, start), sigma,
-                                              state_sigma, ee, notes,
-                                              restart=settings.restart_diverged)
+                                              state_sigma, ee, notes, settings.restart_diverged)
     state_sigma = flight_initial_state_sigma(flight, sigma)
     log_likelihood, refined = run.log_likelihood, None
     if settings.refine:

@@ -34,7 +34,7 @@ from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.errors import JobFailedError
 
 __all__ = ["DECORRELATION_PASSES", "MAX_RESTARTS", "OVERFLOW_SHARE", "decorrelated_attempt",
-           "filter_attempt", "guarded_filter"]
+           "failure_phrase", "filter_attempt", "guarded_filter"]
 
 #: Filter passes that may raise the measurement σ for correlated pose noise.
 DECORRELATION_PASSES = 3
@@ -46,8 +46,14 @@ OVERFLOW_SHARE = 0.75
 MAX_RESTARTS = 2
 
 
-def _failure(reason: str | None) -> str:
-    """What a failed run did: diverged (innovations, overflow) or ended at an impossible θ."""
+def failure_phrase(reason: str | None) -> str:
+    """What a failed run did: diverged (innovations, overflow) or ended at an impossible θ.
+
+    Parameters
+    ----------
+    reason : str or None
+        `mavsysid.estimation.guard.divergence`'s phrase, or "the state overflowed".
+    """
     if reason is None or reason.startswith((DIVERGED_NIS, "the state overflowed")):
         return f"diverged ({reason})"
     return f"ended at a θ that is not physical ({reason})"
@@ -136,7 +142,7 @@ def guarded_filter(
         return terms, run, start, sigma
     terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
     if reason is not None and not restart:
-        raise JobFailedError(f"{flight.source}: the parameter filter {_failure(reason)}")
+        raise JobFailedError(f"{flight.source}: the parameter filter {failure_phrase(reason)}")
     from_ee = ParameterEstimate(ee.estimate.value, prior.covariance)
     for _ in range(MAX_RESTARTS):
         if reason is None:
@@ -147,7 +153,7 @@ def guarded_filter(
         if start is from_ee and widen == 1.0:
             break  # the same run again would diverge again
         start, sigma = from_ee, (sigma[0] * widen, sigma[1] * widen)
-        notes.append(f"the filter {_failure(reason)}; restarted from the equation-error θ "
+        notes.append(f"the filter {failure_phrase(reason)}; restarted from the equation-error θ "
                      f"with the measurement σ × {widen:.3g} (the innovations' level): "
                      f"{1000 * sigma[0]:.2g} mm, {math.degrees(sigma[1]):.2g}°")
         terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
@@ -157,6 +163,6 @@ def guarded_filter(
                                                          prior, sigma, notes)
     if reason is not None or terms is None or run is None:
         raise JobFailedError(" ".join(
-            f"{flight.source}: the parameter filter {_failure(reason)}, also when restarted "
+            f"{flight.source}: the parameter filter {failure_phrase(reason)}, also when restarted "
             "from the equation-error θ; the model cannot follow this log".split()))
     return terms, run, start, sigma

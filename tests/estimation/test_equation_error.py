@@ -102,10 +102,10 @@ def test_noise_matching_the_assumption_changes_nothing():
 @pytest.mark.parametrize("shape", [(3000,), (3000, 4)])
 def test_smoother_filter_is_the_zero_padded_convolution(taps, shape):
     """Direct or by FFT overlap-add, the filter is np.convolve(mode="same") per column."""
-    from mavsysid.estimation.equation_error import _filter
+    from mavsysid.estimation.equation_error import convolve_columns
 
     rng = np.random.default_rng(taps)
     x, kernel = rng.standard_normal(shape), rng.standard_normal(taps)
     columns = x.reshape(shape[0], -1)
     want = np.column_stack([np.convolve(c, kernel, mode="same") for c in columns.T])
-    np.testing.assert_allclose(_filter(x, kernel).reshape(shape[0], -1), want, atol=1e-12)
+    np.testing.assert_allclose(convolve_columns(x, kernel).reshape(shape[0], -1), want, atol=1e-12)

@@ -164,13 +164,13 @@ def test_vanishing_c_d_is_no_divergence_with_linear_rotor_drag():
 def test_an_impossible_theta_is_not_reported_as_divergence() -> None:
     """A run that ends at an inertia breaking the triangle inequality 'ended at a θ that is
     not physical'; only innovations beyond the bound or an overflow are 'diverged'."""
-    from mavsysid.estimation.guarded_filter import _failure
+    from mavsysid.estimation.guarded_filter import failure_phrase
     from mavsysid.estimation.plausibility import implausibility
 
     theta = load_vehicle("quad_x").theta.copy()
     theta[5] = 3.0 * (theta[3] + theta[4])
     reason = implausibility(theta, 0.01 * theta, theta)
     assert reason is not None and "triangle" in reason
-    assert _failure(reason).startswith("ended at a θ that is not physical")
-    assert _failure(f"{DIVERGED_NIS} 812 over 1 s windows").startswith("diverged")
-    assert _failure("the state overflowed").startswith("diverged")
+    assert failure_phrase(reason).startswith("ended at a θ that is not physical")
+    assert failure_phrase(f"{DIVERGED_NIS} 812 over 1 s windows").startswith("diverged")
+    assert failure_phrase("the state overflowed").startswith("diverged")
