@@ -26,14 +26,16 @@ of ``system-id/data/cf21_bitcraze2021``, F = weight · g; brushless: the scale r
 j_x, j_y, j_z of Förster (2015, Crazyflie 2.0, bifilar pendulum), a weaker reference for
 the brushless airframe; c_M and c_D are not measured.
 
-Each flight runs (a) today's ``mavsysid estimate`` library path (`run_estimate`) and
-(b) the force and torque balance (`fit_wrench_balance`). Printed per flight: duration,
-per parameter the error against the reference, σ, status (D = determined), whether the
-95 % interval covers the reference, the held-out RMSE ratio, run times.
+Each flight runs ``mavsysid estimate`` as a user runs it (a subprocess writing
+``estimate.json``), and on request (``--library``) the force and torque balance alone
+(`fit_wrench_balance`). Printed per flight: duration, per parameter the error against the
+reference, σ, status (D = determined), whether the 95 % interval covers the reference,
+the held-out RMSE ratio, run times. An empty flight file is given to ``estimate`` as an
+empty pose log, to show its one-line refusal.
 
     nice python bench/crazyflie_flights.py --repo /path/to/crazyflie-data-collection \\
         [--json out.json] [--markdown table.md] [--flights jana0,eckart1] [--jobs 2]
-        [--no-tool]
+        [--library]
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import subprocess
 import sys
 import tempfile
 import time
@@ -58,7 +61,6 @@ from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
 from mavsysid.estimation.wrench_balance import fit_wrench_balance
 from mavsysid.formats.poselog import PoseLogWriter, read_pose_log
-from mavsysid.pipeline.estimate import run_estimate
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, vehicle_to_toml
 from mavsysid.vehicle.config_types import RotorConfig
 from mavsysid.vehicle.constants import GRAVITY, RPM_TO_RAD_S
@@ -168,19 +170,63 @@ def _scored(value: np.ndarray, sigma: np.ndarray, reference: np.ndarray) -> dict
 
 
 def run_tool(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
-    """Today's ``mavsysid estimate`` path on the converted flight."""
+    """``mavsysid estimate`` as a user runs it (a subprocess writing ``estimate.json``).
+
+    In the shape of `run_balance`'s row: the answer per parameter (value, σ, status), the
+    balance's data value where a parameter is not determined, its choices, held-out check
+    and combinations; or the exit code and the one-line message.
+    """
     t0 = time.perf_counter()
-    try:
-        final = run_estimate(pose, vehicle=vehicle).result.final
-    except MavsysidError as error:
-        return {"code": exit_code(error), "message": str(error).splitlines()[0],
-                "seconds": time.perf_counter() - t0}
-    except Exception as error:  # a bug is a finding of this bench, not a crash of it
-        return {"code": 1, "message": f"internal {type(error).__name__}: {error}",
-                "seconds": time.perf_counter() - t0}
-    out = _scored(final.value, final.sigma, reference)
-    out.update(code=0, seconds=time.perf_counter() - t0)
+    out_json = pose.parent / "estimate.json"
+    proc = subprocess.run([sys.executable, "-m", "mavsysid", "estimate", str(pose),
+                           "--vehicle", str(vehicle), "-o", str(out_json), "-q"],
+                          capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    if proc.returncode:
+        lines = proc.stderr.strip().splitlines()
+        return {"code": proc.returncode, "message": lines[-1] if lines else "",
+                "stderr_lines": len(lines), "seconds": seconds,
+                "traceback": "Traceback" in proc.stderr}
+    doc = json.loads(out_json.read_text(encoding="utf-8"))
+    params = doc["parameters"]
+    value = np.array([params[n]["value"] for n in PARAMETER_NAMES], float)
+    sigma = np.array([params[n]["sigma"] for n in PARAMETER_NAMES], float)
+    status = [params[n].get("status", "determined") for n in PARAMETER_NAMES]
+    out = _scored(value, sigma, reference)
+    balance = doc.get("balance")
+    data_value, data_sigma = value.copy(), sigma.copy()
+    if balance is not None:
+        for k, n in enumerate(PARAMETER_NAMES):
+            if status[k] != "determined":
+                data_value[k] = balance["parameters"][n]["data_value"] or np.nan
+                data_sigma[k] = balance["parameters"][n]["data_sigma"] or np.nan
+    choices = (balance or {}).get("choices") or {}
+    combos = (balance or {}).get("combinations") or {}
+    out.update(
+        code=0, seconds=seconds, status=status,
+        source=[params[n].get("source") for n in PARAMETER_NAMES],
+        data=_scored(data_value, data_sigma, reference),
+        filter_refusal=doc.get("filter_refusal"), mismatch=doc.get("mismatch", []),
+        window_s=choices.get("window_s"), delay_s=choices.get("delay_s") or 0.0,
+        roll_pitch_band=choices.get("roll_pitch_band_hz"),
+        combinations=[(combos.get(c) or {}).get("value") or np.nan
+                      for c in ("c_M/j_z", "J_r/j_z")],
+        combination_sigma=[(combos.get(c) or {}).get("sigma") or np.nan
+                           for c in ("c_M/j_z", "J_r/j_z")],
+        holdout=doc.get("holdout"))
     return out
+
+
+def refuse_empty(directory: Path, vehicle: Path) -> dict:
+    """What ``mavsysid estimate`` says about an empty pose log (a recording that failed)."""
+    pose = directory / "pose.csv"
+    pose.write_text("", encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-m", "mavsysid", "estimate", str(pose),
+                           "--vehicle", str(vehicle), "-q"],
+                          capture_output=True, text=True, check=False)
+    lines = proc.stderr.strip().splitlines()
+    return {"code": proc.returncode, "message": lines[-1] if lines else "",
+            "stderr_lines": len(lines)}
 
 
 def _flight(pose: Path, config) -> tuple[FlightData, str | None]:
@@ -226,22 +272,23 @@ def run_balance(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
 
 def run_flight(job: tuple) -> dict:
     """Decode, convert and estimate one flight (a worker's task)."""
-    repo, vehicle, path, references, prior, n_max, with_tool = job
+    repo, vehicle, path, references, prior, n_max, library = job
     row = {"flight": path.name, "vehicle": vehicle}
-    if path.stat().st_size == 0:
-        return {**row, "skipped": "empty file (a recording that failed)"}
-    decoded = load_decoder(repo).decode(str(path))
-    if not decoded or "fixedFrequency" not in decoded:
-        return {**row, "skipped": "the decoder found no fixedFrequency event"}
     with tempfile.TemporaryDirectory(prefix="cf-") as tmp:
-        pose, rows, duration = convert(decoded, Path(tmp))
         toml = Path(tmp) / f"{vehicle}.toml"
         toml.write_text(vehicle_toml(f"cf21_{vehicle}", VEHICLES[vehicle][2], prior, n_max),
                         encoding="utf-8")
+        if path.stat().st_size == 0:
+            return {**row, "skipped": "empty file (a recording that failed)",
+                    "tool": refuse_empty(Path(tmp), toml)}
+        decoded = load_decoder(repo).decode(str(path))
+        if not decoded or "fixedFrequency" not in decoded:
+            return {**row, "skipped": "the decoder found no fixedFrequency event"}
+        pose, rows, duration = convert(decoded, Path(tmp))
         row.update(rows=rows, duration=duration)
-        row["balance"] = run_balance(pose, toml, references)
-        if with_tool:
-            row["tool"] = run_tool(pose, toml, references)
+        row["balance"] = run_tool(pose, toml, references)
+        if library:
+            row["library"] = run_balance(pose, toml, references)
     return row
 
 
@@ -264,8 +311,8 @@ def main() -> None:
     parser.add_argument("--flights", default="", help="comma-separated name filters")
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--markdown", type=Path, help="write the per-flight table (Markdown)")
-    parser.add_argument("--no-tool", action="store_true",
-                        help="skip today's `estimate` path (the balance only)")
+    parser.add_argument("--library", action="store_true",
+                        help="also run the library's balance alone (`fit_wrench_balance`)")
     args = parser.parse_args()
     repo = args.repo.resolve()
     refs, stand, jobs = {}, {}, []
@@ -278,10 +325,16 @@ def main() -> None:
     for vehicle, path in _flights(repo, [p for p in args.flights.split(",") if p]):
         prior = np.array(stand[vehicle]["prior"])
         jobs.append((repo, vehicle, path, refs[vehicle], prior, stand[vehicle]["n_max"],
-                     not args.no_tool))
+                     args.library))
     print(f"references: {json.dumps(stand)}")
+    rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        rows = list(pool.map(run_flight, jobs))
+        for row in pool.map(run_flight, jobs):  # in order; each row kept as it arrives
+            rows.append(row)
+            print(f"done {row['flight']}", file=sys.stderr, flush=True)
+            if args.json:
+                args.json.write_text(json.dumps({"references": stand, "flights": rows},
+                                                indent=1), encoding="utf-8")
     print_table(rows, PARAMETER_NAMES)
     print_summary(rows, refs)
     if args.json:

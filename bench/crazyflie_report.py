@@ -40,7 +40,9 @@ def print_table(rows: Sequence[dict], names: Sequence[str]) -> None:
     for row in rows:
         name = row["flight"]
         if "skipped" in row:
-            print(f"{name:9s} skipped: {row['skipped']}")
+            said = row.get("tool", {})
+            print(f"{name:9s} skipped: {row['skipped']}"
+                  + (f"; estimate exit {said['code']}: {said['message']}" if said else ""))
             continue
         b = row["balance"]
         line = f"{name:9s} {row['duration']:5.1f} "
@@ -162,9 +164,9 @@ def _md_cell(balance: dict, k: int) -> str:
 def markdown_table(rows: Sequence[dict]) -> str:
     """Per flight, as a Markdown table: the determined parameters (error ± σ, ✗ = the
     reference outside the 95 % interval; – = not determined), band, offset, held-out
-    force/torque ratios and today's `estimate` exit code."""
+    force/torque ratios and the `estimate` exit code."""
     head = ("| flight | s | band Hz | δ ms | c_T | c_D | j_x | j_y | j_z | c_M/j_z | "
-            "held-out F/M | `estimate` today |\n|" + "---|" * 12)
+            "held-out F/M | `estimate` |\n|" + "---|" * 12)
     lines = [head]
     for row in rows:
         tool = row.get("tool")
@@ -174,6 +176,9 @@ def markdown_table(rows: Sequence[dict]) -> str:
             lines.append(f"| {row['flight']} | | {row['skipped']} |" + " |" * 9)
             continue
         b = row["balance"]
+        if tool is None:  # the row is `estimate`'s own
+            tool_text = f"exit {b['code']}" + (", filter refused" if b.get("filter_refusal")
+                                               else "")
         if b["code"]:
             reason = b["message"].split(": ", 1)[-1].split(";")[0].split(" while ")[0]
             lines.append(f"| {row['flight']} | {row['duration']:.1f} | refused (exit "

@@ -8,7 +8,8 @@ wind), draw a prior 30–50 % off the truth (seeded, random sign per parameter),
 `run_estimate` and print per parameter the relative error and whether the 95 % interval
 covers the truth — or the refusal (exit code and its one line).
 
-Target: every θ within 5 % (c_D 15 %) with covering intervals, or an honest refusal.
+Target: every determined θ within 5 % (c_D 15 %) with covering intervals, or an honest
+refusal (a parameter the flight does not determine keeps the prior and is not scored).
 
     nice python bench/micro_quad_robustness.py [--seeds 5] [--duration 60]
         [--no-sensor-path] [--effects motor_lag,rotor_drag_linear,wind]
@@ -51,7 +52,8 @@ def run_seed(seed: int, duration: float, root: Path, sensor_path: bool = True,
     vehicle, prior = prior_config(flight.config, root / f"prior-{seed}.toml", seed)
     t0 = time.perf_counter()
     try:
-        final = run_estimate(flight.pose, vehicle=vehicle).result.final
+        result = run_estimate(flight.pose, vehicle=vehicle).result
+        final = result.final
     except MavsysidError as error:
         return {"seed": seed, "code": exit_code(error), "message": str(error),
                 "prior": prior / flight.truth - 1.0, "wall": time.perf_counter() - t0,
@@ -62,7 +64,8 @@ def run_seed(seed: int, duration: float, root: Path, sensor_path: bool = True,
                 "sim": simulated, "rows": flight.rows_kept}
     error = final.value / flight.truth - 1.0
     covered = np.abs(final.value - flight.truth) <= 1.96 * final.sigma
-    return {"seed": seed, "code": 0, "error": error, "covered": covered,
+    status = result.status or ("determined",) * len(PARAMETER_NAMES)
+    return {"seed": seed, "code": 0, "error": error, "covered": covered, "status": status,
             "sigma": final.sigma / flight.truth, "prior": prior / flight.truth - 1.0,
             "wall": time.perf_counter() - t0, "sim": simulated, "rows": flight.rows_kept}
 
@@ -75,11 +78,16 @@ def _print(row: dict) -> None:
     if row["code"]:
         print(f"    REFUSED exit {row['code']}: {row['message']}")
         return
+    determined = np.array([s == "determined" for s in row["status"]])
     ok = (np.abs(row["error"]) <= TOLERANCE) & row["covered"]
-    for name, e, s, c, good in zip(PARAMETER_NAMES, row["error"], row["sigma"],
-                                   row["covered"], ok, strict=True):
+    for name, e, s, c, good, d, st in zip(PARAMETER_NAMES, row["error"], row["sigma"],
+                                          row["covered"], ok, determined, row["status"],
+                                          strict=True):
+        verdict = ("ok" if good else "FAIL") if d else f"({st})"
         print(f"    {name:4s} error {100 * e:+8.2f} %  σ {100 * s:6.2f} %  "
-              f"95 % covers: {'yes' if c else 'NO '}  {'ok' if good else 'FAIL'}")
+              f"95 % covers: {'yes' if c else 'NO '}  {verdict}")
+    print(f"    every determined parameter within target and covered: "
+          f"{'yes' if ok[determined].all() else 'no'}")
 
 
 def main() -> None:
@@ -101,10 +109,12 @@ def main() -> None:
             _print(rows[-1])
             sys.stdout.flush()
     done = [r for r in rows if r["code"] == 0]
-    passed = sum(bool(np.all((np.abs(r["error"]) <= TOLERANCE) & r["covered"])) for r in done)
+    passed = sum(bool(np.all(((np.abs(r["error"]) <= TOLERANCE) & r["covered"])[
+        np.array([s == "determined" for s in r["status"]])])) for r in done)
     refused = [r for r in rows if r["code"] in (2, 3)]
     internal = [r for r in rows if r["code"] not in (0, 2, 3)]
-    print(f"\n{len(rows)} flights: {passed} within tolerance with covering intervals, "
+    print(f"\n{len(rows)} flights: {passed} with every determined parameter within tolerance "
+          "and covered, "
           f"{len(done) - passed} confident and wrong (exit 0 outside tolerance or not "
           f"covered), {len(refused)} refused, {len(internal)} internal errors")
 

@@ -29,7 +29,7 @@ from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
 from mavsysid.vehicle.model_effects import EffectInputs, ModelEffect, total_wrench
 from mavsysid.vehicle.rotation import quat_multiply, quat_to_matrix
 from scipy.ndimage import convolve1d
-from scipy.signal import savgol_coeffs
+from scipy.signal import oaconvolve, savgol_coeffs
 
 from mavsysid.errors import InputError
 
@@ -43,6 +43,7 @@ __all__ = [
     "body_force_readout",
     "body_rotation_readout",
     "consistent_accelerations",
+    "convolve_columns",
     "model_accelerations",
     "noise_gain",
     "savgol_kernel",
@@ -250,8 +251,28 @@ def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.
     return np.hstack([force / config.mass, omega_dot])
 
 
-def _filter(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    # np.convolve(mode="same") per column: zero padding, an odd kernel centred.
+#: Kernel length from which the FFT's overlap-add beats the direct sum (measured: 3–4×
+#: faster at 150 taps on 30 000 samples, equal near 64).
+_FFT_TAPS = 64
+
+
+def convolve_columns(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``np.convolve(mode="same")`` per column: zero padding, an odd kernel centred.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,) or (N, m)
+        Signal, one column per channel.
+    kernel : ndarray, shape (w,)
+        Odd length.
+
+    Returns
+    -------
+    ndarray, shape of ``x``
+    """
+    if kernel.size > _FFT_TAPS and x.shape[0] > kernel.size:
+        out = oaconvolve(x, kernel.reshape((-1,) + (1,) * (x.ndim - 1)), mode="same", axes=0)
+        return np.asarray(out, dtype=float)
     return convolve1d(x, kernel, axis=0, mode="constant", cval=0.0)
 
 
@@ -307,7 +328,7 @@ def body_force_readout(pose: SmoothedPose, inputs: SmoothedPose, force: np.ndarr
         Body force per unit mass, m/s².
     kernel : ndarray, shape (w,)
     """
-    world = _filter(np.einsum("nij,nj->ni", inputs.rotation(), force), kernel)
+    world = convolve_columns(np.einsum("nij,nj->ni", inputs.rotation(), force), kernel)
     return np.einsum("nji,nj->ni", pose.rotation(), world)
 
 
@@ -330,7 +351,7 @@ def body_rotation_readout(pose: SmoothedPose, inputs: SmoothedPose, omega_dot: n
     """
     scalar = -0.25 * np.sum(inputs.rates**2, axis=1) if rate_term else np.zeros(len(omega_dot))
     inner = np.column_stack([scalar, 0.5 * np.asarray(omega_dot, float)])
-    qdd = _filter(quat_multiply(inputs.quaternion, inner), kernel)
+    qdd = convolve_columns(quat_multiply(inputs.quaternion, inner), kernel)
     conj = pose.quaternion * np.array([1.0, -1.0, -1.0, -1.0])
     return 2.0 * quat_multiply(conj, qdd)[:, 1:]
 

@@ -68,6 +68,9 @@ class EstimatorSettings:
     start_from_equation_error : bool
         Start the filter at the equation-error θ (with the prior's covariance) rather than
         at the prior; the MAP prior stays the vehicle file's either way.
+    restart_diverged : bool
+        Restart a diverged filter from the equation-error θ (else refuse at once: used when
+        the force and torque balance answers and the filter only checks it).
     """
 
     prior_relative_sigma: float = 0.5
@@ -78,6 +81,7 @@ class EstimatorSettings:
     fit_effects: bool = True
     guard: bool = True
     start_from_equation_error: bool = False
+    restart_diverged: bool = True
 
 
 def prior_from_config(config: VehicleConfig, settings: EstimatorSettings) -> ParameterEstimate:
@@ -235,7 +239,7 @@ def estimate_with_effects(
                      + "; ".join(repr(e) for e in effects))
     report_stage(f"filtering {len(flight)} samples")
     terms, run, start, sigma = guarded_filter(flight, effects, config, (prior, start), sigma,
-                                              state_sigma, ee, notes)
+                                              state_sigma, ee, notes, settings.restart_diverged)
     state_sigma = flight_initial_state_sigma(flight, sigma)
     log_likelihood, refined = run.log_likelihood, None
     if settings.refine:

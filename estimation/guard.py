@@ -37,9 +37,9 @@ from scipy.stats import chi2
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "CORRELATED_RHO", "NIS_FACTOR",
-           "NIS_WINDOW", "UNDETERMINED_RELATIVE", "check_agreement", "correlated_noise_sigma",
-           "disagreements", "divergence", "nis_level"]
+__all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "CORRELATED_RHO", "DIVERGED_NIS",
+           "NIS_FACTOR", "NIS_WINDOW", "UNDETERMINED_RELATIVE", "check_agreement",
+           "correlated_noise_sigma", "disagreements", "divergence", "nis_level"]
 
 #: Window of the NIS mean, s.
 NIS_WINDOW = 1.0
@@ -52,6 +52,9 @@ NIS_FACTOR = 20.0
 #: smoothing gives ≈ 0.8), and the largest one believed.
 CORRELATED_RHO = 0.9
 _RHO_MAX = 0.999
+
+#: How `divergence` starts the phrase of a run whose innovations grew beyond the bound.
+DIVERGED_NIS = "mean normalised innovation squared"
 
 #: Agreement rule of the cross-check: sigmas and relative tolerance per parameter.
 AGREEMENT_SIGMAS = 3.0
@@ -155,7 +158,7 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
         return reason
     level, bound = nis_level(t, nis)
     if level > NIS_FACTOR * bound:
-        return (f"mean normalised innovation squared {level:.3g} over {NIS_WINDOW:g} s "
+        return (f"{DIVERGED_NIS} {level:.3g} over {NIS_WINDOW:g} s "
                 f"windows, {level / bound:.3g}× its χ² bound {bound:.3g}")
     return None
 

@@ -18,7 +18,12 @@ from mavsysid.estimation.effect_fit import reference_terms
 from mavsysid.estimation.ekf import FilterOverflow, FilterRun
 from mavsysid.estimation.equation_error_fit import EquationErrorFit
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.guard import correlated_noise_sigma, divergence, nis_level
+from mavsysid.estimation.guard import (
+    DIVERGED_NIS,
+    correlated_noise_sigma,
+    divergence,
+    nis_level,
+)
 from mavsysid.estimation.plausibility import vanishing_floor, vanishing_parameters
 from mavsysid.estimation.pose_noise import NOISE_TOLERANCE
 from mavsysid.estimation.results import ParameterEstimate
@@ -29,7 +34,7 @@ from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.errors import JobFailedError
 
 __all__ = ["DECORRELATION_PASSES", "MAX_RESTARTS", "OVERFLOW_SHARE", "decorrelated_attempt",
-           "filter_attempt", "guarded_filter"]
+           "failure_phrase", "filter_attempt", "guarded_filter"]
 
 #: Filter passes that may raise the measurement σ for correlated pose noise.
 DECORRELATION_PASSES = 3
@@ -39,6 +44,19 @@ OVERFLOW_SHARE = 0.75
 
 #: Restarts of a diverged filter from the equation-error θ before the estimate is refused.
 MAX_RESTARTS = 2
+
+
+def failure_phrase(reason: str | None) -> str:
+    """What a failed run did: diverged (innovations, overflow) or ended at an impossible θ.
+
+    Parameters
+    ----------
+    reason : str or None
+        `mavsysid.estimation.guard.divergence`'s phrase, or "the state overflowed".
+    """
+    if reason is None or reason.startswith((DIVERGED_NIS, "the state overflowed")):
+        return f"diverged ({reason})"
+    return f"ended at a θ that is not physical ({reason})"
 
 
 def filter_attempt(
@@ -109,7 +127,7 @@ def guarded_filter(
     flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
     priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
     state_sigma: tuple[float, float, float, float], ee: EquationErrorFit | None,
-    notes: list[str],
+    notes: list[str], restart: bool = True,
 ) -> tuple[ModelTerms, FilterRun, ParameterEstimate, tuple[float, float]]:
     """Step 1 with the divergence guard (`mavsysid.estimation.guard`).
 
@@ -119,32 +137,35 @@ def guarded_filter(
     diverges, unless widening σ for correlated pose noise (`decorrelated_attempt`, from
     the equation-error θ) ends the divergence. ``priors`` is (the prior, the filter's
     start). Returns the terms, the run, and the start and measurement σ the run used.
+    ``restart`` False refuses at the first failure (another estimate answers instead).
     """
     prior, start = priors
     if ee is None:
         terms, run = reference_terms(flight, effects, config, start, sigma, state_sigma)
         return terms, run, start, sigma
     terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
-    restart = ParameterEstimate(ee.estimate.value, prior.covariance)
+    if reason is not None and not restart:
+        raise JobFailedError(f"{flight.source}: the parameter filter {failure_phrase(reason)}")
+    from_ee = ParameterEstimate(ee.estimate.value, prior.covariance)
     for _ in range(MAX_RESTARTS):
         if reason is None:
             break
         level = nis_level(run.history.t, run.history.nis)[0] if run is not None else np.nan
         widen = float(np.sqrt(level / MEAS_DIM)) if np.isfinite(level) else 1.0
         widen = max(widen, 1.0)
-        if start is restart and widen == 1.0:
+        if start is from_ee and widen == 1.0:
             break  # the same run again would diverge again
-        start, sigma = restart, (sigma[0] * widen, sigma[1] * widen)
-        notes.append(f"the filter diverged ({reason}); restarted from the equation-error θ "
+        start, sigma = from_ee, (sigma[0] * widen, sigma[1] * widen)
+        notes.append(f"the filter {failure_phrase(reason)}; restarted from the equation-error θ "
                      f"with the measurement σ × {widen:.3g} (the innovations' level): "
                      f"{1000 * sigma[0]:.2g} mm, {math.degrees(sigma[1]):.2g}°")
         terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
     if reason is not None:  # last resort: pose noise that drifts (an on-board estimator's)
-        start = restart
+        start = from_ee
         terms, run, reason, sigma = decorrelated_attempt(flight, effects, config, start,
                                                          prior, sigma, notes)
     if reason is not None or terms is None or run is None:
         raise JobFailedError(" ".join(
-            f"{flight.source}: the parameter filter diverged, also when restarted from the "
-            f"equation-error θ ({reason}); the model cannot follow this log".split()))
+            f"{flight.source}: the parameter filter {failure_phrase(reason)}, also when restarted "
+            "from the equation-error θ; the model cannot follow this log".split()))
     return terms, run, start, sigma

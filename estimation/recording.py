@@ -27,8 +27,8 @@ from mavsysid.formats.rerun_file import atomic_recording
 from mavsysid.vehicle.config import PARAMETER_NAMES
 from scipy.stats import chi2
 
-__all__ = ["APPLICATION_ID", "ROTOR_COLORS", "log_estimation", "recording_id_for",
-           "write_estimation_rrd"]
+__all__ = ["APPLICATION_ID", "ROTOR_COLORS", "answer_markdown", "log_estimation",
+           "recording_id_for", "write_estimation_rrd"]
 
 APPLICATION_ID = "mavsysid"
 
@@ -81,6 +81,38 @@ def _log_parameters(rec: rr.RecordingStream, result: EstimationResult) -> None:
         if result.refined is not None:
             _series(rec, f"{base}/refined", t, np.full(t.shape, result.refined.value[j]),
                     f"{name} refined", _REFINED_COLOR)
+
+
+def answer_markdown(result: EstimationResult) -> str:
+    """The final θ per parameter (value, σ, status, source) and the held-out check, Markdown."""
+    final = result.final
+    lines = ["| parameter | value | σ | status | from |", "|---|---|---|---|---|"]
+    for j, name in enumerate(PARAMETER_NAMES):
+        status = result.status[j] if result.status else "determined"
+        source = result.answer_source[j] if result.answer_source else "filter"
+        lines.append(f"| {name} | {final.value[j]:.4g} | {final.sigma[j]:.2g} | {status} | "
+                     f"{source} |")
+    holdout = None if result.balance is None else result.balance.holdout
+    if holdout is not None:
+        lines += ["", f"Held-out check (fitted before t = {holdout.start:.2f} s): force RMSE "
+                  f"ratio to the prior model {holdout.force_ratio:.3g}, angular acceleration "
+                  f"{holdout.torque_ratio:.3g} (below 1: better than the prior)."]
+    if result.mismatch:
+        lines += ["", "Filter and balance disagree (the balance stands): "
+                  + "; ".join(result.mismatch)]
+    return "\n".join(lines)
+
+
+def _log_answer(rec: rr.RecordingStream, result: EstimationResult) -> None:
+    """The answer as a static text document, and the held-out RMSE ratios as scalars."""
+    rec.log("estimate/answer", rr.TextDocument(answer_markdown(result),
+                                               media_type=rr.MediaType.MARKDOWN), static=True)
+    holdout = None if result.balance is None else result.balance.holdout
+    if holdout is not None:
+        for name, ratio in (("force", holdout.force_ratio), ("torque", holdout.torque_ratio)):
+            if np.isfinite(ratio):
+                rec.log(f"estimate/holdout_ratio/{name}", rr.Scalars([float(ratio)]),
+                        static=True)
 
 
 def _log_trajectories(rec: rr.RecordingStream, result: EstimationResult,
@@ -174,6 +206,7 @@ def log_estimation(rec: rr.RecordingStream, result: EstimationResult,
                    flight: FlightData) -> None:
     """Log an estimate's entities (module docstring) into an open recording, e.g. the demo's."""
     _log_parameters(rec, result)
+    _log_answer(rec, result)
     _log_trajectories(rec, result, flight)
     _log_innovations(rec, result)
     _log_rotor_speeds(rec, flight)

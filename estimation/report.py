@@ -145,6 +145,8 @@ def _main_block(result: EstimationResult) -> list[str]:
     header = ["parameter", "unit", "prior", "estimate", "σ", "σ/|θ| %", "converged s"]
     if truth is not None:
         header += ["true", "error %"]
+    if result.status:
+        header += ["status", "from"]
     rows = []
     for j, name in enumerate(PARAMETER_NAMES):
         value = float(final.value[j])
@@ -161,8 +163,13 @@ def _main_block(result: EstimationResult) -> list[str]:
             true_value = float(truth[j])
             row += [_fmt(true_value, ".3e"),
                     _fmt(100.0 * _relative(value - true_value, true_value), "+.2f")]
+        if result.status:
+            row += [result.status[j], result.answer_source[j]]
         rows.append(row)
     which = "batch refinement" if result.refined is not None else "filter"
+    if result.status:
+        which = ("per parameter (from: the filter and batch refinement, the force and "
+                 "torque balance, or the prior)")
     target = "the truth" if truth is not None else "its own final value"
     return [
         *_rows(header, rows, left=2),
@@ -195,6 +202,36 @@ def _refined_block(filtered: ParameterEstimate, refined: ParameterEstimate) -> l
     return ["Filter vs batch refinement", *_rows(header, rows)]
 
 
+def _pooled(rmse: np.ndarray) -> float:
+    """RMSE pooled over the axes that have one; NaN if none."""
+    live = rmse[np.isfinite(rmse)]
+    return float(np.sqrt(np.mean(live**2))) if live.size else float("nan")
+
+
+def _balance_block(balance: Any) -> list[str]:
+    """The force and torque balance: its choices and the held-out check."""
+    c = balance.choices
+    band = ("none" if c.roll_pitch is None
+            else f"{c.roll_pitch.low:.3g}–{c.roll_pitch.high:.3g} Hz")
+    lines = ["Force and torque balance",
+             f"  smoothing window {1000 * c.window:.0f} ms; roll/pitch band {band}; "
+             f"pose lags the rotor speeds by {1000 * c.delay:+.1f} ± "
+             f"{_fmt(1000 * balance.delay_sigma, '.1f')} ms"]
+    h = balance.holdout
+    if h is None:
+        lines.append("  held-out check: none (the flight is too short to hold a part out)")
+        return lines
+    lines += [
+        f"  held-out check (fitted before t = {h.start:.2f} s, predicting the rest, "
+        f"{h.rows} rows):",
+        f"    force RMSE {_fmt(_pooled(h.rmse[:3]), '.3g')} m/s², "
+        f"{_fmt(h.force_ratio, '.2f')} × the prior model's; angular acceleration RMSE "
+        f"{_fmt(_pooled(h.rmse[3:]), '.3g')} rad/s², {_fmt(h.torque_ratio, '.2f')} × the "
+        "prior model's",
+        "    (below 1: the estimate predicts unseen data better than the prior)"]
+    return lines
+
+
 def format_table(result: EstimationResult, config: VehicleConfig, log_name: str) -> str:
     """The human-readable report printed by ``mavsysid estimate``.
 
@@ -220,6 +257,8 @@ def format_table(result: EstimationResult, config: VehicleConfig, log_name: str)
         lines += ["", *_effects_block(result)]
     if result.refined is not None:
         lines += ["", *_refined_block(result.filtered, result.refined)]
+    if result.balance is not None:
+        lines += ["", *_balance_block(result.balance)]
     lines.append("")
     lines += [f"note: {note}" for note in result.notes]
     lines += [
@@ -293,16 +332,35 @@ def result_to_json(
         ``refined`` and ``prior``, which have no time history. Also ``covariance`` (final, 6×6, SI),
         ``parameter_names``, ``log``, ``vehicle``, ``pose_source``,
         ``measurement_sigma`` (``position_m``, ``attitude_rad``), ``notes`` and
-        ``software`` (``name``, ``version``).
+        ``software`` (``name``, ``version``). With the per-parameter answer
+        (`mavsysid.estimation.parameter_answer`), each entry of ``parameters`` adds
+        ``status`` ("determined", "not determined by this flight", "at the bound") and
+        ``source`` ("filter", "balance", "prior"); ``balance`` is the force and torque
+        balance (`WrenchBalanceResult.as_dict`) or None, ``holdout`` its held-out check
+        (RMSE per axis and ratios to the prior model) or None, ``mismatch`` the parameters
+        where the filter and the balance disagree, and ``filter_refusal`` why the filter
+        could not answer (then ``filter`` is None).
     """
     truth = result.true_theta
     position_sigma, attitude_sigma = result.measurement_sigma
     convergence = result.convergence_time
+    parameters = _block(result.final, convergence, truth)
+    for j, name in enumerate(PARAMETER_NAMES):
+        if result.status:
+            parameters[name]["status"] = result.status[j]
+            parameters[name]["source"] = result.answer_source[j]
+    balance = result.balance
     return {
-        "parameters": _block(result.final, convergence, truth),
+        "parameters": parameters,
         "effects": [fe.as_dict() for fe in result.effects],
         "log_likelihood": _number(result.log_likelihood),
-        "filter": _block(result.filtered, convergence, truth),
+        "filter": None if result.filter_refusal is not None
+        else _block(result.filtered, convergence, truth),
+        "filter_refusal": result.filter_refusal,
+        "balance": None if balance is None else balance.as_dict(),
+        "holdout": None if balance is None or balance.holdout is None
+        else balance.holdout.as_dict(),
+        "mismatch": list(result.mismatch),
         "refined": None if result.refined is None else _block(result.refined, None, truth),
         "prior": _block(result.prior, None, truth),
         "covariance": [[_number(c) for c in row] for row in result.final.covariance],

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from mavsysid.estimation.equation_error import AXIS_NAMES
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.history_table import write_history_csv
 from mavsysid.estimation.report_figures import (
@@ -37,6 +38,7 @@ from mavsysid.estimation.wrench_check import compare_wrench
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 
 __all__ = ["ESTIMATE_REPORT_FILES", "ReportTable", "estimate_table", "flight_lines",
+           "holdout_table",
            "html_page", "write_estimate_report", "write_index"]
 
 #: What `write_estimate_report` writes, each PNG with its caption on the page.
@@ -134,6 +136,8 @@ def estimate_table(result: EstimationResult) -> ReportTable:
     header = ("parameter", "unit", "prior", "estimate", "σ", "σ/|θ| %", "converged s")
     if truth is not None:
         header += ("true", "error %")
+    if result.status:
+        header += ("status", "from")
     rows = []
     for j, name in enumerate(PARAMETER_NAMES):
         value, sigma = float(final.value[j]), float(final.sigma[j])
@@ -145,9 +149,30 @@ def estimate_table(result: EstimationResult) -> ReportTable:
             true = float(truth[j])
             row += (_cell(true, ".4e"),
                     _cell(100.0 * (value - true) / abs(true) if true else math.nan, "+.2f"))
+        if result.status:
+            row += (result.status[j], result.answer_source[j])
         rows.append(row)
     which = "batch refinement" if result.refined is not None else "filter"
+    if result.status:
+        which = "per parameter"
     return ReportTable(f"Estimate ({which}), SI", header, tuple(rows))
+
+
+def holdout_table(result: EstimationResult) -> ReportTable | None:
+    """The held-out check of the force and torque balance: RMSE per axis and its ratio to
+    the prior model's; None without one."""
+    holdout = None if result.balance is None else result.balance.holdout
+    if holdout is None:
+        return None
+    rows = tuple((axis, _cell(float(m), ".3g"), _cell(float(p), ".3g"), _cell(float(r), ".2f"))
+                 for axis, m, p, r in zip(AXIS_NAMES, holdout.rmse, holdout.prior_rmse,
+                                          holdout.ratio, strict=True))
+    rows += (("force (pooled)", "", "", _cell(holdout.force_ratio, ".2f")),
+             ("angular acceleration (pooled)", "", "", _cell(holdout.torque_ratio, ".2f")))
+    return ReportTable(
+        f"Held-out check: fitted before t = {holdout.start:.2f} s, the rest predicted "
+        f"({holdout.rows} rows); RMSE in m/s² and rad/s²; ratio below 1: better than the prior",
+        ("axis", "RMSE", "prior RMSE", "ratio"), rows)
 
 
 def write_estimate_report(directory: str | Path, result: EstimationResult,
@@ -180,6 +205,10 @@ def write_estimate_report(directory: str | Path, result: EstimationResult,
         f"{1e3 * position_sigma:.2f} mm, {math.degrees(attitude_sigma):.3f}°.",
         "The estimate over time is in history.csv (t, each parameter and its σ, NIS).",
     ]
-    page = html_page(f"Parameter estimate: {log_name}", lines, [estimate_table(result)],
+    tables = [estimate_table(result)]
+    holdout = holdout_table(result)
+    if holdout is not None:
+        tables.append(holdout)
+    page = html_page(f"Parameter estimate: {log_name}", lines, tables,
                      ESTIMATE_REPORT_FILES, result.notes)
     return write_index(directory, page)

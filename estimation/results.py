@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from mavsysid.vehicle.config import PARAMETER_NAMES
@@ -171,6 +172,23 @@ class EstimationResult:
         σ multipliers (≥ 1) already applied to the final θ's covariance where it and the
         equation-error θ disagree beyond their σ
         (`mavsysid.estimation.robust_covariance.disagreement_widening`); None if not checked.
+    answer : ParameterEstimate or None
+        The per-parameter answer (`mavsysid.estimation.parameter_answer`): the filter's or
+        the force and torque balance's value per parameter, the prior's where the flight
+        determines nothing; `final` when set.
+    status : tuple of str
+        Per parameter, with ``answer``: "determined", "not determined by this flight" or
+        "at the bound"; empty without it.
+    answer_source : tuple of str
+        Per parameter, with ``answer``: "filter", "balance" or "prior".
+    mismatch : tuple of str
+        Parameters where the filter and the balance disagree (the balance's value stands).
+    balance : WrenchBalanceResult or None
+        The force and torque balance (`mavsysid.estimation.wrench_balance`), with its
+        held-out check.
+    filter_refusal : str or None
+        Why the filter and batch could not answer (then ``filtered`` is the balance's θ and
+        ``history`` is empty).
     """
 
     prior: ParameterEstimate
@@ -186,8 +204,16 @@ class EstimationResult:
     log_likelihood: float = math.nan
     equation_error: ParameterEstimate | None = None
     mismatch_widening: np.ndarray | None = None
+    answer: ParameterEstimate | None = None
+    status: tuple[str, ...] = ()
+    answer_source: tuple[str, ...] = ()
+    mismatch: tuple[str, ...] = ()
+    balance: Any = None
+    filter_refusal: str | None = None
 
     @property
     def final(self) -> ParameterEstimate:
-        """The best estimate: refined if available, else filtered."""
+        """The best estimate: the per-parameter answer if formed, else refined, else filtered."""
+        if self.answer is not None:
+            return self.answer
         return self.refined if self.refined is not None else self.filtered

@@ -12,9 +12,20 @@ cent), and the honest answer is that the data contradict each other.
 `check_rotor_balance` refuses a flight whose median centroid lies more than
 `MAX_CENTROID_OFFSET` of the arm off the rotors' centre (4× what balanced vehicles show, and
 below what one rotor reading half its speed gives on a quadrotor, about 0.3).
+
+`rescale_wrong_rotor` corrects the one case the data can: a single rotor channel reading a
+constant share of its speed (the Crazyflie brushed flights' rotor 1, whose RPM deck reads
+half while its motor command matches the others'). The scale s of the rotor whose median
+speed is furthest below the others' is the one that puts the centroid at the centre in the
+least-squares sense over the flying samples: with a_k = r_w n_w,k² and b_k = Σ_i r_i n_i,k²
+(hubs relative to the centre), s² − 1 = −Σ a_k·b_k / Σ a_k·a_k. The flight is corrected only
+when that brings the centroid within `MAX_CENTROID_OFFSET`, and the correction is said in a
+note; otherwise the rotor speeds contradict each other and the flight is refused.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from mavsysid.estimation.flight_data import FlightData
@@ -22,7 +33,8 @@ from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["MAX_CENTROID_OFFSET", "check_rotor_balance", "thrust_centroid_offset"]
+__all__ = ["MAX_CENTROID_OFFSET", "check_rotor_balance", "rescale_wrong_rotor",
+           "thrust_centroid_offset"]
 
 #: Largest offset of the thrust centroid from the rotors' centre, as a share of the arm.
 MAX_CENTROID_OFFSET = 0.2
@@ -77,3 +89,59 @@ def check_rotor_balance(flight: FlightData, config: VehicleConfig,
         f"{100 * max_offset:.0f} % expected); rotor {worst + 1}'s median speed is "
         f"{100 * ratio[worst]:.0f} % of the rotors' median: a rotor-speed channel reading "
         "wrong, or a centre of gravity far off the rotors' centre")
+
+
+def rescale_wrong_rotor(flight: FlightData, config: VehicleConfig,
+                        max_offset: float = MAX_CENTROID_OFFSET
+                        ) -> tuple[FlightData, str | None]:
+    """The flight with one rotor channel rescaled when it alone puts the centroid off centre.
+
+    Parameters
+    ----------
+    flight : FlightData
+    config : VehicleConfig
+        Rotor positions.
+    max_offset : float
+        Share of the arm.
+
+    Returns
+    -------
+    flight : FlightData
+        Unchanged when the centroid is within ``max_offset`` or no single-rotor scale brings
+        it there (then `check_rotor_balance` refuses it); else with the rotor's speeds
+        multiplied by s.
+    note : str or None
+        What was corrected, and why.
+    """
+    offset = thrust_centroid_offset(flight.rotor_speeds, config)
+    if float(np.hypot(*offset)) <= max_offset:
+        return flight, None
+    n = np.asarray(flight.rotor_speeds, float)
+    median = np.median(n, axis=0)
+    if not np.median(median) > 0.0:
+        return flight, None
+    worst = int(np.argmin(median / np.median(median)))
+    r = config.rotor_positions[:, :2]
+    r = r - r.mean(axis=0)
+    n2 = n**2
+    use = (n2.sum(axis=1) > 0.0) & (n[:, worst] > 0.0)
+    a = n2[use, worst, None] * r[worst]
+    b = n2[use] @ r
+    denominator = float(np.sum(a * a))
+    if not denominator > 0.0:
+        return flight, None
+    scale_sq = 1.0 - float(np.sum(a * b)) / denominator
+    if not scale_sq > 0.0:
+        return flight, None
+    scale = float(np.sqrt(scale_sq))
+    corrected = n.copy()
+    corrected[:, worst] *= scale
+    if float(np.hypot(*thrust_centroid_offset(corrected, config))) > max_offset:
+        return flight, None
+    note = (f"{flight.source}: rotor {worst + 1}'s speeds put the thrust centroid "
+            f"{100 * float(np.hypot(*offset)):.0f} % of the arm off the rotors' centre while "
+            f"the vehicle holds its attitude; its channel reads {100 / scale:.0f} % of the "
+            f"speed that balances the others and was multiplied by {scale:.3g} (a rotor-speed "
+            "channel reading a constant share; check its sensor)")
+    return dataclasses.replace(flight, rotor_speeds=corrected,
+                               warnings=(*flight.warnings, note)), note

@@ -83,7 +83,8 @@ class WrenchBalanceResult:
         "roll_pitch_band_hz", "yaw_band_hz", "force_lowpass_hz", "delay_s",
         "delay_sigma_s"}, "holdout": {…} or None, "rows", "notes"}``.
         """
-        data_sigma = np.sqrt(np.sum(self.sigma_parts**2, axis=0))
+        with np.errstate(over="ignore", invalid="ignore"):
+            data_sigma = np.sqrt(np.sum(self.sigma_parts**2, axis=0))
         parameters = {}
         for k, name in enumerate(PARAMETER_NAMES):
             parameters[name] = {

@@ -1,32 +1,58 @@
 """One estimation job: read a flight log and estimate θ (the work of ``mavsysid estimate``).
 
 `run_estimate` is what the command line and the tests call; the console layer
-(``mavsysid estimate``) only parses its options, calls it and prints. An estimate that is
-physically impossible or far outside the prior is refused here
-(`mavsysid.estimation.plausibility`), before anything is written. `checked_estimate` takes
-the same steps on a flight already read and gives θ̂ and Σ as ``estimate`` reports them
-(re-planning in flight, `mavsysid.pipeline.replanned_stream`, and its offline evaluation).
+(``mavsysid estimate``) only parses its options, calls it and prints. Two estimates come
+from the flight: the force and torque balance (`mavsysid.estimation.wrench_balance`, with
+its held-out check) and the filter with its batch refinement
+(`mavsysid.estimation.estimator`). When the balance answers, the filter checks it and θ is
+answered per parameter (`mavsysid.estimation.parameter_answer`): a filter that cannot
+follow the flight, or whose θ is refused (`check_result`: physically impossible, far
+outside the prior, contradicting the log's equation-error fit), leaves the balance's
+answer, with the reason in the notes. A flight is refused only when neither determines a
+parameter. A rotor channel that reads a constant share of its speed is rescaled first
+(`mavsysid.estimation.rotor_balance.rescale_wrong_rotor`). `checked_estimate` takes the
+filter's steps on a flight already read and gives θ̂ and Σ (re-planning in flight,
+`mavsysid.pipeline.replanned_stream`, and its offline evaluation).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.flight_data import FlightData
+import numpy as np
+from mavsysid.estimation.estimator import (
+    EstimatorSettings,
+    estimate_parameters,
+    prior_from_config,
+)
+from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
 from mavsysid.estimation.guard import check_agreement
+from mavsysid.estimation.parameter_answer import (
+    AT_BOUND,
+    BOUND_SIGMAS,
+    DETERMINED,
+    NOT_DETERMINED,
+    answer_parameters,
+    balance_only_result,
+    with_answer,
+)
 from mavsysid.estimation.plausibility import (
     check_plausible,
     vanishing_floor,
     vanishing_parameters,
 )
+from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import EstimationResult, ParameterEstimate
 from mavsysid.estimation.robust_covariance import widened
+from mavsysid.estimation.rotor_balance import rescale_wrong_rotor
 from mavsysid.estimation.tilt_consistency import check_kinematics
-from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+from mavsysid.estimation.wrench_balance import WrenchBalanceResult, fit_wrench_balance
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
+
+from mavsysid.errors import JobFailedError
 
 __all__ = ["EstimateRun", "Estimator", "check_result", "checked_estimate", "run_estimate"]
 
@@ -73,23 +99,107 @@ def run_estimate(
     Returns
     -------
     EstimateRun
+        With the balance's answer the result carries ``status``, ``answer_source``,
+        ``balance`` (and its held-out check), ``mismatch`` and, when the filter could not
+        answer, ``filter_refusal``.
 
     Raises
     ------
     JobFailedError
-        The final θ is physically impossible (c_T, c_D, c_M or J ≤ 0, J breaking the
-        triangle inequality) or far outside the prior, or the log's equation-error fit
-        contradicts it (`mavsysid.estimation.guard.check_agreement`); one line naming the
-        log, the parameter and the numbers. Also before estimating, when the logged motion
+        The balance determines nothing (or could not run) and the filter's θ is physically
+        impossible (c_T, c_D, c_M or J ≤ 0, J breaking the triangle inequality), far
+        outside the prior, contradicted by the log's equation-error fit
+        (`mavsysid.estimation.guard.check_agreement`), or the filter diverged; one line
+        naming the log and both reasons. Also before estimating, when the logged motion
         contradicts the logged tilt: a wrong clock or position unit
         (`mavsysid.estimation.tilt_consistency.check_kinematics`).
     """
     config = load_vehicle(vehicle)
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
-    result = (estimate or estimate_parameters)(flight, config, settings)
-    check_result(flight.source, result, config.limits.rotor_speed_max)
-    return EstimateRun(config, flight, result)
+    settings = settings or EstimatorSettings()
+    prior = prior_from_config(config, settings)
+    if flight.rotor_count == config.rotor_count:
+        flight, _ = rescale_wrong_rotor(flight, config)
+    balance, balance_refusal = _balance(flight, config, prior)
+    if balance is not None:
+        report_stage("the force and torque balance answered; checking it with the filter")
+        settings = replace(settings, restart_diverged=False)
+    try:
+        result = (estimate or estimate_parameters)(flight, config, settings)
+        check_result(flight.source, result, config.limits.rotor_speed_max)
+    except JobFailedError as error:
+        reason = str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
+        if balance is None and balance_refusal is None:
+            raise
+        if balance is None:
+            raise JobFailedError(
+                f"{flight.source}: this flight determines no parameter: {balance_refusal}; "
+                f"and {reason}") from error
+        return EstimateRun(config, flight, _answered(None, reason, balance, config, flight,
+                                                     prior))
+    if balance is None:
+        if balance_refusal is not None:
+            result = replace(result, notes=result.notes + (
+                f"no force and torque balance check: {balance_refusal}",))
+        return EstimateRun(config, flight, result)
+    return EstimateRun(config, flight, _answered(result, None, balance, config, flight, prior))
+
+
+def _balance(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
+             ) -> tuple[WrenchBalanceResult | None, str | None]:
+    """The force and torque balance, or None and why it gave no answer."""
+    if flight.rotor_count != config.rotor_count or flight.duration < MIN_DURATION:
+        return None, None  # the estimator says what is wrong with the input
+    report_stage("fitting the force and torque balance")
+    try:
+        return fit_wrench_balance(flight, config, prior), None
+    except JobFailedError as error:
+        return None, str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
+    except np.linalg.LinAlgError:
+        return None, "the force and torque balance is numerically singular on this flight"
+
+
+def _answered(result: EstimationResult | None, filter_refusal: str | None,
+              balance: WrenchBalanceResult, config: VehicleConfig, flight: FlightData,
+              prior: ParameterEstimate) -> EstimationResult:
+    """The per-parameter answer (`mavsysid.estimation.parameter_answer`) and its notes."""
+    estimate, status, source, mismatch = answer_parameters(result, balance, prior)
+    notes = list(balance.notes)
+    if result is None:
+        notes.append(f"the filter and batch could not follow this flight ({filter_refusal}); "
+                     "the answer is the force and torque balance's")
+        result = balance_only_result(
+            balance, prior, (config.noise.position_sigma, config.noise.attitude_sigma),
+            flight.pose_source, flight.true_theta, tuple(flight.warnings))
+    if mismatch:
+        notes.append("the filter and the force and torque balance disagree on "
+                     + "; ".join(mismatch) + ": the balance's value stands; the model "
+                     "misses something (mavsysid diagnose names what)")
+    for label, why in ((NOT_DETERMINED, "the prior's value and σ are kept"),
+                       (AT_BOUND, f"the data put it within {BOUND_SIGMAS:g} σ of 0")):
+        names = [n for n, s in zip(PARAMETER_NAMES, status, strict=True) if s == label]
+        if names:
+            notes.append(f"{', '.join(names)}: {label}; {why}")
+    notes.extend(_triangle_note(estimate, status))
+    return with_answer(result, estimate, status, source, mismatch, balance, filter_refusal,
+                       tuple(notes))
+
+
+def _triangle_note(estimate: ParameterEstimate, status: tuple[str, ...]) -> list[str]:
+    """A kept prior inertia that breaks the triangle inequality with determined ones."""
+    j = estimate.value[3:6]
+    known = [s == DETERMINED for s in status[3:6]]
+    names = PARAMETER_NAMES[3:6]
+    out = []
+    for k in range(3):
+        others = [i for i in range(3) if i != k]
+        if not known[k] and all(known[i] for i in others) and j[k] > j[others[0]] + j[others[1]]:
+            out.append(f"the prior {names[k]} = {j[k]:.3g} kg·m² exceeds "
+                       f"{names[others[0]]} + {names[others[1]]} = "
+                       f"{j[others[0]] + j[others[1]]:.3g} kg·m² (determined): the rigid-body "
+                       f"bound a vehicle file should respect")
+    return out
 
 
 def check_result(source: str, result: EstimationResult,

@@ -6,8 +6,10 @@ samples come from a stalled estimator, a lost motion-capture body, a dead ESC te
 channel or a logger repeating its last value; the filter would take them for a vehicle
 that stopped dead, or for a rotor that carries no thrust. They are left out as gaps
 (`drop_unphysical_samples`, called by `mavsysid.estimation.readers.checks.validate_flight`),
-with one note each. On the ground (a noise-free simulation, a pre-arm estimator, idling
-rotors) a signal may well stand still, so only runs mostly at flying thrust count.
+with one note each; one rotor's dead readings, while the vehicle keeps flying and the rotor
+reads elsewhere, are filled from the other rotors instead (`fill_dead_rotor`). On the
+ground (a noise-free simulation, a pre-arm estimator, idling rotors) a signal may well
+stand still, so only runs mostly at flying thrust count.
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ from mavsysid.errors import LogFormatError
 __all__ = [
     "FLYING_THRUST",
     "MAX_BODY_RATE",
+    "MIN_LIVE_TIME",
     "attitude_jumps",
     "dead_rotor_samples",
     "drop_unphysical_samples",
+    "fill_dead_rotor",
     "frozen_samples",
 ]
 
@@ -40,6 +44,9 @@ MAX_BODY_RATE = np.deg2rad(2000.0)
 def attitude_jumps(t: np.ndarray, q: np.ndarray, source: str
                    ) -> tuple[np.ndarray, list[str]]:
     """Steps between samples where the attitude turns faster than `MAX_BODY_RATE`.
+
+    The rate of a fresh attitude is measured from the last fresh one before it: a held
+    (repeated) attitude followed by a new one is a slow turn, not a jump.
 
     Parameters
     ----------
@@ -58,8 +65,12 @@ def attitude_jumps(t: np.ndarray, q: np.ndarray, source: str
     notes : list of str
         One line when there is any.
     """
-    cosine = np.clip(np.abs(np.sum(q[1:] * q[:-1], axis=1)), 0.0, 1.0)
-    rate = 2.0 * np.arccos(cosine) / np.diff(t)
+    # A pose streamed at a lower rate (or lost packets) repeats; the turn since the last
+    # fresh attitude took the whole time since then, not one sample period.
+    fresh = np.flatnonzero(np.concatenate([[True], np.any(q[1:] != q[:-1], axis=1)]))
+    cosine = np.clip(np.abs(np.sum(q[fresh[1:]] * q[fresh[:-1]], axis=1)), 0.0, 1.0)
+    rate = np.full(t.shape[0] - 1, 0.0)
+    rate[fresh[1:] - 1] = 2.0 * np.arccos(cosine) / (t[fresh[1:]] - t[fresh[:-1]])
     jump = np.flatnonzero(rate > MAX_BODY_RATE)
     if not jump.size:
         return np.empty((0, 2)), []
@@ -155,6 +166,65 @@ def _stuck_rotor_samples(t: np.ndarray, n: np.ndarray, airborne: np.ndarray,
     return frozen_samples(t, n, airborne & ~saturated, min_run)
 
 
+#: Time at flying thrust in which a rotor must read a speed for its dead readings to be
+#: filled from the others (`fill_dead_rotor`), s: its ratio to them is a median over it.
+MIN_LIVE_TIME = 1.0
+
+
+def fill_dead_rotor(t: np.ndarray, n: np.ndarray, dead: np.ndarray, airborne: np.ndarray,
+                    source: str) -> tuple[np.ndarray, str | None]:
+    """One rotor's dead readings (0 while the vehicle flies) taken from the other rotors.
+
+    When every dead sample is one rotor w reading 0, and w reads a speed for at least
+    `MIN_LIVE_TIME` of the flight at flying thrust, its speed in the dead samples is r × the
+    others' RMS speed, r the median of its ratio to them where it reads: the vehicle kept
+    flying, so the channel, not the motor, is dead. The fill carries w's share of the
+    thrust but none of its differential (roll, pitch and yaw) information; the note says
+    so. Otherwise nothing is filled (the samples are left out as gaps).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s.
+    n : ndarray, shape (N, k)
+        Rotor speeds, rad/s.
+    dead : ndarray of bool, shape (N,)
+        `dead_rotor_samples`.
+    airborne : ndarray of bool, shape (N,)
+        Samples at flying thrust.
+    source : str
+        The file, for the note.
+
+    Returns
+    -------
+    n : ndarray, shape (N, k)
+        The speeds, filled (a copy) or as given.
+    note : str or None
+        What was filled; None when nothing was.
+    """
+    if not dead.any() or n.shape[1] < 3:
+        return n, None
+    zero = n[dead] == 0.0
+    rotors = np.flatnonzero(zero.any(axis=0))
+    if rotors.size != 1 or not zero[:, rotors[0]].all():
+        return n, None
+    w = int(rotors[0])
+    others = np.sqrt(np.mean(np.delete(n, w, axis=1) ** 2, axis=1))
+    live = airborne & ~dead & (n[:, w] > 0.0) & (others > 0.0)
+    period = float(np.median(np.diff(t))) if t.size > 1 else np.inf
+    if live.sum() < 2 or live.sum() * period < MIN_LIVE_TIME:
+        return n, None
+    ratio = float(np.median(n[live, w] / others[live]))
+    filled = n.copy()
+    filled[dead, w] = ratio * others[dead]
+    return filled, (
+        f"{source}: rotor {w + 1} reads 0 while the others fly in "
+        f"{_plural(int(dead.sum()), 'sample')} (first at t = {t[int(np.argmax(dead))]:.3f} s) "
+        "and the vehicle keeps flying: a dead reading; its speed there is taken as "
+        f"{ratio:.3g} × the others' RMS speed (its median ratio to them where it reads), which "
+        "carries its thrust but not its share of the roll, pitch and yaw information")
+
+
 def drop_unphysical_samples(t: np.ndarray, stacked: np.ndarray, source: str,
                             vehicle: VehicleConfig, min_run: float
                             ) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -200,12 +270,18 @@ def drop_unphysical_samples(t: np.ndarray, stacked: np.ndarray, source: str,
         (_stuck_rotor_samples(t, n, airborne, min_run),
          "the rotor speeds repeat one value exactly in {count} (first at t = {first:.3f} s), "
          f"in flight runs longer than {min_run:g} s: a stuck reading"),
-        (dead_rotor_samples(t, n, typical >= weight, min_run),
-         "a rotor reads 0 while the others fly in {count} (first at t = {first:.3f} s), in "
-         f"runs longer than {min_run:g} s: a dead reading or a stopped motor"),
     ]
+    dead = dead_rotor_samples(t, n, typical >= weight, min_run)
+    filled, note = fill_dead_rotor(t, n, dead, airborne, source)
+    if note is not None:
+        stacked = stacked.copy()
+        stacked[:, 7:] = filled
+        dead = np.zeros_like(dead)
+    found.append((dead, "a rotor reads 0 while the others fly in {count} (first at t = "
+                  f"{{first:.3f}} s), in runs longer than {min_run:g} s: a dead reading or a "
+                  "stopped motor"))
     drop = np.zeros(t.shape[0], dtype=bool)
-    notes = []
+    notes = [] if note is None else [note]
     for flagged, what in found:
         if flagged.any():
             detail = what.format(count=_plural(int(flagged.sum()), "sample"),

@@ -96,3 +96,16 @@ def test_noise_matching_the_assumption_changes_nothing():
     assert used_p == pytest.approx(3 * NOISE_TOLERANCE * 5e-4, rel=0.1)
     assert used_a == assumed[1]
     assert note is not None and "measured from the pose" in note
+
+
+@pytest.mark.parametrize("taps", [5, 63, 65, 151])
+@pytest.mark.parametrize("shape", [(3000,), (3000, 4)])
+def test_smoother_filter_is_the_zero_padded_convolution(taps, shape):
+    """Direct or by FFT overlap-add, the filter is np.convolve(mode="same") per column."""
+    from mavsysid.estimation.equation_error import convolve_columns
+
+    rng = np.random.default_rng(taps)
+    x, kernel = rng.standard_normal(shape), rng.standard_normal(taps)
+    columns = x.reshape(shape[0], -1)
+    want = np.column_stack([np.convolve(c, kernel, mode="same") for c in columns.T])
+    np.testing.assert_allclose(convolve_columns(x, kernel).reshape(shape[0], -1), want, atol=1e-12)

@@ -217,12 +217,31 @@ def test_clean_simulated_rotor_dips_are_kept(flight: CleanFlight) -> None:
     assert (n < 0.01 * n.max()).any()  # the premise: the dips exist
 
 
+def test_one_dead_rotor_channel_is_filled_from_the_others(flight: CleanFlight) -> None:
+    """One rotor reading 0 for 2 s while the vehicle flies (and reading elsewhere): kept,
+    its speed there taken from the others at its usual ratio, with a note."""
+    n = flight.rotor_speeds.copy()
+    n[300:500, 2] = 0.0
+    stacked = np.column_stack([flight.position, flight.quaternion, n])
+    t, out, notes = drop_unphysical_samples(flight.t, stacked, "x", load_vehicle("firefly"),
+                                            MAX_GAP)
+    assert t.size == flight.t.size
+    assert len(notes) == 1 and "rotor 3 reads 0" in notes[0] and "taken as" in notes[0]
+    filled = out[300:500, 7 + 2]
+    live = filled > 0.0  # the zeros while the others fly (the rest was never flagged)
+    assert live.sum() > 100
+    truth = flight.rotor_speeds[300:500, 2]
+    assert abs(np.median(filled[live] / truth[live]) - 1.0) < 0.1
+
+
 @pytest.mark.parametrize("kind", ["zero", "stuck"])
-def test_dead_or_stuck_rotor_is_left_out(flight: CleanFlight, kind: str) -> None:
+def test_dead_or_stuck_rotors_are_left_out(flight: CleanFlight, kind: str) -> None:
+    """Two rotors reading 0 (no single channel to fill), or all rotors stuck: left out."""
     n = flight.rotor_speeds.copy()
     rows = slice(300, 500)  # 2 s in the air
     if kind == "zero":
         n[rows, 2] = 0.0
+        n[rows, 0] = 0.0
     else:
         n[rows] = n[300]
     stacked = np.column_stack([flight.position, flight.quaternion, n])
@@ -241,3 +260,20 @@ def test_attitude_jump_splits_the_flight(flight: CleanFlight) -> None:
     gaps, notes = attitude_jumps(flight.t, q, "x")
     np.testing.assert_array_equal(gaps, [[flight.t[399], flight.t[400]]])
     assert "faster than 2000 °/s" in notes[0]
+
+
+@pytest.mark.parametrize("held", [5, 40])
+def test_held_attitude_then_fresh_one_is_no_jump(flight: CleanFlight, held: int) -> None:
+    """An attitude held for several samples, then fresh, turns over the whole hold: no jump."""
+    q = flight.quaternion.copy()
+    q[300:300 + held] = q[300]  # the pose stream repeated its last value (lost packets)
+    assert attitude_jumps(flight.t, q, "x")[0].shape == (0, 2)
+
+
+def test_attitude_jump_after_a_hold_is_found(flight: CleanFlight) -> None:
+    """A 180° turn right after a held attitude is still a jump, placed where it happens."""
+    q = flight.quaternion.copy()
+    q[300:303] = q[300]
+    q[303:] = q[303:, [1, 0, 3, 2]] * [-1.0, 1.0, -1.0, 1.0]
+    gaps, _ = attitude_jumps(flight.t, q, "x")
+    np.testing.assert_array_equal(gaps, [[flight.t[302], flight.t[303]]])

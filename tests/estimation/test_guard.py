@@ -12,6 +12,7 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.guard import (
     AGREEMENT_SIGMAS,
     AGREEMENT_TOLERANCE,
+    DIVERGED_NIS,
     NIS_FACTOR,
     check_agreement,
     disagreements,
@@ -175,3 +176,18 @@ def test_vanishing_c_d_is_no_divergence_with_linear_rotor_drag():
     estimate = ParameterEstimate(theta, np.diag(sigma**2))
     assert "not positive" in divergence(t, nis, estimate, PRIOR)
     assert divergence(t, nis, estimate, PRIOR, vanishing_parameters(["rotor_drag_linear"])) is None
+
+
+def test_an_impossible_theta_is_not_reported_as_divergence() -> None:
+    """A run that ends at an inertia breaking the triangle inequality 'ended at a θ that is
+    not physical'; only innovations beyond the bound or an overflow are 'diverged'."""
+    from mavsysid.estimation.guarded_filter import failure_phrase
+    from mavsysid.estimation.plausibility import implausibility
+
+    theta = load_vehicle("quad_x").theta.copy()
+    theta[5] = 3.0 * (theta[3] + theta[4])
+    reason = implausibility(theta, 0.01 * theta, theta)
+    assert reason is not None and "triangle" in reason
+    assert failure_phrase(reason).startswith("ended at a θ that is not physical")
+    assert failure_phrase(f"{DIVERGED_NIS} 812 over 1 s windows").startswith("diverged")
+    assert failure_phrase("the state overflowed").startswith("diverged")

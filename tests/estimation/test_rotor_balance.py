@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.rotor_balance import check_rotor_balance, thrust_centroid_offset
+from mavsysid.estimation.rotor_balance import (
+    check_rotor_balance,
+    rescale_wrong_rotor,
+    thrust_centroid_offset,
+)
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import JobFailedError
@@ -37,3 +41,34 @@ def test_a_rotor_reading_half_its_speed_is_refused_naming_it(rotor):
                        ) as info:
         check_rotor_balance(_flight(scale), CONFIG)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(("rotor", "share"), [(0, 0.5), (3, 0.4)])
+def test_a_rotor_reading_a_constant_share_is_rescaled_and_said(rotor, share):
+    """One rotor reading a constant share: scaled back within 3 %, a note naming it; the
+    flight then passes the balance check."""
+    scale = np.ones(4)
+    scale[rotor] = share
+    flight = _flight(scale)
+    corrected, note = rescale_wrong_rotor(flight, CONFIG)
+    ratio = corrected.rotor_speeds[:, rotor] / flight.rotor_speeds[:, rotor]
+    assert abs(ratio[0] * share - 1.0) < 0.03
+    np.testing.assert_array_equal(np.delete(corrected.rotor_speeds, rotor, axis=1),
+                                  np.delete(flight.rotor_speeds, rotor, axis=1))
+    assert note is not None and f"rotor {rotor + 1}'s" in note and note in corrected.warnings
+    check_rotor_balance(corrected, CONFIG)
+
+
+def test_balanced_rotors_are_not_rescaled():
+    """A balanced flight comes back unchanged, without a note."""
+    flight = _flight(np.array([1.03, 0.97, 1.02, 0.98]))
+    corrected, note = rescale_wrong_rotor(flight, CONFIG)
+    assert corrected is flight and note is None
+
+
+def test_two_wrong_rotors_are_not_rescaled():
+    """Two rotors reading wrong on one side: no single scale balances them; left to refusal."""
+    corrected, note = rescale_wrong_rotor(_flight(np.array([0.3, 0.3, 1.0, 1.0])), CONFIG)
+    assert note is None
+    with pytest.raises(JobFailedError):
+        check_rotor_balance(corrected, CONFIG)

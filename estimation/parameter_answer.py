@@ -1,0 +1,182 @@
+"""The per-parameter answer of ``mavsysid estimate``: the balance, checked by the filter.
+
+Two estimates come from one flight: the force and torque balance
+(`mavsysid.estimation.wrench_balance`, which follows real data: band, window and
+rotor-to-pose offset chosen from the flight, HAC σ widened by the errors in the variables and
+by split disagreements) and the filter with its batch refinement
+(`mavsysid.estimation.estimator`, the paper's estimator, more precise where its model and
+noise assumptions hold). Per parameter:
+
+* both determine it and agree (within `AGREEMENT_SIGMAS` × their combined σ, or within the
+  relative tolerance `mavsysid.estimation.guard.AGREEMENT_TOLERANCE`): the filter's value
+  and σ;
+* both determine it and disagree: the balance's value and σ stand, and the disagreement is
+  reported as a mismatch (what ``diagnose`` looks for), not a refusal;
+* one determines it: that one's value and σ (the filter's only when it followed the flight);
+* neither: c_D whose data value lies within `BOUND_SIGMAS` σ of 0 is "at the bound"
+  (drag linear in rotor speed, or none: the value clipped at 0 with the data's σ); anything
+  else is "not determined by this flight" and keeps the prior's value and σ.
+
+A filter "determines" a parameter when its σ is at most
+`mavsysid.estimation.parameter_status.MAX_RELATIVE_SIGMA` of its value, the balance's own
+rule. The covariance keeps the cross terms within each source and none between sources.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from mavsysid.estimation.guard import AGREEMENT_TOLERANCE
+from mavsysid.estimation.parameter_status import MAX_RELATIVE_SIGMA
+from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.estimation.wrench_balance_result import WrenchBalanceResult
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
+from mavsysid.vehicle.linearization import MEAS_DIM
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["AGREEMENT_SIGMAS", "AT_BOUND", "BOUND_SIGMAS", "DETERMINED", "NOT_DETERMINED",
+           "answer_parameters", "balance_only_result", "with_answer"]
+
+DETERMINED = "determined"
+NOT_DETERMINED = "not determined by this flight"
+AT_BOUND = "at the bound"
+
+#: Filter and balance disagree beyond this many combined σ (and the relative tolerance).
+AGREEMENT_SIGMAS = 3.0
+#: A data value within this many σ of 0 puts c_D at its bound.
+BOUND_SIGMAS = 2.0
+_C_D = PARAMETER_NAMES.index("c_D")
+
+
+def _filter_determines(estimate: ParameterEstimate) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (estimate.value > 0.0) & (estimate.sigma <= MAX_RELATIVE_SIGMA * estimate.value)
+
+
+def _balance_data_sigma(balance: WrenchBalanceResult) -> np.ndarray:
+    with np.errstate(over="ignore", invalid="ignore"):  # a σ part of 1e200: inf, not determined
+        return np.sqrt(np.sum(balance.sigma_parts**2, axis=0))
+
+
+def _at_bound(balance: WrenchBalanceResult | None, prior: ParameterEstimate) -> np.ndarray:
+    """c_D whose data value lies within `BOUND_SIGMAS` of 0, more tightly than the prior."""
+    out = np.zeros(len(PARAMETER_NAMES), bool)
+    if balance is None:
+        return out
+    v, s = float(balance.data.value[_C_D]), float(_balance_data_sigma(balance)[_C_D])
+    out[_C_D] = (math.isfinite(v) and math.isfinite(s) and s > 0.0
+                 and abs(v) <= BOUND_SIGMAS * s and s < float(prior.sigma[_C_D]))
+    return out
+
+
+def answer_parameters(
+    filter_result: EstimationResult | None, balance: WrenchBalanceResult | None,
+    prior: ParameterEstimate,
+) -> tuple[ParameterEstimate, tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """θ per parameter from the filter's result and the balance (module docstring).
+
+    Parameters
+    ----------
+    filter_result : EstimationResult or None
+        The filter and batch estimate (None: it could not follow the flight).
+    balance : WrenchBalanceResult or None
+        The force and torque balance (None: it determined nothing or could not run).
+    prior : ParameterEstimate
+        The prior θ and σ (SI).
+
+    Returns
+    -------
+    estimate : ParameterEstimate
+        θ and its covariance, SI.
+    status : tuple of 6 str
+        `DETERMINED`, `NOT_DETERMINED` or `AT_BOUND` per parameter.
+    source : tuple of 6 str
+        "filter", "balance" or "prior" per parameter.
+    mismatch : tuple of str
+        One phrase per parameter where the filter and the balance disagree.
+
+    Raises
+    ------
+    JobFailedError
+        Neither estimate given.
+    """
+    if filter_result is None and balance is None:
+        raise JobFailedError("no estimate to answer from")
+    n = len(PARAMETER_NAMES)
+    f_est = None if filter_result is None else filter_result.final
+    f_det = np.zeros(n, bool) if f_est is None else _filter_determines(f_est)
+    b_det = np.zeros(n, bool) if balance is None else np.asarray(balance.determined, bool)
+    source = np.full(n, "prior", dtype=object)
+    mismatch = []
+    for j, name in enumerate(PARAMETER_NAMES):
+        if f_det[j] and b_det[j]:
+            assert f_est is not None and balance is not None
+            fv, fs = float(f_est.value[j]), float(f_est.sigma[j])
+            bv, bs = float(balance.estimate.value[j]), float(balance.estimate.sigma[j])
+            spread = math.hypot(fs, bs)
+            delta = abs(fv - bv)
+            if delta > AGREEMENT_SIGMAS * spread and delta > AGREEMENT_TOLERANCE[j] * abs(bv):
+                source[j] = "balance"
+                mismatch.append(
+                    f"{name}: filter {fv:.4g} ± {fs:.2g}, balance {bv:.4g} ± {bs:.2g} "
+                    f"{PARAMETER_UNITS[name]} ({delta / spread:.1f} σ apart)")
+            else:
+                source[j] = "filter"
+        elif f_det[j]:
+            source[j] = "filter"
+        elif b_det[j]:
+            source[j] = "balance"
+    bound = _at_bound(balance, prior) & (source == "prior")
+    value = prior.value.astype(float).copy()
+    cov = np.diag(prior.sigma**2)
+    for name, est in (("filter", f_est), ("balance", None if balance is None
+                                          else balance.estimate)):
+        idx = np.flatnonzero(source == name)
+        if est is None or not idx.size:
+            continue
+        value[idx] = est.value[idx]
+        cov[np.ix_(idx, idx)] = est.covariance[np.ix_(idx, idx)]
+    status = [DETERMINED if s != "prior" else NOT_DETERMINED for s in source]
+    if balance is not None:
+        for j in np.flatnonzero(bound):
+            value[j] = max(float(balance.data.value[j]), 0.0)
+            cov[j, :] = cov[:, j] = 0.0
+            cov[j, j] = float(_balance_data_sigma(balance)[j]) ** 2
+            status[j], source[j] = AT_BOUND, "balance"
+    return (ParameterEstimate(value, cov), tuple(status), tuple(str(s) for s in source),
+            tuple(mismatch))
+
+
+def _empty_history() -> EstimationHistory:
+    return EstimationHistory(
+        t=np.zeros(0), theta=np.zeros((0, 6)), theta_sigma=np.zeros((0, 6)),
+        position=np.zeros((0, 3)), quaternion=np.zeros((0, 4)),
+        innovation=np.zeros((0, MEAS_DIM)), nis=np.zeros(0))
+
+
+def balance_only_result(balance: WrenchBalanceResult, prior: ParameterEstimate,
+                        measurement_sigma: tuple[float, float], pose_source: str,
+                        true_theta: np.ndarray | None, notes: tuple[str, ...]
+                        ) -> EstimationResult:
+    """An `EstimationResult` for a flight the filter could not follow: the balance alone.
+
+    ``filtered`` holds the balance's θ (there is no filter estimate), the history is empty
+    and the convergence times NaN.
+    """
+    return EstimationResult(
+        prior=prior, filtered=balance.estimate, refined=None, history=_empty_history(),
+        convergence_time=np.full(len(PARAMETER_NAMES), np.nan), true_theta=true_theta,
+        measurement_sigma=measurement_sigma, pose_source=pose_source, notes=notes)
+
+
+def with_answer(result: EstimationResult, estimate: ParameterEstimate,
+                status: tuple[str, ...], source: tuple[str, ...],
+                mismatch: tuple[str, ...], balance: WrenchBalanceResult | None,
+                filter_refusal: str | None, notes: tuple[str, ...]) -> EstimationResult:
+    """``result`` carrying the per-parameter answer (its ``final``) and how it was formed."""
+    return replace(result, answer=estimate, status=status, answer_source=source,
+                   mismatch=mismatch, balance=balance, filter_refusal=filter_refusal,
+                   notes=result.notes + notes)

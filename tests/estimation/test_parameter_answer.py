@@ -1,0 +1,99 @@
+"""The per-parameter answer: the balance checked by the filter, statuses and mismatches."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from mavsysid.estimation.balance_fit import FitChoices
+from mavsysid.estimation.parameter_answer import (
+    AT_BOUND,
+    DETERMINED,
+    NOT_DETERMINED,
+    answer_parameters,
+    balance_only_result,
+)
+from mavsysid.estimation.parameter_status import DataTheta
+from mavsysid.estimation.results import EstimationResult, ParameterEstimate
+from mavsysid.estimation.wrench_balance_result import WrenchBalanceResult
+from mavsysid.vehicle.config import load_vehicle
+
+from mavsysid.errors import JobFailedError
+
+THETA = load_vehicle("micro_quad").theta
+PRIOR = ParameterEstimate(THETA * 1.3, np.diag((0.5 * THETA * 1.3) ** 2))
+
+
+def _balance(value: np.ndarray, relative_sigma: np.ndarray) -> WrenchBalanceResult:
+    sigma = np.abs(value) * relative_sigma
+    determined = (value > 0) & (relative_sigma <= 0.125)
+    estimate = ParameterEstimate(np.where(determined, value, PRIOR.value),
+                                 np.diag(np.where(determined, sigma, PRIOR.sigma) ** 2))
+    parts = np.zeros((6, 6))
+    parts[0] = sigma
+    data = DataTheta(value, np.diag(sigma**2), np.zeros(2), np.zeros(2), np.zeros(6))
+    return WrenchBalanceResult(estimate, determined, data, parts, np.zeros(2), PRIOR,
+                               FitChoices(0.06, None, None, 0.0, 0.0), 0.001, None, 100)
+
+
+def _filter(value: np.ndarray, relative_sigma: float) -> EstimationResult:
+    balance = _balance(THETA, np.full(6, 0.01))
+    result = balance_only_result(balance, PRIOR, (1e-3, 1e-3), "motion_capture", None, ())
+    est = ParameterEstimate(value, np.diag((relative_sigma * value) ** 2))
+    return dataclasses.replace(result, filtered=est, refined=est)
+
+
+def test_agreeing_estimates_give_the_filters_value():
+    """Both determine θ and agree: the filter's (more precise) value and σ, no mismatch."""
+    balance = _balance(THETA * 1.01, np.full(6, 0.02))
+    filt = _filter(THETA * 0.999, 0.005)
+    estimate, status, source, mismatch = answer_parameters(filt, balance, PRIOR)
+    np.testing.assert_allclose(estimate.value, THETA * 0.999)
+    assert status == (DETERMINED,) * 6 and source == ("filter",) * 6 and mismatch == ()
+
+
+def test_disagreement_keeps_the_balance_and_reports_a_mismatch():
+    """The filter 30 % off on j_x, far beyond both σ: the balance's j_x stands, named."""
+    balance = _balance(THETA, np.full(6, 0.02))
+    filt = _filter(THETA * np.array([1, 1, 1, 1.3, 1, 1]), 0.005)
+    estimate, status, source, mismatch = answer_parameters(filt, balance, PRIOR)
+    assert source[3] == "balance" and estimate.value[3] == pytest.approx(THETA[3])
+    assert status[3] == DETERMINED
+    assert len(mismatch) == 1 and mismatch[0].startswith("j_x:")
+
+
+def test_undetermined_parameters_keep_the_prior():
+    """Neither determines c_M, j_z: prior value and σ, status 'not determined by this flight'."""
+    rel = np.array([0.01, 0.05, 0.6, 0.05, 0.05, 0.6])
+    estimate, status, source, _ = answer_parameters(None, _balance(THETA, rel), PRIOR)
+    for j in (2, 5):
+        assert status[j] == NOT_DETERMINED and source[j] == "prior"
+        assert estimate.value[j] == PRIOR.value[j] and estimate.sigma[j] == PRIOR.sigma[j]
+    assert status[0] == DETERMINED and source[0] == "balance"
+
+
+def test_drag_within_noise_of_zero_is_at_the_bound():
+    """c_D's data value within 2 σ of 0 (σ below the prior's): 'at the bound', not refused."""
+    value = THETA.copy()
+    value[1] = -0.2 * PRIOR.sigma[1]
+    rel = np.full(6, 0.02)
+    rel[1] = 0.5  # σ = 0.1 × the prior's σ: informative, and 0 is within 2 σ
+    estimate, status, source, _ = answer_parameters(None, _balance(value, rel), PRIOR)
+    assert status[1] == AT_BOUND and source[1] == "balance"
+    assert estimate.value[1] == 0.0 and estimate.sigma[1] == pytest.approx(abs(value[1]) * 0.5)
+
+
+def test_a_filter_that_determines_what_the_balance_does_not_answers_for_it():
+    """The balance leaves j_z to the prior; a filter that determines it gives its value."""
+    rel = np.array([0.01, 0.05, 0.05, 0.05, 0.05, 0.6])
+    filt = _filter(THETA * 1.02, 0.01)
+    estimate, status, source, _ = answer_parameters(filt, _balance(THETA, rel), PRIOR)
+    assert source[5] == "filter" and status[5] == DETERMINED
+    assert estimate.value[5] == pytest.approx(THETA[5] * 1.02)
+
+
+def test_nothing_to_answer_from_is_refused():
+    """No filter and no balance: refused, not an answer made of the prior."""
+    with pytest.raises(JobFailedError):
+        answer_parameters(None, None, PRIOR)
