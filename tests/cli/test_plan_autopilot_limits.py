@@ -18,9 +18,10 @@ def planned(monkeypatch: pytest.MonkeyPatch) -> list:
 
     def run_plan(vehicle, settings, random=False, progress=True, say=None):
         calls.append(settings)
-        from mavsysid.vehicle.config import load_vehicle
+        from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
-        return fake_result(load_vehicle(vehicle), settings, "dopt")
+        config = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
+        return fake_result(config, settings, "dopt")
 
     monkeypatch.setattr("mavsysid.cli.plan.run_plan", run_plan)
     return calls

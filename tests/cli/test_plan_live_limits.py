@@ -11,7 +11,7 @@ from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.autopilot_limits import kinematic_limits, parameter_names
 from mavsysid.flight.loopback_ports import free_tcp_port
 from mavsysid.flight.simvehicle.params import default_parameters
-from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
 from mavsysid.cli import main
 from tests.support.stream_flights import SimProcess
@@ -28,7 +28,8 @@ def planned(monkeypatch: pytest.MonkeyPatch) -> list:
 
     def run_plan(vehicle, settings, random=False, progress=True, say=None):
         calls.append(settings)
-        return fake_result(load_vehicle(vehicle), settings, "dopt")
+        config = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
+        return fake_result(config, settings, "dopt")
 
     monkeypatch.setattr("mavsysid.cli.plan.run_plan", run_plan)
     return calls
