@@ -66,7 +66,7 @@ def test_estimate_report_history_and_stages(pose_csv, tmp_path, capsys):
     # A stage's progress lines ("batch refinement 2/30: …") repeat its first word.
     first_words = [s.split(" ")[0] for s in stages]
     collapsed = [w for i, w in enumerate(first_words) if i == 0 or w != first_words[i - 1]]
-    assert collapsed == ["reading", "filtering", "fitting", "batch", "writing"]
+    assert collapsed == ["reading", "fitting", "the", "filtering", "fitting", "batch", "writing"]
     assert all(line.startswith("mavsysid estimate: [") for line in verbose.err.splitlines())
     assert sorted(_check_page(report / "index.html")) == sorted(
         ["parameters.png", "innovations.png", "rotor_speeds.png", "wrench.png"])

@@ -123,18 +123,21 @@ def test_controller_picks_mixer_by_config() -> None:
 
 @pytest.mark.slow
 def test_exact_plans_fly_with_fewer_saturated_ticks() -> None:
-    """Firefly plans made with "exact" (10 % rotor headroom), truth = the plan's θ: the
+    """Firefly plans made with "exact" (`plan`'s default rotor headroom), truth = the plan's θ: the
     exact mixer saturates on at most 1 % of ticks in the median flight, and on fewer ticks
     in all than the A⁺ mixer flying the same plans."""
     from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
     from mavsysid.planner.rrbt import plan
     from mavsysid.planner.settings import PlannerSettings
 
+    from mavsysid.cli.plan import DEFAULT_ROTOR_HEADROOM
+
     config = replace(load_vehicle("firefly"), allocation="exact")
     fractions: dict[str, list[float]] = {"exact": [], "pseudo_inverse": []}
     for seed in range(5):
         settings = PlannerSettings(budget=20.0, planning_time=np.inf, max_samples=150,
-                                   refine_steps=300, seed=seed, rotor_headroom=0.1)
+                                   refine_steps=300, seed=seed,
+                                   rotor_headroom=DEFAULT_ROTOR_HEADROOM)
         trajectory = plan(config, settings).trajectory
         for mode, values in fractions.items():
             sim = Simulator(replace(config, allocation=mode), true_theta=config.theta,
