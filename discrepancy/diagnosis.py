@@ -58,6 +58,7 @@ __all__ = [
     "Diagnosis",
     "DiagnosisSettings",
     "Gap",
+    "HeldOutGap",
     "check_refits",
     "diagnose_flight",
     "reestimate",
@@ -96,6 +97,49 @@ class DiagnosisSettings:
 
 
 @dataclass(frozen=True)
+class HeldOutGap:
+    """Held-out RMSE of the prior model, the diagnosed θ, and θ with the named effects.
+
+    The ratios pool the axes as `mavsysid.estimation.holdout.HoldoutCheck` does: the
+    specific force (m/s², three axes) and the angular acceleration (rad/s², three axes),
+    each RMSE over the prior model's; below 1 predicts unseen data better than the prior.
+
+    Attributes
+    ----------
+    prior_rmse, before_rmse, after_rmse : ndarray, shape (6,)
+        Per axis, SI.
+    rows : int
+        Held-out samples compared.
+    """
+
+    prior_rmse: np.ndarray
+    before_rmse: np.ndarray
+    after_rmse: np.ndarray
+    rows: int
+
+    @staticmethod
+    def _pooled(model: np.ndarray, prior: np.ndarray, axes: slice) -> float:
+        m, p = model[axes], prior[axes]
+        total = float(np.sum(p**2))
+        return float(np.sqrt(np.sum(m**2) / total)) if total > 0 else float("nan")
+
+    def ratios(self, which: str) -> tuple[float, float]:
+        """(force, torque) RMSE ratios to the prior of ``"before"`` or ``"after"``."""
+        model = self.before_rmse if which == "before" else self.after_rmse
+        return (self._pooled(model, self.prior_rmse, slice(0, 3)),
+                self._pooled(model, self.prior_rmse, slice(3, 6)))
+
+    def as_dict(self) -> dict:
+        """JSON-ready: per-axis RMSE lists and the pooled ratios before and after."""
+        (fb, tb), (fa, ta) = self.ratios("before"), self.ratios("after")
+        return {"rows": self.rows, "prior_rmse": self.prior_rmse.tolist(),
+                "before_rmse": self.before_rmse.tolist(),
+                "after_rmse": self.after_rmse.tolist(),
+                "force_ratio_before": fb, "torque_ratio_before": tb,
+                "force_ratio_after": fa, "torque_ratio_after": ta}
+
+
+@dataclass(frozen=True)
 class Gap:
     """The gap between model and measurement before and after the augmentation.
 
@@ -111,6 +155,8 @@ class Gap:
         remaining noise), or 0 with no effect.
     bic_before, bic_after : float
         Effective BIC of the base and augmented regressions on the training data.
+    held_out : HeldOutGap or None
+        The held-out RMSE before and after, as ratios to the prior model's.
     """
 
     before: AxisStats
@@ -119,6 +165,7 @@ class Gap:
     shrink: float
     bic_before: float
     bic_after: float
+    held_out: HeldOutGap | None = None
 
 
 @dataclass(frozen=True)
@@ -226,6 +273,7 @@ def diagnose_flight(
     flight: FlightData, config: VehicleConfig, theta: np.ndarray | None = None,
     settings: DiagnosisSettings | None = None, known_effects: Sequence[ModelEffect] = (),
     progress: Callable[[str], None] | None = None, with_nis: bool = True,
+    free_theta: np.ndarray | None = None,
 ) -> Diagnosis:
     """Find, name and fit what the model gets wrong on a flight; show the gap shrink.
 
@@ -244,6 +292,11 @@ def diagnose_flight(
         `mavsysid.estimation.progress.report_stage`).
     with_nis : bool
         Run the parameter EKF for the NIS (needs its compiled kernels).
+    free_theta : ndarray of bool, shape (6,), optional
+        Given: ``theta`` is an answer to start from (the force and torque balance's), not
+        refitted on its own; only these entries may move with the named effects, the
+        others stay where ``theta`` has them (the prior, for a parameter the flight does
+        not determine). None: θ is refitted on the training data first, every entry free.
 
     Returns
     -------
@@ -267,13 +320,20 @@ def diagnose_flight(
     library = tuple(c for c in candidate_library(names) if c.name not in known_names)
     say = progress or report_stage
     uniform, resampling = average_blocks(*resample_flight(flight))
-    problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling)
+    free = None if free_theta is None else np.asarray(free_theta, bool).reshape(6)
+    problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling,
+                              theta_free=free)
     used = problem.keep()
     t = uniform.t
     split, train, test = _split(problem, used, settings)
-    say(f"fitting θ to the flight's accelerations ({len(t)} samples at "
-        f"{1.0 / problem.dt:.4g} Hz)")
-    base, weights = fit_theta(problem, train)
+    if free is None:
+        say(f"fitting θ to the flight's accelerations ({len(t)} samples at "
+            f"{1.0 / problem.dt:.4g} Hz)")
+        base, weights = fit_theta(problem, train)
+    else:
+        say(f"residual of the given θ ({len(t)} samples at {1.0 / problem.dt:.4g} Hz, "
+            f"{settings.smoother.window * 1e3:.0f} ms smoother)")
+        base, weights = fit_theta(problem, train, iterations=0)
     selection = forward_select(base, library, train, weights, settings.selection, say)
     fitted = tuple(f.effect for f in selection.effects)
     measured, model, pose = base.evaluate()
@@ -285,9 +345,12 @@ def diagnose_flight(
                        *nis_stats(nis_before, test))
     after = AxisStats(axis_rms(r_after[test]), ljung_box(r_after[test], base.block),
                       *nis_stats(nis_after, test))
+    r_prior = base.residual((), config.theta)
+    held_out = HeldOutGap(axis_rms(r_prior[test]), before.rms, after.rms, len(test))
     noise = axis_rms(r_after[train])
     flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
-    gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
+    gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after,
+              held_out)
     where = where_large(base, pose, r_before, used, noise, train, settings.window)
     changed = resampling.resampled or resampling.averaged > 1
     notes = [MASS_NOTE, *([resampling.describe()] if changed else []),

@@ -1,8 +1,9 @@
-"""Tests of the diagnose job (`mavsysid.pipeline.diagnose`): it refuses an impossible θ
-before anything is written."""
+"""Tests of the diagnose job (`mavsysid.pipeline.diagnose`): without a balance answer it
+refuses an impossible θ before anything is written; from the balance's θ it answers."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -45,6 +46,7 @@ def test_diagnose_refuses_an_impossible_refit(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.setattr(diagnose_job, "load_flight",
                         lambda log, config, **kw: SimpleNamespace(source=str(log)))
     monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
+    monkeypatch.setattr(diagnose_job, "balance_start", lambda *a, **kw: (None, None))
     named = SimpleNamespace(name="body_drag")
     monkeypatch.setattr(diagnose_job, "diagnose_flight", lambda *a, **kw: SimpleNamespace(
         theta_before=PRIOR.copy(), theta_after=refit, theta_after_sigma=None,
@@ -62,6 +64,7 @@ def test_diagnose_notes_an_impossible_refit_the_named_effects_explain(
     monkeypatch.setattr(diagnose_job, "load_flight",
                         lambda log, config, **kw: SimpleNamespace(source=str(log)))
     monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
+    monkeypatch.setattr(diagnose_job, "balance_start", lambda *a, **kw: (None, None))
     named = SimpleNamespace(name="body_drag")
     diagnosis = SimpleNamespace(theta_before=before, theta_after=_theta(),
                                 theta_after_sigma=None, effects=(named,),
@@ -75,3 +78,62 @@ def test_diagnose_notes_an_impossible_refit_the_named_effects_explain(
         **{**vars(diagnosis), "theta_after": before, "effects": (), "augmented_effects": ()}))
     with pytest.raises(JobFailedError, match=r"^flight\.ulg: θ refitted without effects: J"):
         diagnose_job.run_diagnose("flight.ulg", "quad_x")
+
+
+def test_diagnose_from_the_balance_keeps_its_theta_when_the_refit_is_impossible(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """θ from the balance: an impossible refit with the named effects is a note, not a
+    refusal, and the balance's θ stands as the answer."""
+    balance = _theta(j_x=PRIOR[3] * 1.1)
+    refit = _theta(j_z=3.0 * (PRIOR[3] + PRIOR[4]))
+    monkeypatch.setattr(diagnose_job, "load_flight",
+                        lambda log, config, **kw: SimpleNamespace(source=str(log)))
+    monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
+    determined = np.array([True, False, False, True, True, True])
+    monkeypatch.setattr(diagnose_job, "balance_start", lambda *a, **kw: (
+        diagnose_job.BalanceStart(balance, determined, 0.06, "fitted here"), None))
+    named = SimpleNamespace(name="body_drag")
+    seen = {}
+
+    def diagnosed(flight, config, theta, settings, known, **kw):
+        seen.update(theta=theta, window=settings.smoother.window, free=kw["free_theta"])
+        return SimpleNamespace(theta_before=theta.copy(), theta_after=refit,
+                               theta_after_sigma=None, effects=(named,),
+                               augmented_effects=(named,), notes=())
+
+    monkeypatch.setattr(diagnose_job, "diagnose_flight", diagnosed)
+    monkeypatch.setattr(diagnose_job, "replace",
+                        lambda d, **kw: SimpleNamespace(**{**vars(d), **kw})
+                        if isinstance(d, SimpleNamespace) else dataclasses.replace(d, **kw))
+    d = diagnose_job.run_diagnose("flight.ulg", "quad_x").diagnosis
+    assert np.array_equal(seen["theta"], balance) and seen["window"] == 0.06
+    assert np.array_equal(seen["free"], determined)
+    assert np.array_equal(d.theta_after, balance)
+    assert any("triangle inequality" in n and "balance's θ is kept" in n for n in d.notes)
+    assert any("c_D, c_M not determined" in n for n in d.notes)
+
+
+@pytest.mark.slow
+def test_diagnose_answers_a_flight_with_on_board_estimator_noise(tmp_path: Path) -> None:
+    """A flight logged through an on-board estimator (correlated pose noise, jitter, gaps)
+    and a prior 30–50 % off: diagnose starts from the balance, holds what it does not
+    determine at the prior, and gives the held-out gap before and after; no refusal."""
+    from tests.support.realistic import prior_config, realistic_micro_quad_flight
+
+    flight = realistic_micro_quad_flight(tmp_path / "f", seed=2, duration=30.0)
+    vehicle, prior = prior_config(flight.config, tmp_path / "prior.toml", seed=2)
+    run = diagnose_job.run_diagnose(flight.pose, vehicle, with_nis=False)
+    d = run.diagnosis
+    start = [n for n in d.notes if n.startswith("θ from the force and torque balance")]
+    assert start, d.notes
+    held = np.array([n in start[0].split(";")[-1] for n in PARAMETER_NAMES])
+    assert np.array_equal(d.theta_identified[held], prior[held])
+    g = d.gap.held_out
+    assert g is not None and g.rows > 100
+    for which in ("before", "after"):
+        assert all(np.isfinite(r) and r > 0 for r in g.ratios(which))
+    # The balance's θ predicts the held-out forces better than the 30–50 % prior does.
+    assert g.ratios("before")[0] < 1.0
+    if d.effects:
+        assert d.gap.after.rms[list(d.gap.flagged_axes)].sum() \
+            < d.gap.before.rms[list(d.gap.flagged_axes)].sum()
