@@ -194,15 +194,22 @@ def run_diagnose(
         and the parameter).
     """
     config = load_vehicle(vehicle)
-    theta, known = None, tuple(config.effects)
+    theta, known, early = None, tuple(config.effects), []
     if estimate is not None:
         theta, estimated = read_estimate(estimate)
         known = estimated or known
         # The config's own θ is the prior, checked (and warned about) when loaded.
-        check_plausible(str(estimate), theta, None, config.theta, what="identified θ",
-                        may_vanish=vanishing_parameters(e.name for e in known),
-                        floor=vanishing_floor(known, float(theta[0]),
-                                              config.limits.rotor_speed_max))
+        try:
+            check_plausible(str(estimate), theta, None, config.theta, what="identified θ",
+                            may_vanish=vanishing_parameters(e.name for e in known),
+                            floor=vanishing_floor(known, float(theta[0]),
+                                                  config.limits.rotor_speed_max))
+        except JobFailedError as error:
+            # The balance's answer mixes determined values with prior ones the flight
+            # says nothing about: a bound they break together is the prior's to fix.
+            if _balance_from_estimate(Path(estimate)) is None:
+                raise
+            early.append(str(error).splitlines()[0])
     flight = load_flight(log, config, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
     start_from, why_not = balance_start(flight, config, estimate)
@@ -224,13 +231,15 @@ def run_diagnose(
     notes = [f"θ from the force and torque balance ({start_from.source}; smoother "
              f"{1e3 * start_from.window:.0f} ms)"
              + (f"; {', '.join(held)} not determined by this flight, held at the prior"
-                if held else "")]
+                if held else ""), *early]
     if with_nis and not nis:
         notes.append("no EKF NIS: " + ("the estimate's parameter filter could not follow "
                      "this flight" if start_from.source != "fitted here" else
                      "run `mavsysid estimate` and pass its --estimate for it"))
     try:
-        notes += check_refits(flight.source, diagnosis, config)
+        # θ before the effects is the balance's own, judged above: only the refit counts.
+        notes += [n for n in check_refits(flight.source, diagnosis, config)
+                  if not n.startswith("θ refitted without")]
     except JobFailedError as error:
         reason = str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
         notes.append(f"{reason}; the balance's θ is kept")

@@ -137,3 +137,44 @@ def test_diagnose_answers_a_flight_with_on_board_estimator_noise(tmp_path: Path)
     if d.effects:
         assert d.gap.after.rms[list(d.gap.flagged_axes)].sum() \
             < d.gap.before.rms[list(d.gap.flagged_axes)].sum()
+
+
+def test_an_estimate_answered_by_the_balance_is_diagnosed_despite_a_prior_bound(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """An estimate.json whose balance determines j_x, j_y below the prior j_z (the triangle
+    inequality broken by the prior's j_z) is diagnosed from the balance, with a note; the
+    same θ without a balance section is refused."""
+    theta = _theta(j_x=PRIOR[5] / 4, j_y=PRIOR[5] / 4)
+    status = ["determined", "not determined", "not determined", "determined", "determined",
+              "not determined"]
+    body = {"parameters": {n: {"value": float(v)} for n, v in zip(PARAMETER_NAMES, theta,
+                                                                   strict=True)}}
+    balance = {"parameters": {n: {"value": float(v), "status": s} for n, v, s in
+                              zip(PARAMETER_NAMES, theta, status, strict=True)},
+               "choices": {"window_s": 0.08}}
+    estimate = tmp_path / "estimate.json"
+    estimate.write_text(json.dumps({**body, "balance": balance, "filter_refusal": "diverged"}))
+    monkeypatch.setattr(diagnose_job, "load_flight",
+                        lambda log, config, **kw: SimpleNamespace(source=str(log)))
+    monkeypatch.setattr(diagnose_job, "check_kinematics", lambda flight: None)
+    seen = {}
+
+    def diagnosed(flight, config, theta, settings, known, **kw):
+        seen.update(theta=theta, window=settings.smoother.window, nis=kw["with_nis"])
+        return SimpleNamespace(theta_before=theta.copy(), theta_after=theta.copy(),
+                               theta_after_sigma=None, effects=(), augmented_effects=(),
+                               notes=())
+
+    monkeypatch.setattr(diagnose_job, "diagnose_flight", diagnosed)
+    monkeypatch.setattr(diagnose_job, "check_refits", lambda *a: ())
+    monkeypatch.setattr(diagnose_job, "replace",
+                        lambda d, **kw: SimpleNamespace(**{**vars(d), **kw})
+                        if isinstance(d, SimpleNamespace) else dataclasses.replace(d, **kw))
+    notes = diagnose_job.run_diagnose("flight.ulg", "quad_x", estimate).diagnosis.notes
+    assert np.array_equal(seen["theta"], theta) and seen["window"] == 0.08
+    assert seen["nis"] is False  # the estimate's filter did not follow the flight
+    assert any("triangle inequality" in n for n in notes)
+    assert any("c_D, c_M, j_z not determined" in n for n in notes)
+    estimate.write_text(json.dumps(body))
+    with pytest.raises(JobFailedError, match="triangle inequality"):
+        diagnose_job.run_diagnose("flight.ulg", "quad_x", estimate)
