@@ -124,7 +124,13 @@ class HeldOutGap:
         return float(np.sqrt(np.sum(m**2) / total)) if total > 0 else float("nan")
 
     def ratios(self, which: str) -> tuple[float, float]:
-        """(force, torque) RMSE ratios to the prior of ``"before"`` or ``"after"``."""
+        """(force, torque) RMSE ratios to the prior model's.
+
+        Parameters
+        ----------
+        which : {"before", "after"}
+            Without or with the named effects.
+        """
         model = self.before_rmse if which == "before" else self.after_rmse
         return (self._pooled(model, self.prior_rmse, slice(0, 3)),
                 self._pooled(model, self.prior_rmse, slice(3, 6)))
