@@ -103,13 +103,12 @@ def balance_start(flight: FlightData, config: VehicleConfig,
     config : VehicleConfig
         Mass, geometry and the prior θ.
     estimate : str or Path, optional
-        An ``estimate.json`` whose ``balance`` section is read; without one (or without
-        that section) the balance is fitted on ``flight``.
+        An ``estimate.json`` whose ``balance`` section is read (None without one: its θ
+        is the start); without an estimate the balance is fitted on ``flight``.
     """
     if estimate is not None:
         found = _balance_from_estimate(Path(estimate))
-        if found is not None:
-            return found, None
+        return found, None if found is not None else f"{estimate} has no balance section"
     from mavsysid.estimation.wrench_balance import fit_wrench_balance  # loads the estimator
 
     report_stage("fitting the force and torque balance")
@@ -174,7 +173,8 @@ def run_diagnose(
         Shipped vehicle name or TOML path; its ``[effects.*]`` are the known effects.
     estimate : str or Path, optional
         ``estimate.json``: its balance section is the θ to start from, its effects the
-        known ones; without a balance section, its θ is refitted.
+        known ones; without a balance section, its θ is refitted. Without an estimate,
+        the balance is fitted on the flight.
     settings : DiagnosisSettings, optional
         Its smoother window is replaced by the balance's when θ comes from the balance.
     with_nis : bool
