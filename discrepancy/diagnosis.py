@@ -275,6 +275,28 @@ def _shrink(before: AxisStats, after: AxisStats, contribution: np.ndarray, noise
     return flagged, float(1.0 - a / b)
 
 
+def _start_theta(flight: FlightData, config: VehicleConfig, theta: np.ndarray | None
+                 ) -> np.ndarray:
+    """θ to diagnose (the config's when None), refused unless finite with c_T, J > 0."""
+    theta0 = config.theta.copy() if theta is None else np.asarray(theta, float).reshape(6)
+    if not np.all(np.isfinite(theta0)) or theta0[0] <= 0.0 or np.any(theta0[3:] <= 0.0):
+        origin = "the estimate's" if theta is not None else f"vehicle {config.name}'s"
+        raise InputError(f"{flight.source}: {origin} θ to diagnose must be finite with "
+                         f"c_T > 0 and a positive inertia, got {np.array2string(theta0)}")
+    return theta0
+
+
+def _base(problem: ResidualProblem, train: np.ndarray, say: Callable[[str], None]
+          ) -> tuple[ResidualProblem, np.ndarray]:
+    """The base model and axis weights: θ refitted (all free), or as given (a mask)."""
+    rate = f"{len(problem.flight.t)} samples at {1.0 / problem.dt:.4g} Hz"
+    if problem.theta_free is None:
+        say(f"fitting θ to the flight's accelerations ({rate})")
+        return fit_theta(problem, train)
+    say(f"residual of the given θ ({rate}, {problem.settings.window * 1e3:.0f} ms smoother)")
+    return fit_theta(problem, train, iterations=0)
+
+
 def diagnose_flight(
     flight: FlightData, config: VehicleConfig, theta: np.ndarray | None = None,
     settings: DiagnosisSettings | None = None, known_effects: Sequence[ModelEffect] = (),
@@ -299,10 +321,8 @@ def diagnose_flight(
     with_nis : bool
         Run the parameter EKF for the NIS (needs its compiled kernels).
     free_theta : ndarray of bool, shape (6,), optional
-        Given: ``theta`` is an answer to start from (the force and torque balance's), not
-        refitted on its own; only these entries may move with the named effects, the
-        others stay where ``theta`` has them (the prior, for a parameter the flight does
-        not determine). None: θ is refitted on the training data first, every entry free.
+        Given: ``theta`` is an answer (the balance's), not refitted; only these entries
+        move with the named effects. None: θ is refitted first, every entry free.
 
     Returns
     -------
@@ -315,31 +335,19 @@ def diagnose_flight(
     if not 0.05 <= settings.holdout <= 0.5:
         raise InputError(f"{flight.source}: held-out fraction {settings.holdout:g}: expected "
                          "0.05 … 0.5")
-    theta0 = config.theta.copy() if theta is None else np.asarray(theta, float).reshape(6)
-    if not np.all(np.isfinite(theta0)) or theta0[0] <= 0.0 or np.any(theta0[3:] <= 0.0):
-        origin = "the estimate's" if theta is not None else f"vehicle {config.name}'s"
-        raise InputError(f"{flight.source}: {origin} θ to diagnose must be finite with "
-                         f"c_T > 0 and a positive inertia, got {np.array2string(theta0)}")
+    theta0 = _start_theta(flight, config, theta)
     known = tuple(known_effects)
-    names = settings.candidates
-    known_names = {e.name for e in known}
-    library = tuple(c for c in candidate_library(names) if c.name not in known_names)
+    library = tuple(c for c in candidate_library(settings.candidates)
+                    if c.name not in {e.name for e in known})
     say = progress or report_stage
     uniform, resampling = average_blocks(*resample_flight(flight))
-    free = None if free_theta is None else np.asarray(free_theta, bool).reshape(6)
     problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling,
-                              theta_free=free)
+                              theta_free=None if free_theta is None else
+                              np.asarray(free_theta, bool).reshape(6))
     used = problem.keep()
     t = uniform.t
     split, train, test = _split(problem, used, settings)
-    if free is None:
-        say(f"fitting θ to the flight's accelerations ({len(t)} samples at "
-            f"{1.0 / problem.dt:.4g} Hz)")
-        base, weights = fit_theta(problem, train)
-    else:
-        say(f"residual of the given θ ({len(t)} samples at {1.0 / problem.dt:.4g} Hz, "
-            f"{settings.smoother.window * 1e3:.0f} ms smoother)")
-        base, weights = fit_theta(problem, train, iterations=0)
+    base, weights = _base(problem, train, say)
     selection = forward_select(base, library, train, weights, settings.selection, say)
     fitted = tuple(f.effect for f in selection.effects)
     measured, model, pose = base.evaluate()
@@ -351,16 +359,15 @@ def diagnose_flight(
                        *nis_stats(nis_before, test))
     after = AxisStats(axis_rms(r_after[test]), ljung_box(r_after[test], base.block),
                       *nis_stats(nis_after, test))
-    r_prior = base.residual((), config.theta)
-    held_out = HeldOutGap(axis_rms(r_prior[test]), before.rms, after.rms, len(test))
+    held_out = HeldOutGap(axis_rms(base.residual((), config.theta)[test]), before.rms,
+                          after.rms, len(test))
     noise = axis_rms(r_after[train])
     flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
     gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after,
               held_out)
     where = where_large(base, pose, r_before, used, noise, train, settings.window)
-    changed = resampling.resampled or resampling.averaged > 1
-    notes = [MASS_NOTE, *([resampling.describe()] if changed else []),
-             *nis_notes]
+    notes = [MASS_NOTE, *([resampling.describe()] if resampling.resampled
+                          or resampling.averaged > 1 else []), *nis_notes]
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
         where=where, theta_identified=theta0, theta_before=selection.theta_before,

@@ -220,6 +220,14 @@ def run_diagnose(
                     f"balance answer ({why_not})",) if why_not else ()))
         return DiagnoseRun(config, flight, replace(diagnosis,
                                                    notes=(*diagnosis.notes, *notes)))
+    return DiagnoseRun(config, flight, _from_balance(flight, config, start_from, settings,
+                                                     known, with_nis, early))
+
+
+def _from_balance(flight: FlightData, config: VehicleConfig, start_from: BalanceStart,
+                  settings: DiagnosisSettings | None, known: tuple[ModelEffect, ...],
+                  with_nis: bool, early: list[str]) -> Diagnosis:
+    """The diagnosis from the balance's θ (module docstring), with its notes."""
     settings = settings or DiagnosisSettings()
     settings = replace(settings, smoother=replace(settings.smoother, window=start_from.window))
     # The NIS needs the parameter filter (a minute on 50 s at 500 Hz): run only where
@@ -245,7 +253,7 @@ def run_diagnose(
         notes.append(f"{reason}; the balance's θ is kept")
         diagnosis = replace(diagnosis, theta_after=diagnosis.theta_before.copy(),
                             theta_after_sigma=None)
-    return DiagnoseRun(config, flight, replace(diagnosis, notes=(*diagnosis.notes, *notes)))
+    return replace(diagnosis, notes=(*diagnosis.notes, *notes))
 
 
 def reestimate_comparison(run: DiagnoseRun) -> tuple[Any, Any]:
