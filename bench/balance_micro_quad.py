@@ -9,9 +9,9 @@ covers the truth; per flight the window, bands, offset and held-out ratios. A ch
 the balance's choices, made on real Crazyflie flights, hold on another vehicle's noise,
 lags and rates.
 
-The hidden linear rotor drag k n v adds k / (c_T n_hover) ≈ 0.0052 s/m to the quadratic
-drag the paper's model can express: the balance's c_D is that sum (+52 % on the truth's
-0.01), which the row prints as ``c_D with linear drag``.
+The hidden linear rotor drag k n v would add k / (c_T n_hover) ≈ 0.0052 s/m to the
+quadratic drag if the balance lacked its linear-drag nuisance column; the row still prints
+c_D against that sum as ``c_D with linear drag``, to show which of the two c_D follows.
 
     nice python bench/balance_micro_quad.py [--seeds 5] [--duration 60] [--effects ...]
 """

@@ -40,6 +40,15 @@ from tests.support.realistic import (
 
 #: Relative error allowed per parameter (c_D: 15 %, the rest 5 %).
 TOLERANCE = np.array([0.05, 0.15, 0.05, 0.05, 0.05, 0.05])
+#: The issue's acceptance target for this bench (c_T 5 %, c_D 15 %, J 10 %; c_M 5 %),
+#: counted beside the stricter `TOLERANCE`.
+ISSUE_TARGET = np.array([0.05, 0.15, 0.05, 0.10, 0.10, 0.10])
+
+
+def _passes(row: dict, tolerance: np.ndarray) -> bool:
+    """Every determined parameter within ``tolerance`` and covered by its interval."""
+    determined = np.array([s == "determined" for s in row["status"]])
+    return bool(np.all(((np.abs(row["error"]) <= tolerance) & row["covered"])[determined]))
 
 
 def run_seed(seed: int, duration: float, root: Path, sensor_path: bool = True,
@@ -109,14 +118,16 @@ def main() -> None:
             _print(rows[-1])
             sys.stdout.flush()
     done = [r for r in rows if r["code"] == 0]
-    passed = sum(bool(np.all(((np.abs(r["error"]) <= TOLERANCE) & r["covered"])[
-        np.array([s == "determined" for s in r["status"]])])) for r in done)
+    passed = sum(_passes(r, TOLERANCE) for r in done)
+    passed_issue = sum(_passes(r, ISSUE_TARGET) for r in done)
     refused = [r for r in rows if r["code"] in (2, 3)]
     internal = [r for r in rows if r["code"] not in (0, 2, 3)]
     print(f"\n{len(rows)} flights: {passed} with every determined parameter within tolerance "
           "and covered, "
           f"{len(done) - passed} confident and wrong (exit 0 outside tolerance or not "
           f"covered), {len(refused)} refused, {len(internal)} internal errors")
+    print(f"by the issue's target (c_T, c_M 5 %, c_D 15 %, J 10 %): {passed_issue} of "
+          f"{len(rows)} with every determined parameter within it and covered")
 
 
 if __name__ == "__main__":

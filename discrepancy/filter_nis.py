@@ -33,6 +33,17 @@ def filter_nis(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
     model follows the log, and θ is not reported. A run whose NIS level is beyond the
     guard's divergence bound (`mavsysid.estimation.guard.NIS_FACTOR`) raises
     `JobFailedError`, as an overflowed one does.
+
+    Parameters
+    ----------
+    flight : FlightData
+        The logged flight.
+    config : VehicleConfig
+        The vehicle, its θ the identified one.
+    effects : sequence of ModelEffect
+        Effects in the model, held at their values.
+    grid : ndarray, shape (M,)
+        Times at which the NIS is wanted, s (``flight.t`` itself: every sample).
     """
     from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
 
@@ -64,6 +75,19 @@ def nis_pair(flight: FlightData, config: VehicleConfig, known: tuple[ModelEffect
     rotor order, or time on the ground) that "no significant discrepancy" from the
     residual regression would be a confident wrong answer. A filter that cannot follow
     the augmented model (its effects held at the regression's values) costs only its NIS.
+
+    Parameters
+    ----------
+    flight : FlightData
+        The logged flight.
+    config : VehicleConfig
+        The vehicle, its θ the identified one.
+    known : tuple of ModelEffect
+        Effects the model already had.
+    fitted : tuple of ModelEffect
+        The named effects, at their fitted values.
+    grid : ndarray, shape (M,)
+        Times at which the NIS is wanted, s.
     """
     notes: list[str] = []
     report_stage("parameter filter without the named effects (NIS)")

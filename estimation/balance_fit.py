@@ -32,6 +32,7 @@ from mavsysid.estimation.coherence_band import (
     smoother_cutoff,
     smoother_window,
 )
+from mavsysid.estimation.parameter_status import MAX_RELATIVE_SIGMA
 from mavsysid.estimation.time_offset import MAX_DELAY, scan_delay
 from mavsysid.estimation.uniform_pose import UniformSegment
 from mavsysid.estimation.wrench_regressors import (
@@ -62,7 +63,9 @@ MAIN_COLUMNS = {"force": (), "torque": ((0, (0,)), (3, (1,)), (6, (2,)))}
 class FitChoices:
     """What the flight chose: window (s), bands (or None), offset δ (s), c_D for the rows.
 
-    ``force`` is the force rows' low-pass (a `Band` with ``low = 0``).
+    ``force`` is the force rows' low-pass (a `Band` with ``low = 0``); ``drag_linear``
+    (k / c_T, s·rad/m) and ``drag_c_d`` (s/m) the fitted drag in the thrust row's
+    magnitude (NaN: ``c_d``).
     """
 
     window: float
@@ -71,6 +74,8 @@ class FitChoices:
     delay: float
     c_d: float
     force: Band | None = None
+    drag_linear: float = 0.0
+    drag_c_d: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -122,7 +127,8 @@ def balance_rows_for(builders: list[BalanceBuilder], choices: FitChoices,
     fc = force or choices.force
     out = []
     for b in builders:
-        rows = b.rows(choices.delay, choices.c_d, rp, yw, fc)
+        rows = b.rows(choices.delay, choices.c_d, rp, yw, fc,
+                      drag_linear=choices.drag_linear, drag_c_d=choices.drag_c_d)
         rows = rows.rows(slice(None, None, _stride(choices, b.dt)))
         if len(rows) > 4:
             out.append(_dead_axes(rows, choices))
@@ -251,8 +257,14 @@ def fit_balance(segments: list[UniformSegment], config: VehicleConfig, c_d: floa
     """
     choices, builders = choose_fit(segments, config, c_d)
     force, torque, reverse = regress(balance_rows_for(builders, choices))
-    fitted_c_d = force.coefficients[1] / force.coefficients[0]
-    if np.isfinite(fitted_c_d) and fitted_c_d > 0.0 and fitted_c_d != c_d:
-        choices = replace(choices, c_d=float(fitted_c_d))
+    b, sigma = force.coefficients, force.sigma
+    fitted_c_d, fitted_linear = b[1] / b[0], b[2] / b[0]
+    # The rows' drag moments take the fitted c_D only where the flight separates it from
+    # the linear drag; the thrust row's magnitude takes the drag the fit sees, split or not.
+    separated = np.isfinite(sigma[1]) and sigma[1] <= MAX_RELATIVE_SIGMA * abs(b[1])
+    if np.isfinite(fitted_c_d) and np.isfinite(fitted_linear):
+        new_c_d = float(fitted_c_d) if separated and fitted_c_d > 0.0 else c_d
+        choices = replace(choices, c_d=new_c_d, drag_c_d=float(fitted_c_d),
+                          drag_linear=float(fitted_linear))
         force, torque, reverse = regress(balance_rows_for(builders, choices))
     return BalanceFit(choices, force, torque, reverse), builders

@@ -142,6 +142,11 @@ def fit_scales(effect: ModelEffect) -> np.ndarray:
     value of the effect's parameters (they share a unit: offsets, wind, drag terms) is the
     vehicle's own size; a start at zero, or below 10⁻³ of the catalogue scale, keeps the
     catalogue's.
+
+    Parameters
+    ----------
+    effect : ModelEffect
+        The effect, its values the start of the fit (SI).
     """
     catalogue = effect.parameter_scales()
     size = float(np.max(np.abs(effect.values))) if effect.values.size else 0.0

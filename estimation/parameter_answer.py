@@ -165,6 +165,21 @@ def balance_only_result(balance: WrenchBalanceResult, prior: ParameterEstimate,
 
     ``filtered`` holds the balance's θ (there is no filter estimate), the history is empty
     and the convergence times NaN.
+
+    Parameters
+    ----------
+    balance : WrenchBalanceResult
+        The force and torque balance's answer.
+    prior : ParameterEstimate
+        The prior θ and covariance.
+    measurement_sigma : tuple of float
+        Pose noise: position σ, m, and attitude σ, rad.
+    pose_source : str
+        Where the pose came from (motion capture, the autopilot's estimate).
+    true_theta : ndarray, shape (6,), optional
+        The truth of a simulated flight.
+    notes : tuple of str
+        Notes carried into the result.
     """
     return EstimationResult(
         prior=prior, filtered=balance.estimate, refined=None, history=_empty_history(),
@@ -176,7 +191,27 @@ def with_answer(result: EstimationResult, estimate: ParameterEstimate,
                 status: tuple[str, ...], source: tuple[str, ...],
                 mismatch: tuple[str, ...], balance: WrenchBalanceResult | None,
                 filter_refusal: str | None, notes: tuple[str, ...]) -> EstimationResult:
-    """``result`` carrying the per-parameter answer (its ``final``) and how it was formed."""
+    """``result`` carrying the per-parameter answer (its ``final``) and how it was formed.
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The filter's (or the balance-only) result.
+    estimate : ParameterEstimate
+        The answer θ and covariance.
+    status : tuple of str
+        Per parameter: determined, not determined by this flight, at the bound.
+    source : tuple of str
+        Per parameter: which estimate gave the value (filter, balance, prior).
+    mismatch : tuple of str
+        Parameters on which filter and balance disagree, in words.
+    balance : WrenchBalanceResult or None
+        The force and torque balance, if it ran.
+    filter_refusal : str or None
+        Why the filter's result was not used, if it was not.
+    notes : tuple of str
+        Notes appended to the result's.
+    """
     return replace(result, answer=estimate, status=status, answer_source=source,
                    mismatch=mismatch, balance=balance, filter_refusal=filter_refusal,
                    notes=result.notes + notes)

@@ -84,7 +84,13 @@ def _log_parameters(rec: rr.RecordingStream, result: EstimationResult) -> None:
 
 
 def answer_markdown(result: EstimationResult) -> str:
-    """The final θ per parameter (value, σ, status, source) and the held-out check, Markdown."""
+    """The final θ per parameter (value, σ, status, source) and the held-out check, Markdown.
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The estimate, with its per-parameter answer.
+    """
     final = result.final
     lines = ["| parameter | value | σ | status | from |", "|---|---|---|---|---|"]
     for j, name in enumerate(PARAMETER_NAMES):

@@ -160,7 +160,13 @@ def estimate_table(result: EstimationResult) -> ReportTable:
 
 def holdout_table(result: EstimationResult) -> ReportTable | None:
     """The held-out check of the force and torque balance: RMSE per axis and its ratio to
-    the prior model's; None without one."""
+    the prior model's; None without one.
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The estimate; its balance carries the held-out check.
+    """
     holdout = None if result.balance is None else result.balance.holdout
     if holdout is None:
         return None

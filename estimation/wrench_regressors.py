@@ -12,7 +12,12 @@ paper's model enter as nuisance coefficients, so that they are not taken for ine
 the rotors' own angular momentum h = J_r Σ ε_i n_i e_z, whose change J_r Σ ε_i ṅ_i turns
 the body about z (a rotor speeding up turns the body the other way; on small vehicles it
 rivals the drag moment) and whose precession −ω × h acts about x and y; and the rotor
-drag's yaw moment (coefficient c_T c_D / j_z).
+drag's yaw moment (coefficient c_T c_D / j_z). In the force rows, a rotor drag linear in
+rotor speed (`mavsysid.vehicle.model_effects.RotorDragLinear`, in-plane k, per unit k and
+mass) stands beside the quadratic c_T c_D: real rotors show both forms, and without it the
+quadratic c_D absorbs the linear one. In hover n barely varies, so the two columns are
+nearly collinear and c_D's σ with the nuisance included says whether the flight separates
+them (`mavsysid.estimation.parameter_status`).
 
 Each model column goes through the same smoother as the measured side
 (`mavsysid.estimation.equation_error.body_force_readout`, `body_rotation_readout`), so the
@@ -27,6 +32,7 @@ from typing import Protocol
 
 import numpy as np
 from mavsysid.estimation.equation_error import (
+    SmoothedPose,
     SmootherSettings,
     acceleration_kernel,
     body_force_readout,
@@ -35,14 +41,17 @@ from mavsysid.estimation.equation_error import (
 )
 from mavsysid.estimation.uniform_pose import UniformSegment
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.effect_base import EffectInputs
 from mavsysid.vehicle.mav_model import rotor_wrench
+from mavsysid.vehicle.model_effects import RotorDragLinear
 
 __all__ = ["FORCE_COEFFICIENTS", "ROTOR_FORCE_COLUMNS", "ROTOR_TORQUE_COLUMNS",
            "STACKED_COEFFICIENTS", "TORQUE_AXIS", "TORQUE_COEFFICIENTS", "BalanceBuilder",
            "BalanceRows", "BandFilter"]
 
-#: Coefficients of the force rows: c_T and c_T c_D.
-FORCE_COEFFICIENTS = ("c_T", "c_T*c_D")
+#: Coefficients of the force rows: c_T, c_T c_D and the nuisance ``drag_linear``, the
+#: in-plane k of a rotor drag linear in rotor speed (N·s/(m·rad)).
+FORCE_COEFFICIENTS = ("c_T", "c_T*c_D", "drag_linear")
 #: Coefficients of the torque rows, in column order. ``g_*`` are the gyroscopic
 #: coefficients −(j_z − j_y)/j_x, −(j_x − j_z)/j_y, −(j_y − j_x)/j_z; ``rotor_gyro_x`` is
 #: −J_r/j_x on Σε_i n_i ω_y, ``rotor_gyro_y`` is J_r/j_y on Σε_i n_i ω_x; ``drag_z`` is
@@ -55,7 +64,7 @@ TORQUE_AXIS = (0, 0, 0, 1, 1, 1, 2, 2, 2, 2)
 #: Columns of the torque rows that depend on the rotor speeds (the rest on the pose only).
 ROTOR_TORQUE_COLUMNS = (0, 2, 3, 5, 6, 7, 9)
 #: Columns of the force rows that depend on the rotor speeds.
-ROTOR_FORCE_COLUMNS = (0, 1)
+ROTOR_FORCE_COLUMNS = (0, 1, 2)
 #: All coefficients, force then torque: the stacked vector of `parameter_status`.
 STACKED_COEFFICIENTS = FORCE_COEFFICIENTS + TORQUE_COEFFICIENTS
 
@@ -70,7 +79,7 @@ class BalanceRows:
         s.
     force : ndarray, shape (N, 3)
         Measured body specific force, m/s².
-    force_columns : ndarray, shape (N, 3, 2)
+    force_columns : ndarray, shape (N, 3, 3)
         Model body specific force per unit of each `FORCE_COEFFICIENTS` entry.
     torque : ndarray, shape (N, 3)
         Measured body angular acceleration minus the model's rate term, rad/s².
@@ -114,19 +123,30 @@ def _unit_wrenches(n: np.ndarray, config: VehicleConfig, v_b: np.ndarray, w: np.
     return f_t, f_td - f_t, m_t, m_td - m_t, m_m
 
 
-def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float
-                             ) -> tuple[np.ndarray, np.ndarray]:
-    """The z row replaced by magnitudes: |f| against |thrust + c_D drag| per unit c_T.
+def _linear_drag_force(n: np.ndarray, config: VehicleConfig, pose: SmoothedPose,
+                       v_b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Body force of the catalogue's linear rotor drag per unit in-plane k (k_z = 0), N."""
+    inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, n, np.zeros(6),
+                          config.rotor_positions)
+    force, _ = RotorDragLinear(k=1.0, k_z=0.0).wrench(inputs)
+    return force
+
+
+def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float,
+                             drag_linear: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The z row replaced by magnitudes: |f| against |thrust + drag| per unit c_T.
 
     An attitude error ε turns the measured specific force out of z_B and shortens its z
     component by cos ε ≈ 1 − ε²/2: with a noisy attitude (an on-board estimator's, 1°) the
     z row alone would bias c_T low by σ_ε². The magnitude is free of it. The rotor drag,
     perpendicular to the thrust, lengthens it at second order, so the model's magnitude
-    includes it at the given c_D (linear in c_T; the drag column leaves this row).
+    includes it: c_D times the quadratic column and ``drag_linear`` (k / c_T) times the
+    linear one (linear in c_T; the drag columns leave this row).
     """
     force, cols = force.copy(), cols.copy()
     force[:, 2] = np.linalg.norm(force, axis=1)
-    cols[:, 2, 0] = np.linalg.norm(cols[:, :, 0] + c_d * cols[:, :, 1], axis=1)
+    drag = c_d * cols[:, :, 1] + drag_linear * cols[:, :, 2]
+    cols[:, 2, 0] = np.linalg.norm(cols[:, :, 0] + drag, axis=1)
     cols[:, 2, 1:] = 0.0
     return force, cols
 
@@ -171,7 +191,8 @@ class BalanceBuilder:
 
     def rows(self, delay: float, c_d: float, roll_pitch: BandFilter | None = None,
              yaw: BandFilter | None = None, force: BandFilter | None = None,
-             trim: float = 0.0, magnitude: bool = True) -> BalanceRows:
+             trim: float = 0.0, magnitude: bool = True, drag_linear: float = 0.0,
+             drag_c_d: float = float("nan")) -> BalanceRows:
         """The balance rows at ``delay`` (module docstring).
 
         Parameters
@@ -187,13 +208,18 @@ class BalanceBuilder:
             Time cut off each end, s, beyond the smoother's and the filters' edges.
         magnitude : bool
             Make the thrust row the specific force's magnitude (else its z component).
+        drag_linear, drag_c_d : float
+            k / c_T of the linear rotor drag (s·rad/m) and c_D (s/m, NaN: ``c_d``) in the
+            thrust row's magnitude.
         """
         n = self.segment.rotor_speeds(delay)
         n_dot = np.gradient(n, self.dt, axis=0)
         pose, config = self.pose, self.config
-        f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, pose.velocity_body(), pose.rates)
+        v_b = pose.velocity_body()
+        f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, v_b, pose.rates)
+        f_l = _linear_drag_force(n, config, pose, v_b, pose.rates)
         force_cols = np.stack([body_force_readout(pose, pose, f / config.mass, self.kernel)
-                               for f in (f_t, f_d)], axis=-1)
+                               for f in (f_t, f_d, f_l)], axis=-1)
         thrust_torque = m_t + c_d * m_d
         spin = n @ config.rotor_directions
         w = pose.rates
@@ -215,7 +241,7 @@ class BalanceBuilder:
             settle = max(settle, trim + force.settle())
         if magnitude:
             specific_force, force_cols = _thrust_row_as_magnitude(specific_force, force_cols,
-                                                                  c_d)
+                c_d if np.isnan(drag_c_d) else drag_c_d, drag_linear)
         for band, axes in ((roll_pitch, [0, 1]), (yaw, [2])):
             if band is not None:
                 torque[:, axes] = band.apply(torque[:, axes], self.dt)

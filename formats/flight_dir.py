@@ -20,7 +20,11 @@ from mavsysid.formats.poselog import read_text_file
 
 from mavsysid.errors import InputError, LogFormatError
 
-__all__ = ["new_flight_dir", "read_meta", "write_json_atomic", "write_meta"]
+__all__ = ["STREAM_SOURCE", "new_flight_dir", "read_meta", "write_json_atomic", "write_meta"]
+
+#: ``meta.json``'s ``"source"`` for a flight recorded by ``mavsysid stream``: its
+#: ``pose.csv`` holds the vehicle's telemetry, the autopilot's own estimate of the pose.
+STREAM_SOURCE = "mavlink-stream"
 
 
 def write_meta(path: str | Path, meta: Mapping[str, Any]) -> None:

@@ -217,6 +217,9 @@ def check_result(source: str, result: EstimationResult,
         The log, as named in the message.
     result : EstimationResult
         The estimate to check.
+    rotor_speed_max : float, optional
+        Top rotor speed, rad/s: with a linear rotor drag in the model, c_D may go as low as
+        keeps the rotor drag a drag up to it (`mavsysid.estimation.plausibility.vanishing_floor`).
 
     Raises
     ------

@@ -136,6 +136,13 @@ def time_derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
 
     Times that do not increase (a repeated row) would divide by zero: the samples are then
     taken as evenly spaced at the median step. Fewer than two samples give zeros.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Times, s.
+    x : ndarray, shape (N, ...)
+        Samples to differentiate along axis 0.
     """
     x = np.asarray(x, dtype=float)
     if len(t) < 2:
@@ -277,7 +284,13 @@ class ModelEffect:
         return zero_wrench(inputs)
 
     def air_velocity(self, inputs: EffectInputs) -> np.ndarray | None:
-        """The body's velocity through the air v_B − Rᵀ w (N, 3), m/s; None: still air."""
+        """The body's velocity through the air v_B − Rᵀ w (N, 3), m/s; None: still air.
+
+        Parameters
+        ----------
+        inputs : EffectInputs
+            State, rotor speeds and vehicle at N samples.
+        """
         return None
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray

@@ -370,7 +370,19 @@ class RotorSpeedLag(ModelEffect):
 
     def logged_step(self, dt: float, logged: np.ndarray, acting: np.ndarray,
                     acting_next: np.ndarray) -> np.ndarray:
-        """Acting → logged over one step dt, s: the next logged speeds (k,), rad/s."""
+        """Acting → logged over one step dt, s: the next logged speeds (k,), rad/s.
+
+        Parameters
+        ----------
+        dt : float
+            Step, s.
+        logged : ndarray, shape (k,)
+            Logged rotor speeds at the step's start, rad/s.
+        acting : ndarray, shape (k,)
+            Acting rotor speeds at the step's start, rad/s.
+        acting_next : ndarray, shape (k,)
+            Acting rotor speeds at the step's end, rad/s (linear in between).
+        """
         return lag_step(dt, float(self.values[0]), logged, acting, acting_next)
 
 

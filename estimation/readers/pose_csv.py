@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from mavsysid.estimation.readers.streams import LogStreams
-from mavsysid.formats.flight_dir import read_meta
+from mavsysid.formats.flight_dir import STREAM_SOURCE, read_meta
 from mavsysid.formats.parsed_log import Series
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.config import VehicleConfig
@@ -28,26 +28,33 @@ def read_pose_csv(path: Path, vehicle: VehicleConfig) -> LogStreams:
     ----------
     path : Path
         The ``pose.csv`` file; a ``meta.json`` beside it with ``"simulated": true``
-        supplies its ``"truth"`` block.
+        supplies its ``"truth"`` block, and one written by ``mavsysid stream`` marks the
+        pose as the autopilot's estimate.
     vehicle : VehicleConfig
         The vehicle: the file must have its k rotor-speed columns.
 
     Returns
     -------
     LogStreams
-        Motion-capture pose and rotor speeds on the same sample times.
+        Pose (motion capture, or the autopilot's estimate for a streamed flight) and rotor
+        speeds on the same sample times.
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         log = read_pose_log(path, vehicle.rotor_count)
     notes = tuple(" ".join(str(w.message).split()) for w in caught)
     truth = None
+    pose_source = "motion_capture"
     meta_path = path.parent / "meta.json"
     if meta_path.is_file():
         meta = read_meta(meta_path)
         if meta.get("simulated") is True and isinstance(meta.get("truth"), dict):
             truth = meta["truth"]
+        if meta.get("source") == STREAM_SOURCE:
+            # `mavsysid stream` records the vehicle's telemetry: its own filtered, lagged
+            # estimate of the pose, not a motion-capture measurement.
+            pose_source = "autopilot"
     pose = Series(log.t, np.column_stack([log.position, log.quaternion]), "pose")
     rotors = (Series(log.t, log.rotor_speeds, "rotor speed"),)
-    return LogStreams(source=str(path), pose=pose, pose_source="motion_capture",
+    return LogStreams(source=str(path), pose=pose, pose_source=pose_source,
                       rotors=rotors, warnings=notes, truth=truth)

@@ -42,6 +42,7 @@ from mavsysid.flight.ground.telemetry_recorder import STAMPING, SetpointHistory,
 from mavsysid.flight.ground.trajectory_safety import flight_limits, operator_box
 from mavsysid.flight.ground.vehicle_commands import VehicleCommands
 from mavsysid.flight.mavlink_setup import parse_connect
+from mavsysid.formats.flight_dir import STREAM_SOURCE
 from mavsysid.formats.flight_log import software_version
 from mavsysid.formats.trajectory_file import TrajectoryFile, read_trajectory
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle, vehicle_to_toml
@@ -293,7 +294,7 @@ class StreamSession:
             "format": "mavsysid-flight", "format_version": 1,
             "software": {"name": "mavsysid", "version": software_version()},
             "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            "source": "mavlink-stream", "simulated": False,
+            "source": STREAM_SOURCE, "simulated": False,
             "vehicle": {"name": self.config.name, "source": self.config.source,
                         "config_toml": vehicle_to_toml(self.config)},
             "files": {"pose": "pose.csv", "tlog": "flight.tlog"},

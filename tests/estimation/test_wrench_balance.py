@@ -11,8 +11,10 @@ from mavsysid.estimation.estimator import EstimatorSettings, prior_from_config
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.results import Z95
 from mavsysid.estimation.wrench_balance import fit_wrench_balance
+from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.sensor_path import OnboardPoseEstimate
 from mavsysid.vehicle.config import load_vehicle
+from mavsysid.vehicle.model_effects import RotorDragLinear
 
 from mavsysid.errors import JobFailedError
 
@@ -56,6 +58,20 @@ def test_onboard_estimator_pose_gives_no_confident_wrong_answer(simulate_flight)
     assert abs(result.estimate.value[0] / truth[0] - 1.0) < 0.01
     assert _covered(result, truth)[result.determined].all(), result.status
     assert 0.015 <= result.choices.delay <= 0.06, result.choices.delay
+
+
+@pytest.mark.slow
+def test_hidden_linear_rotor_drag_is_not_taken_for_c_d(simulate_flight):
+    """A linear rotor drag about 0.5 c_D's size in hover: c_D is within 15 % and covered,
+    or "not determined" (never the +50 % sum); c_T stays within 0.1 %."""
+    effect = hidden_effect(RotorDragLinear(k=2e-7, k_z=0.0))
+    flight = simulate_flight(CONFIG, 3, duration=30.0, effects=[effect], log_rate=500.0)
+    result = fit_wrench_balance(flight, PRIOR)
+    truth = np.asarray(flight.true_theta)
+    assert abs(result.estimate.value[0] / truth[0] - 1.0) < 1e-3
+    if result.determined[1]:
+        assert abs(result.estimate.value[1] / truth[1] - 1.0) < 0.15, result.estimate.value
+    assert _covered(result, truth)[result.determined].all(), result.status
 
 
 @pytest.mark.slow

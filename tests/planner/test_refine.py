@@ -164,7 +164,10 @@ def test_split_path_keeps_the_flight_and_its_dopt(searched):
     fa, fb = a.flat_outputs(t), b.flat_outputs(t)
     np.testing.assert_allclose(fb.position, fa.position, atol=1e-9)
     np.testing.assert_allclose(fb.yaw, fa.yaw, atol=1e-9)
-    np.testing.assert_allclose(fb.snap, fa.snap, rtol=1e-6, atol=1e-6)
+    # Snap jumps at the original knots; a sample on one may fall on either side of it.
+    knots = np.cumsum(a.durations)
+    smooth = np.min(np.abs(t[:, None] - knots[None, :]), axis=1) > 1e-9
+    np.testing.assert_allclose(fb.snap[smooth], fa.snap[smooth], rtol=1e-6, atol=1e-6)
     assert all(search.feasible(s) for s in split.segments)
     dopt = search.flight_dopt([*split.transfers, split.stop.transfer])
     assert dopt == pytest.approx(path.dopt, rel=1e-3)

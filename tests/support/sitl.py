@@ -24,7 +24,7 @@ from mavsysid.flight.mavlink_setup import load_mavutil
 from tests.support.stream_flights import start_stream, wait_for
 
 __all__ = ["SITL_DIR", "Observer", "SitlInstance", "observing", "require_sitl", "running_sitl",
-           "streaming", "wait_ready_to_arm"]
+           "streaming"]
 
 #: Where the shared SITL build lives, beside the checkout.
 SITL_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "sitl"
@@ -212,28 +212,3 @@ def streaming(trajectory: Path, sitl: SitlInstance, *args: str, cwd: Path
         stream.wait(timeout=10)
         if stream.stdout is not None:
             stream.stdout.close()
-
-
-#: MAV_SYS_STATUS_PREARM_CHECK.
-_PREARM_BIT = 0x10000000
-
-
-def wait_ready_to_arm(connect: str, timeout: float = 600.0) -> float:
-    """Wall seconds until SITL's SYS_STATUS says its pre-arm checks pass, asked for one
-    message at a time (MAV_CMD_REQUEST_MESSAGE), so no stream rate is left set on the link."""
-    mavutil = load_mavutil()
-    start = time.monotonic()
-    link = mavutil.mavlink_connection(connect, source_system=250, retries=5)
-    try:
-        link.wait_heartbeat(timeout=60)
-        while time.monotonic() - start < timeout:
-            link.mav.command_long_send(1, 0, mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
-                                       mavutil.mavlink.MAVLINK_MSG_ID_SYS_STATUS,
-                                       0, 0, 0, 0, 0, 0)
-            status = link.recv_match(type="SYS_STATUS", blocking=True, timeout=2.0)
-            if status is not None and status.onboard_control_sensors_health & _PREARM_BIT:
-                return time.monotonic() - start
-            time.sleep(2.0)
-    finally:
-        link.close()
-    raise AssertionError(f"SITL on {connect} not ready to arm after {timeout:g} s")
