@@ -35,7 +35,10 @@ empty pose log, to show its one-line refusal.
 
     nice python bench/crazyflie_flights.py --repo /path/to/crazyflie-data-collection \\
         [--json out.json] [--markdown table.md] [--flights jana0,eckart1] [--jobs 2]
-        [--library]
+        [--library] [--diagnose]
+
+With ``--diagnose``, each flight also runs ``mavsysid diagnose --estimate estimate.json``
+(time, named effects, held-out ratios before → after).
 """
 
 from __future__ import annotations
@@ -217,6 +220,31 @@ def run_tool(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
     return out
 
 
+def run_diagnose_tool(pose: Path, vehicle: Path) -> dict:
+    """``mavsysid diagnose`` as a user runs it after ``estimate`` (its ``estimate.json``).
+
+    The row: exit code, seconds, the named effects, and the held-out RMSE ratios to the
+    prior model's (force, angular acceleration) before and after them; or the one-line
+    message.
+    """
+    t0 = time.perf_counter()
+    out_json = pose.parent / "diagnosis.json"
+    estimate = pose.parent / "estimate.json"
+    proc = subprocess.run([sys.executable, "-m", "mavsysid", "diagnose", str(pose),
+                           "--vehicle", str(vehicle), "-o", str(out_json), "-q",
+                           *(["--estimate", str(estimate)] if estimate.exists() else [])],
+                          capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    if proc.returncode:
+        lines = proc.stderr.strip().splitlines()
+        return {"code": proc.returncode, "message": lines[-1] if lines else "",
+                "seconds": seconds, "traceback": "Traceback" in proc.stderr}
+    doc = json.loads(out_json.read_text(encoding="utf-8"))
+    held = doc["gap"].get("held_out") or {}
+    return {"code": 0, "seconds": seconds, "effects": [e["name"] for e in doc["effects"]],
+            "held_out": {k: v for k, v in held.items() if k.endswith(("_before", "_after"))}}
+
+
 def refuse_empty(directory: Path, vehicle: Path) -> dict:
     """What ``mavsysid estimate`` says about an empty pose log (a recording that failed)."""
     pose = directory / "pose.csv"
@@ -272,7 +300,7 @@ def run_balance(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
 
 def run_flight(job: tuple) -> dict:
     """Decode, convert and estimate one flight (a worker's task)."""
-    repo, vehicle, path, references, prior, n_max, library = job
+    repo, vehicle, path, references, prior, n_max, library, diagnose = job
     row = {"flight": path.name, "vehicle": vehicle}
     with tempfile.TemporaryDirectory(prefix="cf-") as tmp:
         toml = Path(tmp) / f"{vehicle}.toml"
@@ -289,6 +317,8 @@ def run_flight(job: tuple) -> dict:
         row["balance"] = run_tool(pose, toml, references)
         if library:
             row["library"] = run_balance(pose, toml, references)
+        if diagnose:
+            row["diagnose"] = run_diagnose_tool(pose, toml)
     return row
 
 
@@ -313,6 +343,8 @@ def main() -> None:
     parser.add_argument("--markdown", type=Path, help="write the per-flight table (Markdown)")
     parser.add_argument("--library", action="store_true",
                         help="also run the library's balance alone (`fit_wrench_balance`)")
+    parser.add_argument("--diagnose", action="store_true",
+                        help="also run `mavsysid diagnose` on each flight after `estimate`")
     args = parser.parse_args()
     repo = args.repo.resolve()
     refs, stand, jobs = {}, {}, []
@@ -325,7 +357,7 @@ def main() -> None:
     for vehicle, path in _flights(repo, [p for p in args.flights.split(",") if p]):
         prior = np.array(stand[vehicle]["prior"])
         jobs.append((repo, vehicle, path, refs[vehicle], prior, stand[vehicle]["n_max"],
-                     args.library))
+                     args.library, args.diagnose))
     print(f"references: {json.dumps(stand)}")
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
@@ -335,6 +367,9 @@ def main() -> None:
             if args.json:
                 args.json.write_text(json.dumps({"references": stand, "flights": rows},
                                                 indent=1), encoding="utf-8")
+    for row in rows:
+        if "diagnose" in row:
+            print(f"diagnose {row['flight']}: {json.dumps(row['diagnose'])}")
     print_table(rows, PARAMETER_NAMES)
     print_summary(rows, refs)
     if args.json:

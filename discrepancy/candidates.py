@@ -90,7 +90,11 @@ def theta_columns(problem: ResidualProblem, fixed: Sequence[ModelEffect], r0: np
     r0 : ndarray, shape (N, 6)
         The residual at θ̂ with ``fixed``.
     """
-    return theta_jacobian(lambda theta: problem.residual(fixed, theta), problem.theta, r0)
+    columns = theta_jacobian(lambda theta: problem.residual(fixed, theta), problem.theta, r0)
+    if problem.theta_free is None:
+        return columns
+    # A held entry has no column: the least squares (minimum norm) leave it unmoved.
+    return columns * np.asarray(problem.theta_free, float)
 
 
 def effect_columns(problem: ResidualProblem, candidate: Candidate,

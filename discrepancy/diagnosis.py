@@ -58,6 +58,7 @@ __all__ = [
     "Diagnosis",
     "DiagnosisSettings",
     "Gap",
+    "HeldOutGap",
     "check_refits",
     "diagnose_flight",
     "reestimate",
@@ -96,6 +97,55 @@ class DiagnosisSettings:
 
 
 @dataclass(frozen=True)
+class HeldOutGap:
+    """Held-out RMSE of the prior model, the diagnosed θ, and θ with the named effects.
+
+    The ratios pool the axes as `mavsysid.estimation.holdout.HoldoutCheck` does: the
+    specific force (m/s², three axes) and the angular acceleration (rad/s², three axes),
+    each RMSE over the prior model's; below 1 predicts unseen data better than the prior.
+
+    Attributes
+    ----------
+    prior_rmse, before_rmse, after_rmse : ndarray, shape (6,)
+        Per axis, SI.
+    rows : int
+        Held-out samples compared.
+    """
+
+    prior_rmse: np.ndarray
+    before_rmse: np.ndarray
+    after_rmse: np.ndarray
+    rows: int
+
+    @staticmethod
+    def _pooled(model: np.ndarray, prior: np.ndarray, axes: slice) -> float:
+        m, p = model[axes], prior[axes]
+        total = float(np.sum(p**2))
+        return float(np.sqrt(np.sum(m**2) / total)) if total > 0 else float("nan")
+
+    def ratios(self, which: str) -> tuple[float, float]:
+        """(force, torque) RMSE ratios to the prior model's.
+
+        Parameters
+        ----------
+        which : {"before", "after"}
+            Without or with the named effects.
+        """
+        model = self.before_rmse if which == "before" else self.after_rmse
+        return (self._pooled(model, self.prior_rmse, slice(0, 3)),
+                self._pooled(model, self.prior_rmse, slice(3, 6)))
+
+    def as_dict(self) -> dict:
+        """JSON-ready: per-axis RMSE lists and the pooled ratios before and after."""
+        (fb, tb), (fa, ta) = self.ratios("before"), self.ratios("after")
+        return {"rows": self.rows, "prior_rmse": self.prior_rmse.tolist(),
+                "before_rmse": self.before_rmse.tolist(),
+                "after_rmse": self.after_rmse.tolist(),
+                "force_ratio_before": fb, "torque_ratio_before": tb,
+                "force_ratio_after": fa, "torque_ratio_after": ta}
+
+
+@dataclass(frozen=True)
 class Gap:
     """The gap between model and measurement before and after the augmentation.
 
@@ -111,6 +161,8 @@ class Gap:
         remaining noise), or 0 with no effect.
     bic_before, bic_after : float
         Effective BIC of the base and augmented regressions on the training data.
+    held_out : HeldOutGap or None
+        The held-out RMSE before and after, as ratios to the prior model's.
     """
 
     before: AxisStats
@@ -119,6 +171,7 @@ class Gap:
     shrink: float
     bic_before: float
     bic_after: float
+    held_out: HeldOutGap | None = None
 
 
 @dataclass(frozen=True)
@@ -222,10 +275,33 @@ def _shrink(before: AxisStats, after: AxisStats, contribution: np.ndarray, noise
     return flagged, float(1.0 - a / b)
 
 
+def _start_theta(flight: FlightData, config: VehicleConfig, theta: np.ndarray | None
+                 ) -> np.ndarray:
+    """θ to diagnose (the config's when None), refused unless finite with c_T, J > 0."""
+    theta0 = config.theta.copy() if theta is None else np.asarray(theta, float).reshape(6)
+    if not np.all(np.isfinite(theta0)) or theta0[0] <= 0.0 or np.any(theta0[3:] <= 0.0):
+        origin = "the estimate's" if theta is not None else f"vehicle {config.name}'s"
+        raise InputError(f"{flight.source}: {origin} θ to diagnose must be finite with "
+                         f"c_T > 0 and a positive inertia, got {np.array2string(theta0)}")
+    return theta0
+
+
+def _base(problem: ResidualProblem, train: np.ndarray, say: Callable[[str], None]
+          ) -> tuple[ResidualProblem, np.ndarray]:
+    """The base model and axis weights: θ refitted (all free), or as given (a mask)."""
+    rate = f"{len(problem.flight.t)} samples at {1.0 / problem.dt:.4g} Hz"
+    if problem.theta_free is None:
+        say(f"fitting θ to the flight's accelerations ({rate})")
+        return fit_theta(problem, train)
+    say(f"residual of the given θ ({rate}, {problem.settings.window * 1e3:.0f} ms smoother)")
+    return fit_theta(problem, train, iterations=0)
+
+
 def diagnose_flight(
     flight: FlightData, config: VehicleConfig, theta: np.ndarray | None = None,
     settings: DiagnosisSettings | None = None, known_effects: Sequence[ModelEffect] = (),
     progress: Callable[[str], None] | None = None, with_nis: bool = True,
+    free_theta: np.ndarray | None = None,
 ) -> Diagnosis:
     """Find, name and fit what the model gets wrong on a flight; show the gap shrink.
 
@@ -244,6 +320,9 @@ def diagnose_flight(
         `mavsysid.estimation.progress.report_stage`).
     with_nis : bool
         Run the parameter EKF for the NIS (needs its compiled kernels).
+    free_theta : ndarray of bool, shape (6,), optional
+        Given: ``theta`` is an answer (the balance's), not refitted; only these entries
+        move with the named effects. None: θ is refitted first, every entry free.
 
     Returns
     -------
@@ -256,24 +335,19 @@ def diagnose_flight(
     if not 0.05 <= settings.holdout <= 0.5:
         raise InputError(f"{flight.source}: held-out fraction {settings.holdout:g}: expected "
                          "0.05 … 0.5")
-    theta0 = config.theta.copy() if theta is None else np.asarray(theta, float).reshape(6)
-    if not np.all(np.isfinite(theta0)) or theta0[0] <= 0.0 or np.any(theta0[3:] <= 0.0):
-        origin = "the estimate's" if theta is not None else f"vehicle {config.name}'s"
-        raise InputError(f"{flight.source}: {origin} θ to diagnose must be finite with "
-                         f"c_T > 0 and a positive inertia, got {np.array2string(theta0)}")
+    theta0 = _start_theta(flight, config, theta)
     known = tuple(known_effects)
-    names = settings.candidates
-    known_names = {e.name for e in known}
-    library = tuple(c for c in candidate_library(names) if c.name not in known_names)
+    library = tuple(c for c in candidate_library(settings.candidates)
+                    if c.name not in {e.name for e in known})
     say = progress or report_stage
     uniform, resampling = average_blocks(*resample_flight(flight))
-    problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling)
+    problem = ResidualProblem(uniform, config, theta0, settings.smoother, known, resampling,
+                              theta_free=None if free_theta is None else
+                              np.asarray(free_theta, bool).reshape(6))
     used = problem.keep()
     t = uniform.t
     split, train, test = _split(problem, used, settings)
-    say(f"fitting θ to the flight's accelerations ({len(t)} samples at "
-        f"{1.0 / problem.dt:.4g} Hz)")
-    base, weights = fit_theta(problem, train)
+    base, weights = _base(problem, train, say)
     selection = forward_select(base, library, train, weights, settings.selection, say)
     fitted = tuple(f.effect for f in selection.effects)
     measured, model, pose = base.evaluate()
@@ -285,13 +359,15 @@ def diagnose_flight(
                        *nis_stats(nis_before, test))
     after = AxisStats(axis_rms(r_after[test]), ljung_box(r_after[test], base.block),
                       *nis_stats(nis_after, test))
+    held_out = HeldOutGap(axis_rms(base.residual((), config.theta)[test]), before.rms,
+                          after.rms, len(test))
     noise = axis_rms(r_after[train])
     flagged, shrink = _shrink(before, after, (r_before - r_after)[train], noise, bool(fitted))
-    gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after)
+    gap = Gap(before, after, flagged, shrink, selection.bic_before, selection.bic_after,
+              held_out)
     where = where_large(base, pose, r_before, used, noise, train, settings.window)
-    changed = resampling.resampled or resampling.averaged > 1
-    notes = [MASS_NOTE, *([resampling.describe()] if changed else []),
-             *nis_notes]
+    notes = [MASS_NOTE, *([resampling.describe()] if resampling.resampled
+                          or resampling.averaged > 1 else []), *nis_notes]
     return Diagnosis(
         effects=selection.effects, ties=selection.ties, scores=selection.scores, gap=gap,
         where=where, theta_identified=theta0, theta_before=selection.theta_before,

@@ -71,6 +71,11 @@ def _gap_lines(diagnosis: Diagnosis) -> list[str]:
         mark = "*" if a in g.flagged_axes else " "
         lines.append(f" {mark}{label:26s} {unit:7s} {g.before.rms[a]:8.4f} {g.after.rms[a]:8.4f}"
                      f"   {_p(g.before.ljung_box_p[a]):>6s} → {_p(g.after.ljung_box_p[a])}")
+    if g.held_out is not None:
+        (fb, tb), (fa, ta) = g.held_out.ratios("before"), g.held_out.ratios("after")
+        lines.append(f"  held-out RMSE / the prior model's ({g.held_out.rows} samples; below 1: "
+                     f"predicts unseen data better): force {fb:.3f} → {fa:.3f}, angular "
+                     f"acceleration {tb:.3f} → {ta:.3f}")
     return lines
 
 
@@ -211,6 +216,7 @@ def diagnosis_to_json(diagnosis: Diagnosis, config: VehicleConfig, log_name: str
             "flagged_axes": [AXIS_NAMES[a] for a in d.gap.flagged_axes],
             "shrink": float(d.gap.shrink),
             "bic_before": float(d.gap.bic_before), "bic_after": float(d.gap.bic_after),
+            "held_out": d.gap.held_out.as_dict() if d.gap.held_out is not None else None,
         },
         "where": {
             "windows": [{"start_s": t0, "end_s": t1, "axis": AXIS_NAMES[a],

@@ -74,6 +74,9 @@ class ResidualProblem:
     resampling : Resampling, optional
         How ``flight`` was put on its uniform grid (`mavsysid.discrepancy.resample`);
         None: ``flight`` must be uniformly sampled.
+    theta_free : ndarray of bool, shape (6,), optional
+        The entries of θ the fits may move (all when None); the others are held where
+        they are (a parameter the flight does not determine stays at its prior).
     smoothed : dict
         The pose smoothed per set of pose-channel effects (their names and values), shared
         by the copies `dataclasses.replace` makes for other θ: the selection re-evaluates
@@ -87,6 +90,7 @@ class ResidualProblem:
     settings: SmootherSettings = field(default_factory=SmootherSettings)
     known_effects: tuple[ModelEffect, ...] = ()
     resampling: Resampling | None = None
+    theta_free: np.ndarray | None = field(default=None, compare=False)
     smoothed: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:

@@ -312,12 +312,15 @@ def _final_fit(model: SelectionModel, reg: Regression, gains: dict[str, float],
     r0, cols, _ = model.design()
     y, X = reg.stack(r0, cols)
     norm = np.linalg.norm(X, axis=0)
-    norm[norm == 0.0] = 1.0
-    ols = sm.OLS(y, X / norm).fit()
-    beta = ols.params / norm
+    live = norm > 0.0  # a θ entry held fixed has no column: it stays, with σ 0
+    norm[~live] = 1.0
+    ols = sm.OLS(y, X[:, live] / norm[live]).fit()
+    beta = np.zeros(X.shape[1])
+    beta[live] = ols.params / norm[live]
     rss = np.sum((y - X @ beta).reshape(-1, 6) ** 2, axis=0)
     # statsmodels' covariance assumes white rows; the block inflation makes it honest.
-    cov = ols.cov_params() * reg.block / np.outer(norm, norm)
+    cov = np.zeros((X.shape[1], X.shape[1]))
+    cov[np.ix_(live, live)] = ols.cov_params() * reg.block / np.outer(norm[live], norm[live])
     dev_full = reg.deviance(rss)
     fitted: dict[str, FittedEffect] = {}
     offset = 6
