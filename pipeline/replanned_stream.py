@@ -9,7 +9,12 @@ opening's end:
 1. estimates θ̂ and its covariance Σ from the pose recorded so far (the pipeline of
    ``mavsysid estimate``: `load_flight` from the opening's first setpoint on, then
    `mavsysid.pipeline.estimate.checked_estimate`), on a snapshot of the complete rows of
-   ``pose.csv``; a refused estimate leaves the prior belief (`belief_after_opening`);
+   ``pose.csv``; when its rotor speeds are zero throughout (no ESC telemetry, e.g.
+   ArduCopter SITL with ``SIM_ESC_TELEM 0``), on a snapshot of the flight's ``flight.tlog``
+   instead, whose reader turns SERVO_OUTPUT_RAW into rotor speeds through the vehicle's
+   motor curve (`mavsysid.formats.tlog`), windowed from the same start (pose.csv and the
+   tlog's pose share the vehicle's clock) (`opening_log`); a refused estimate leaves the
+   prior belief (`belief_after_opening`);
 2. plans the rest of the budget for ``config.with_parameters(θ̂)`` from the hover where the
    opening ended, with the posterior as the planner's prior: ``prior_covariance`` = Σ
    relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the chance-constrained rotor
@@ -41,6 +46,7 @@ from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
 from mavsysid.flight.ground.stream_session import StreamSettings
+from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import read_trajectory
 from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
@@ -50,9 +56,18 @@ from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError, JobFailedError
 
-__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "belief_after_opening", "prior_estimate",
-           "relative_covariance", "replanning_continuation", "run_replanned_stream",
-           "snapshot_pose"]
+__all__ = [
+    "FEEDBACK_HEADROOM",
+    "ReplanSettings",
+    "belief_after_opening",
+    "opening_log",
+    "prior_estimate",
+    "relative_covariance",
+    "replanning_continuation",
+    "run_replanned_stream",
+    "snapshot_pose",
+    "snapshot_tlog",
+]
 
 
 #: Rotor n² share the re-planned rest leaves free at each end for the autopilot's feedback:
@@ -172,12 +187,59 @@ def snapshot_pose(pose: Path, directory: Path) -> Path:
     return out
 
 
+def snapshot_tlog(tlog: Path, directory: Path) -> Path:
+    """Copy a tlog being written into ``directory``; the copy.
+
+    `mavsysid.formats.tlog.TlogWriter` writes each record with one ``write``, so the bytes
+    present are whole records (a record cut mid-write at the end is left out by the
+    reader).
+
+    Parameters
+    ----------
+    tlog : Path
+        The tlog being written.
+    directory : Path
+        Folder the copy goes into.
+    """
+    out = Path(directory) / Path(tlog).name
+    out.write_bytes(Path(tlog).read_bytes())
+    return out
+
+
+def opening_log(so_far: FlightSoFar, directory: Path) -> Path:
+    """Snapshot, into ``directory``, the log the opening is estimated from; its path.
+
+    ``pose.csv`` (the autopilot's pose, rotor speeds from ESC telemetry), or, when its
+    rotor speeds are zero throughout (no ESC telemetry arrived), the flight's
+    ``flight.tlog``, whose reader takes the rotor speeds from the motor outputs through
+    the vehicle's motor curve. Both are on the vehicle's clock, so
+    `FlightSoFar.window_start` windows either.
+
+    Parameters
+    ----------
+    so_far : FlightSoFar
+        The flight so far: its directory, pose log and vehicle.
+    directory : Path
+        Folder the snapshot goes into.
+    """
+    pose = snapshot_pose(so_far.pose, directory)
+    tlog = Path(so_far.directory) / "flight.tlog"
+    try:
+        rotors = read_pose_log(pose, so_far.config.rotor_count).rotor_speeds
+    except InputError:
+        return pose  # the estimate says what is wrong with it
+    if np.any(rotors != 0.0) or not tlog.is_file():
+        return pose
+    return snapshot_tlog(tlog, directory)
+
+
 def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> ParameterEstimate:
     """θ̂ and Σ from the flight so far (the ``estimate`` pipeline, from the opening's start)."""
     with tempfile.TemporaryDirectory(prefix="mavsysid-replan-") as tmp:
-        pose = snapshot_pose(so_far.pose, Path(tmp))
-        flight = load_flight(pose, so_far.config, start=so_far.window_start)
-        return checked_estimate(flight, so_far.config, settings, source=str(so_far.pose))
+        log = opening_log(so_far, Path(tmp))
+        flight = load_flight(log, so_far.config, start=so_far.window_start)
+        source = so_far.pose if log.suffix == ".csv" else Path(so_far.directory) / log.name
+        return checked_estimate(flight, so_far.config, settings, source=str(source))
 
 
 def replanning_continuation(settings: ReplanSettings,
