@@ -16,7 +16,9 @@ opening's end:
    tlog's pose share the vehicle's clock) (`opening_log`); a refused estimate leaves the
    prior belief (`belief_after_opening`);
 2. plans the rest of the budget for ``config.with_parameters(θ̂)`` from the hover where the
-   opening ended, with the posterior as the planner's prior: ``prior_covariance`` = Σ
+   opening ended (pulled in to the rotor clearance from the box's walls, as a plan's start
+   must be, when the opening ended closer: `rest_start`; the streamer flies there first),
+   with the posterior as the planner's prior: ``prior_covariance`` = Σ
    relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the chance-constrained rotor
    check's spread, at the most confident rotor check that admits a flight
    (`plan_most_confident`; the z used goes into meta.json);
@@ -50,6 +52,7 @@ from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import read_trajectory
 from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
+from mavsysid.planner.plan_request import rotor_clearance
 from mavsysid.planner.robust_plan import plan_most_confident
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
@@ -64,6 +67,7 @@ __all__ = [
     "prior_estimate",
     "relative_covariance",
     "replanning_continuation",
+    "rest_start",
     "run_replanned_stream",
     "snapshot_pose",
     "snapshot_tlog",
@@ -233,6 +237,31 @@ def opening_log(so_far: FlightSoFar, directory: Path) -> Path:
     return snapshot_tlog(tlog, directory)
 
 
+def rest_start(hover: tuple[float, ...], box: tuple[float, ...], config: VehicleConfig
+               ) -> tuple[float, float, float, float]:
+    """Where the rest is planned from: the hold, pulled in to the rotor clearance from the
+    box's walls.
+
+    A plan keeps the centre of gravity inside the box, so an opening may end closer to a
+    wall than a plan may start (`mavsysid.planner.plan_request.rotor_clearance`); the
+    rest then starts at the nearest point far enough inside, and the streamer's smooth
+    move flies there from the hold.
+
+    Parameters
+    ----------
+    hover : tuple of 4 float
+        The hold [x, y, z, yaw], m and rad (ENU).
+    box : tuple of 6 float
+        The flight box, m.
+    config : VehicleConfig
+        The vehicle: its rotor positions.
+    """
+    clearance = rotor_clearance(config)
+    low, high = np.asarray(box[:3]) + clearance, np.asarray(box[3:]) - clearance
+    position = np.clip(np.asarray(hover[:3], dtype=float), low, np.maximum(low, high))
+    return (*(float(v) for v in position), float(hover[3]))
+
+
 def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> ParameterEstimate:
     """θ̂ and Σ from the flight so far (the ``estimate`` pipeline, from the opening's start)."""
     with tempfile.TemporaryDirectory(prefix="mavsysid-replan-") as tmp:
@@ -274,8 +303,12 @@ def replanning_continuation(settings: ReplanSettings,
             say(f"estimate after {so_far.flown:.1f} s refused ({refusal}); the rest is "
                 "planned from the prior belief")
         rel = relative_covariance(estimate)
+        start = rest_start(so_far.hover, so_far.box, so_far.config)
+        if start != tuple(so_far.hover):
+            say("the hold is within the rotor clearance of the box's walls: the rest starts "
+                "at {} m".format(", ".join(f"{v:.2f}" for v in start[:3])))
         planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
-                          start=tuple(so_far.hover),
+                          start=start,
                           prior_covariance=rel,
                           autopilot_limits=(so_far.autopilot_limits
                                             or settings.planner.autopilot_limits))
@@ -295,7 +328,7 @@ def replanning_continuation(settings: ReplanSettings,
                         "planning_time": (planner.planning_time if math.isfinite(
                             planner.planning_time) else None), "seed": planner.seed,
                         "rotor_confidence": planner.rotor_confidence,
-                        "start": list(so_far.hover)},
+                        "start": list(start)},
             "predicted_dopt": plan.predicted_dopt}
         return NextSegment(plan.trajectory, "replanned", record)
 

@@ -26,6 +26,7 @@ from mavsysid.pipeline.replanned_stream import (
     opening_log,
     prior_estimate,
     relative_covariance,
+    rest_start,
     run_replanned_stream,
     snapshot_pose,
 )
@@ -169,6 +170,18 @@ def test_with_esc_rpm_the_opening_is_read_from_the_pose_log(tmp_path):
     so_far, _, _ = _flight_without_esc(tmp_path / "flight", config, True)
     (tmp_path / "copy").mkdir()
     assert opening_log(so_far, tmp_path / "copy") == tmp_path / "copy" / "pose.csv"
+
+
+@pytest.mark.parametrize(("hover", "expected"), [
+    ((0.3, -0.4, 1.5, 0.7), (0.3, -0.4, 1.5, 0.7)),  # far from the walls: the hold
+    ((1.8, -1.2, 1.5, -0.1), (2.0 - 0.35, -1.2, 1.5, -0.1)),  # near x_max: pulled in
+    ((-1.95, 1.9, 0.6, 0.0), (-2.0 + 0.35, 2.0 - 0.35, 0.5 + 0.35, 0.0)),  # a corner
+])
+def test_the_rest_starts_the_rotor_clearance_inside_the_box(hover, expected):
+    """An opening ending nearer a wall than the rotor clearance is continued from the
+    nearest point that far inside; otherwise from the hold itself."""
+    config = load_vehicle("sitl_quad")  # rotors 0.35 m from the centre of gravity
+    assert rest_start(hover, BOX, config) == pytest.approx(expected, abs=1e-9)
 
 
 def test_budget_not_longer_than_the_opening_is_refused_before_connecting(tmp_path):
