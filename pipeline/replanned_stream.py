@@ -9,9 +9,16 @@ opening's end:
 1. estimates θ̂ and its covariance Σ from the pose recorded so far (the pipeline of
    ``mavsysid estimate``: `load_flight` from the opening's first setpoint on, then
    `mavsysid.pipeline.estimate.checked_estimate`), on a snapshot of the complete rows of
-   ``pose.csv``; a refused estimate leaves the prior belief (`belief_after_opening`);
+   ``pose.csv``; when its rotor speeds are zero throughout (no ESC telemetry, e.g.
+   ArduCopter SITL with ``SIM_ESC_TELEM 0``), on a snapshot of the flight's ``flight.tlog``
+   instead, whose reader turns SERVO_OUTPUT_RAW into rotor speeds through the vehicle's
+   motor curve (`mavsysid.formats.tlog`), windowed from the same start (pose.csv and the
+   tlog's pose share the vehicle's clock) (`opening_log`); a refused estimate leaves the
+   prior belief (`belief_after_opening`);
 2. plans the rest of the budget for ``config.with_parameters(θ̂)`` from the hover where the
-   opening ended, with the posterior as the planner's prior: ``prior_covariance`` = Σ
+   opening ended (pulled in to the rotor clearance from the box's walls, as a plan's start
+   must be, when the opening ended closer: `rest_start`; the streamer flies there first),
+   with the posterior as the planner's prior: ``prior_covariance`` = Σ
    relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the chance-constrained rotor
    check's spread, at the most confident rotor check that admits a flight
    (`plan_most_confident`; the z used goes into meta.json);
@@ -41,18 +48,30 @@ from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
 from mavsysid.flight.ground.stream_session import StreamSettings
+from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import read_trajectory
 from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
+from mavsysid.planner.plan_request import rotor_clearance
 from mavsysid.planner.robust_plan import plan_most_confident
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError, JobFailedError
 
-__all__ = ["FEEDBACK_HEADROOM", "ReplanSettings", "belief_after_opening", "prior_estimate",
-           "relative_covariance", "replanning_continuation", "run_replanned_stream",
-           "snapshot_pose"]
+__all__ = [
+    "FEEDBACK_HEADROOM",
+    "ReplanSettings",
+    "belief_after_opening",
+    "opening_log",
+    "prior_estimate",
+    "relative_covariance",
+    "replanning_continuation",
+    "rest_start",
+    "run_replanned_stream",
+    "snapshot_pose",
+    "snapshot_tlog",
+]
 
 
 #: Rotor n² share the re-planned rest leaves free at each end for the autopilot's feedback:
@@ -172,12 +191,84 @@ def snapshot_pose(pose: Path, directory: Path) -> Path:
     return out
 
 
+def snapshot_tlog(tlog: Path, directory: Path) -> Path:
+    """Copy a tlog being written into ``directory``; the copy.
+
+    `mavsysid.formats.tlog.TlogWriter` writes each record with one ``write``, so the bytes
+    present are whole records (a record cut mid-write at the end is left out by the
+    reader).
+
+    Parameters
+    ----------
+    tlog : Path
+        The tlog being written.
+    directory : Path
+        Folder the copy goes into.
+    """
+    out = Path(directory) / Path(tlog).name
+    out.write_bytes(Path(tlog).read_bytes())
+    return out
+
+
+def opening_log(so_far: FlightSoFar, directory: Path) -> Path:
+    """Snapshot, into ``directory``, the log the opening is estimated from; its path.
+
+    ``pose.csv`` (the autopilot's pose, rotor speeds from ESC telemetry), or, when its
+    rotor speeds are zero throughout (no ESC telemetry arrived), the flight's
+    ``flight.tlog``, whose reader takes the rotor speeds from the motor outputs through
+    the vehicle's motor curve. Both are on the vehicle's clock, so
+    `FlightSoFar.window_start` windows either.
+
+    Parameters
+    ----------
+    so_far : FlightSoFar
+        The flight so far: its directory, pose log and vehicle.
+    directory : Path
+        Folder the snapshot goes into.
+    """
+    pose = snapshot_pose(so_far.pose, directory)
+    tlog = Path(so_far.directory) / "flight.tlog"
+    try:
+        rotors = read_pose_log(pose, so_far.config.rotor_count).rotor_speeds
+    except InputError:
+        return pose  # the estimate says what is wrong with it
+    if np.any(rotors != 0.0) or not tlog.is_file():
+        return pose
+    return snapshot_tlog(tlog, directory)
+
+
+def rest_start(hover: tuple[float, ...], box: tuple[float, ...], config: VehicleConfig
+               ) -> tuple[float, float, float, float]:
+    """Where the rest is planned from: the hold, pulled in to the rotor clearance from the
+    box's walls.
+
+    A plan keeps the centre of gravity inside the box, so an opening may end closer to a
+    wall than a plan may start (`mavsysid.planner.plan_request.rotor_clearance`); the
+    rest then starts at the nearest point far enough inside, and the streamer's smooth
+    move flies there from the hold.
+
+    Parameters
+    ----------
+    hover : tuple of 4 float
+        The hold [x, y, z, yaw], m and rad (ENU).
+    box : tuple of 6 float
+        The flight box, m.
+    config : VehicleConfig
+        The vehicle: its rotor positions.
+    """
+    clearance = rotor_clearance(config)
+    low, high = np.asarray(box[:3]) + clearance, np.asarray(box[3:]) - clearance
+    position = np.clip(np.asarray(hover[:3], dtype=float), low, np.maximum(low, high))
+    return (*(float(v) for v in position), float(hover[3]))
+
+
 def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> ParameterEstimate:
     """θ̂ and Σ from the flight so far (the ``estimate`` pipeline, from the opening's start)."""
     with tempfile.TemporaryDirectory(prefix="mavsysid-replan-") as tmp:
-        pose = snapshot_pose(so_far.pose, Path(tmp))
-        flight = load_flight(pose, so_far.config, start=so_far.window_start)
-        return checked_estimate(flight, so_far.config, settings, source=str(so_far.pose))
+        log = opening_log(so_far, Path(tmp))
+        flight = load_flight(log, so_far.config, start=so_far.window_start)
+        source = so_far.pose if log.suffix == ".csv" else Path(so_far.directory) / log.name
+        return checked_estimate(flight, so_far.config, settings, source=str(source))
 
 
 def replanning_continuation(settings: ReplanSettings,
@@ -212,8 +303,12 @@ def replanning_continuation(settings: ReplanSettings,
             say(f"estimate after {so_far.flown:.1f} s refused ({refusal}); the rest is "
                 "planned from the prior belief")
         rel = relative_covariance(estimate)
+        start = rest_start(so_far.hover, so_far.box, so_far.config)
+        if start != tuple(so_far.hover):
+            say("the hold is within the rotor clearance of the box's walls: the rest starts "
+                "at {} m".format(", ".join(f"{v:.2f}" for v in start[:3])))
         planner = replace(settings.planner, budget=rest, box=tuple(so_far.box),
-                          start=tuple(so_far.hover),
+                          start=start,
                           prior_covariance=rel,
                           autopilot_limits=(so_far.autopilot_limits
                                             or settings.planner.autopilot_limits))
@@ -233,7 +328,7 @@ def replanning_continuation(settings: ReplanSettings,
                         "planning_time": (planner.planning_time if math.isfinite(
                             planner.planning_time) else None), "seed": planner.seed,
                         "rotor_confidence": planner.rotor_confidence,
-                        "start": list(so_far.hover)},
+                        "start": list(start)},
             "predicted_dopt": plan.predicted_dopt}
         return NextSegment(plan.trajectory, "replanned", record)
 

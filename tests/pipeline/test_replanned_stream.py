@@ -9,18 +9,24 @@ import sys
 
 import numpy as np
 import pytest
+from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.flight.ground.continuation import FlightSoFar
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.formats.flight_dir import read_meta
-from mavsysid.formats.poselog import read_pose_log
+from mavsysid.formats.motor_curve import pwm_from_rotor_speed
+from mavsysid.formats.poselog import PoseLogWriter, read_pose_log
+from mavsysid.formats.tlog import TlogWriter
 from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
 from mavsysid.pipeline.replanned_stream import (
     ReplanSettings,
     belief_after_opening,
+    opening_log,
     prior_estimate,
     relative_covariance,
+    rest_start,
     run_replanned_stream,
     snapshot_pose,
 )
@@ -88,6 +94,94 @@ def test_snapshot_leaves_out_a_half_written_row(tmp_path):
     source.write_text("t,x\n0.0,1.0\n0.1,1.")
     (tmp_path / "copy").mkdir()
     assert snapshot_pose(source, tmp_path / "copy").read_text() == "t,x\n0.0,1.0\n"
+
+
+class _StepClock:
+    """A tlog clock the test sets: µs since the Unix epoch."""
+
+    now_us = 0
+
+    def epoch_us(self) -> int:
+        return self.now_us
+
+
+BOOT_S, EPOCH_S, HOVER_STEP = 40.0, 1.7e9, 0.02
+
+
+def _flight_without_esc(directory, config, rotors_in_pose):
+    """A 4 s hover recorded as the streamer does: pose.csv (ESC rpm columns, here
+    ``rotors_in_pose``) and flight.tlog from our writer with the motor outputs
+    (SERVO_OUTPUT_RAW) and no ESC telemetry, its last record cut mid-write; the rotor
+    speeds flown, per SERVO_OUTPUT_RAW time."""
+    from pymavlink.dialects.v20 import ardupilotmega as m
+
+    rng = np.random.default_rng(7)
+    directory.mkdir()
+    mav, clock = m.MAVLink(None, srcSystem=1, srcComponent=1), _StepClock()
+    tlog = TlogWriter(directory / "flight.tlog", clock)
+    pose = PoseLogWriter(directory / "pose.csv", config.rotor_count)
+    hover = math.sqrt(config.mass * 9.80665 / (config.rotor_count * config.theta[0]))
+    t = BOOT_S + HOVER_STEP * np.arange(200)
+    n = hover * (1.0 + 0.05 * rng.standard_normal((t.size, config.rotor_count)))
+    pwm = np.rint(pwm_from_rotor_speed(n, config))
+    for i, ti in enumerate(t):
+        clock.now_us = round((EPOCH_S + ti + 0.003) * 1e6)
+        ned = (0.2 * math.sin(ti), 0.2 * math.cos(ti), -1.0 - 0.1 * math.sin(2.0 * ti))
+        q = (math.cos(0.05 * math.sin(ti)), 0.0, 0.0, math.sin(0.05 * math.sin(ti)))
+        for msg in (m.MAVLink_heartbeat_message(2, 3, 0, 4, 4, 3),
+                    m.MAVLink_servo_output_raw_message(round((ti - 0.004) * 1e6), 0,
+                                                       *pwm[i].astype(int), 0, 0, 0, 0),
+                    m.MAVLink_attitude_quaternion_message(round(ti * 1e3), *q, 0.0, 0.0, 0.0,
+                                                          [0.0] * 4),
+                    m.MAVLink_local_position_ned_message(round(ti * 1e3), *ned, 0.0, 0.0,
+                                                         0.0)):
+            tlog.write(msg.pack(mav))
+        pose.write(ti, [ned[1], ned[0], -ned[2]], [q[0], 0.0, 0.0, -q[3]],
+                   n[i] if rotors_in_pose else np.zeros(config.rotor_count))
+    tlog.close()
+    pose.close()
+    with (directory / "flight.tlog").open("ab") as f:  # a record being written
+        f.write(m.MAVLink_heartbeat_message(2, 3, 0, 4, 4, 3).pack(mav)[:5])
+    return FlightSoFar(directory=directory, pose=directory / "pose.csv", config=config,
+                       box=BOX, window_start=BOOT_S + 1.0, flown=3.0,
+                       hover=(0.0, 0.0, 1.0, 0.0), segments=1), t - 0.004, n
+
+
+def test_without_esc_rpm_the_opening_is_read_from_the_tlog_motor_outputs(tmp_path):
+    """pose.csv's rotor speeds zero throughout: the opening is the tlog's snapshot, from
+    the window's start, with the rotor speeds the motor outputs stand for."""
+    config = load_vehicle("sitl_quad")
+    so_far, t_servo, n = _flight_without_esc(tmp_path / "flight", config, False)
+    (tmp_path / "copy").mkdir()
+    log = opening_log(so_far, tmp_path / "copy")
+    assert log == tmp_path / "copy" / "flight.tlog"
+    assert log.read_bytes() == (so_far.directory / "flight.tlog").read_bytes()
+    flight = load_flight(log, config, start=so_far.window_start)
+    assert so_far.window_start <= flight.t[0] < so_far.window_start + 2 * HOVER_STEP
+    expected = np.column_stack([np.interp(flight.t, t_servo, n[:, j])
+                                for j in range(config.rotor_count)])
+    # integer µs of PWM: about 0.2 % of a rotor speed at hover
+    np.testing.assert_allclose(flight.rotor_speeds, expected, rtol=0.01)
+
+
+def test_with_esc_rpm_the_opening_is_read_from_the_pose_log(tmp_path):
+    """pose.csv with rotor speeds stays the opening's log."""
+    config = load_vehicle("sitl_quad")
+    so_far, _, _ = _flight_without_esc(tmp_path / "flight", config, True)
+    (tmp_path / "copy").mkdir()
+    assert opening_log(so_far, tmp_path / "copy") == tmp_path / "copy" / "pose.csv"
+
+
+@pytest.mark.parametrize(("hover", "expected"), [
+    ((0.3, -0.4, 1.5, 0.7), (0.3, -0.4, 1.5, 0.7)),  # far from the walls: the hold
+    ((1.8, -1.2, 1.5, -0.1), (2.0 - 0.35, -1.2, 1.5, -0.1)),  # near x_max: pulled in
+    ((-1.95, 1.9, 0.6, 0.0), (-2.0 + 0.35, 2.0 - 0.35, 0.5 + 0.35, 0.0)),  # a corner
+])
+def test_the_rest_starts_the_rotor_clearance_inside_the_box(hover, expected):
+    """An opening ending nearer a wall than the rotor clearance is continued from the
+    nearest point that far inside; otherwise from the hold itself."""
+    config = load_vehicle("sitl_quad")  # rotors 0.35 m from the centre of gravity
+    assert rest_start(hover, BOX, config) == pytest.approx(expected, abs=1e-9)
 
 
 def test_budget_not_longer_than_the_opening_is_refused_before_connecting(tmp_path):
