@@ -8,23 +8,6 @@ from mavsysid.flight.ground.autopilot_limits import kinematic_limits
 
 from mavsysid.cli import main
 from tests.flight.ground.test_autopilot_limits import STOCK
-from tests.support.fake_planner import fake_result
-
-
-@pytest.fixture
-def planned(monkeypatch: pytest.MonkeyPatch) -> list:
-    """`run_plan` replaced by a fake that records the settings it gets."""
-    calls: list = []
-
-    def run_plan(vehicle, settings, random=False, progress=True, say=None):
-        calls.append(settings)
-        from mavsysid.vehicle.config import VehicleConfig, load_vehicle
-
-        config = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
-        return fake_result(config, settings, "dopt")
-
-    monkeypatch.setattr("mavsysid.cli.plan.run_plan", run_plan)
-    return calls
 
 
 def test_the_dumps_limits_reach_the_planner(tmp_path, planned):

@@ -11,28 +11,13 @@ from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.autopilot_limits import kinematic_limits, parameter_names
 from mavsysid.flight.loopback_ports import free_tcp_port
 from mavsysid.flight.simvehicle.params import default_parameters
-from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.cli import main
 from tests.support.stream_flights import SimProcess
 
 VEHICLE = "quad_x"
 
-
-@pytest.fixture
-def planned(monkeypatch: pytest.MonkeyPatch) -> list:
-    """`run_plan` replaced by a fake that records the settings it gets."""
-    from tests.support.fake_planner import fake_result
-
-    calls: list = []
-
-    def run_plan(vehicle, settings, random=False, progress=True, say=None):
-        calls.append(settings)
-        config = vehicle if isinstance(vehicle, VehicleConfig) else load_vehicle(vehicle)
-        return fake_result(config, settings, "dopt")
-
-    monkeypatch.setattr("mavsysid.cli.plan.run_plan", run_plan)
-    return calls
 
 
 def _sim_limits(autopilot: Autopilot):
