@@ -23,7 +23,8 @@ from mavsysid.flight.mavlink_setup import load_mavutil
 
 from tests.support.stream_flights import start_stream, wait_for
 
-__all__ = ["SITL_DIR", "Observer", "SitlInstance", "observing", "require_sitl", "running_sitl",
+__all__ = ["SITL_DIR", "Observer", "SitlInstance", "gentle_trajectory", "observing",
+           "require_sitl", "running_sitl",
            "streaming"]
 
 #: Where the shared SITL build lives, beside the checkout.
@@ -55,6 +56,17 @@ class SitlInstance:
         """What SITL printed so far."""
         path = self.directory / "sitl.out"
         return path.read_text(errors="replace") if path.exists() else ""
+
+
+def gentle_trajectory(path: Path, vehicle: str, box: tuple[float, ...]) -> Path:
+    """Write a gentle 10 s excitation for ``vehicle`` inside ``box`` to ``path``; the path."""
+    from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
+    from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+    from mavsysid.vehicle.config import load_vehicle
+
+    gentle = excitation_trajectory(ExcitationSpec(duration=10.0, amplitude=(0.8, 0.6, 0.3)))
+    write_trajectory_file(path, trajectory_file_for(gentle, load_vehicle(vehicle), box=box))
+    return path
 
 
 def require_sitl() -> Path:

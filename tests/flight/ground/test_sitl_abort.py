@@ -10,11 +10,15 @@ from pathlib import Path
 import pytest
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.autopilot_limits import parameter_names
-from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
-from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
-from mavsysid.vehicle.config import load_vehicle
 
-from tests.support.sitl import Observer, observing, require_sitl, running_sitl, streaming
+from tests.support.sitl import (
+    Observer,
+    gentle_trajectory,
+    observing,
+    require_sitl,
+    running_sitl,
+    streaming,
+)
 from tests.support.stream_flights import BOX, flight_dir, read_tlog
 
 pytestmark = [pytest.mark.slow, pytest.mark.peers]
@@ -43,10 +47,7 @@ def test_aborted_flight_on_arducopter_lands_then_restores_every_parameter(tmp_pa
     """Beyond the tracking limit on SITL: BRAKE, LAND, disarmed before the streamer exits,
     and every parameter it changed reads back, over SITL's second port, as before."""
     require_sitl()
-    trajectory = tmp_path / "gentle.json"
-    gentle = excitation_trajectory(ExcitationSpec(duration=10.0, amplitude=(0.8, 0.6, 0.3)))
-    write_trajectory_file(trajectory, trajectory_file_for(gentle, load_vehicle("sitl_quad"),
-                                                          box=BOX))
+    trajectory = gentle_trajectory(tmp_path / "gentle.json", "sitl_quad", BOX)
     logs = tmp_path / "logs"
     with running_sitl(tmp_path / "sitl", defaults=[SITL_PARMS], model="x") as sitl:
         # SERIAL0 serves one client: read before the streamer takes it.

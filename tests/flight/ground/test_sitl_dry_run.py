@@ -10,11 +10,8 @@ from pathlib import Path
 import pytest
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.ground.autopilot_limits import parameter_names
-from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
-from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
-from mavsysid.vehicle.config import load_vehicle
 
-from tests.support.sitl import Observer, require_sitl, running_sitl
+from tests.support.sitl import Observer, gentle_trajectory, require_sitl, running_sitl
 from tests.support.stream_flights import BOX, flight_dir, read_tlog, run_stream
 
 pytestmark = [pytest.mark.slow, pytest.mark.peers]
@@ -45,10 +42,7 @@ def test_dry_run_on_fresh_arducopter_waits_for_prearm_and_changes_nothing(tmp_pa
     the fence it would set, sends no PARAM_SET, mission or arm, and every limit and fence
     parameter reads back as before."""
     require_sitl()
-    trajectory = tmp_path / "gentle.json"
-    gentle = excitation_trajectory(ExcitationSpec(duration=10.0, amplitude=(0.8, 0.6, 0.3)))
-    write_trajectory_file(trajectory, trajectory_file_for(gentle, load_vehicle("quad_x"),
-                                                          box=BOX))
+    trajectory = gentle_trajectory(tmp_path / "gentle.json", "quad_x", BOX)
     logs = tmp_path / "logs"
     with running_sitl(tmp_path / "sitl", defaults=[STOCK_PARMS], model="x") as sitl:
         before = _read(sitl.port)
