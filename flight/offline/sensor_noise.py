@@ -20,6 +20,11 @@ class SensorNoise:
     Position gets N(0, σ_p² I), attitude q ⊗ Exp(φ) with φ ~ N(0, σ_φ² I) (body frame),
     rotor speeds N(0, σ_n² I).
 
+    Drawn in call order, or by sample index: the index's block comes from a generator
+    seeded with (seed, block), so the noise of a sample does not depend on which other
+    samples were asked for (a simulated vehicle measures only at the ticks its telemetry
+    and requests need, and those may differ between runs of one flight).
+
     Parameters
     ----------
     config : VehicleConfig
@@ -33,23 +38,39 @@ class SensorNoise:
     _BLOCK = 1000
 
     def __init__(self, config: VehicleConfig, seed: int, enabled: bool) -> None:
+        self._seed = seed
         self._rng = np.random.default_rng(seed)
+        self._block = -1
         self._noise = config.noise
         self._k = config.rotor_count
         self._enabled = enabled
         self._next = self._BLOCK
 
-    def _draw(self) -> None:
+    def _draw(self, rng: np.random.Generator) -> None:
         nz, b = self._noise, self._BLOCK
-        self._dp = self._rng.normal(0.0, nz.position_sigma, (b, 3))
-        self._dq = quat_exp(self._rng.normal(0.0, nz.attitude_sigma, (b, 3))).tolist()
-        self._dn = self._rng.normal(0.0, nz.rotor_speed_sigma, (b, self._k))
-        self._next = 0
+        self._dp = rng.normal(0.0, nz.position_sigma, (b, 3))
+        self._dq = quat_exp(rng.normal(0.0, nz.attitude_sigma, (b, 3))).tolist()
+        self._dn = rng.normal(0.0, nz.rotor_speed_sigma, (b, self._k))
+
+    def _row(self, sample: int | None) -> int:
+        """Row of the drawn block for the next call, or for ``sample``."""
+        if sample is None:
+            if self._next == self._BLOCK:
+                self._draw(self._rng)
+                self._block, self._next = -1, 0
+            self._next += 1
+            return self._next - 1
+        block, row = divmod(sample, self._BLOCK)
+        if block != self._block:
+            self._draw(np.random.default_rng((self._seed, block)))
+            self._block, self._next = block, self._BLOCK
+        return row
 
     def apply(
-        self, position: np.ndarray, quaternion: np.ndarray, rotor_speeds: np.ndarray
+        self, position: np.ndarray, quaternion: np.ndarray, rotor_speeds: np.ndarray,
+        sample: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Noisy copies of a true pose and rotor speeds (one draw per call).
+        """Noisy copies of a true pose and rotor speeds (one draw per call, or per index).
 
         Parameters
         ----------
@@ -59,6 +80,9 @@ class SensorNoise:
             Unit [w, x, y, z], body FLU → world ENU.
         rotor_speeds : ndarray, shape (k,)
             rad/s.
+        sample : int, optional
+            Index of the sample (≥ 0): its noise is the same whatever else was drawn. Do
+            not mix with calls in call order on one instance.
 
         Returns
         -------
@@ -67,10 +91,7 @@ class SensorNoise:
         """
         if not self._enabled:
             return position, quaternion, rotor_speeds
-        if self._next == self._BLOCK:
-            self._draw()
-        i = self._next
-        self._next += 1
+        i = self._row(sample)
         # One Hamilton product on plain floats: numpy's per-call overhead would dominate.
         aw, ax, ay, az = quaternion.tolist()
         bw, bx, by, bz = self._dq[i]

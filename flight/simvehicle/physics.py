@@ -266,7 +266,7 @@ class SimVehicle:
         """Published (noisy) position ENU, attitude and rotor speeds at this tick."""
         if self._measured_tick != self.tick:
             sensed = _sensed(self.effects, self.time_us * 1e-6, self.y, self.n_cmd)
-            self._measured = self._noise.apply(*sensed)
+            self._measured = self._noise.apply(*sensed, sample=self.tick)
             self._measured_tick = self.tick
         assert self._measured is not None
         return self._measured

@@ -81,3 +81,23 @@ def test_truth_log_meta_records_hidden_effects(tmp_path, specs):
     assert all(e["hidden"] for e in meta["truth"]["effects"])
     assert meta["truth"]["motor_time_constant_s"] == 0.04
     assert meta["model_effects"] == []
+
+
+def test_published_noise_depends_on_the_tick_not_on_what_else_was_measured():
+    """Two seeded vehicles, one measured every tick and one every third: the same noise
+    at the common ticks (a reply to a request must not shift the rest of the flight)."""
+    config = load_vehicle("firefly")
+    every, sparse = (SimVehicle(config, config.theta, seed=7) for _ in range(2))
+    common = []
+    for tick in range(2500):  # across a block boundary of the drawn noise
+        a = every.measured()
+        if tick % 3 == 0:
+            common.append((a, sparse.measured()))
+        every.step(armed=False)
+        sparse.step(armed=False)
+    assert len(common) > 800
+    for a, b in common:
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+    positions = np.array([a[0] for a, _ in common])
+    assert np.std(positions[:, 0]) > 0.1 * config.noise.position_sigma  # noise is on
