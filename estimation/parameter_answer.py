@@ -7,11 +7,16 @@ by split disagreements) and the filter with its batch refinement
 (`mavsysid.estimation.estimator`, the paper's estimator, more precise where its model and
 noise assumptions hold). Per parameter:
 
-* both determine it and agree (within `AGREEMENT_SIGMAS` × their combined σ, or within the
-  relative tolerance `mavsysid.estimation.guard.AGREEMENT_TOLERANCE`): the filter's value
-  and σ;
-* both determine it and disagree: the balance's value and σ stand, and the disagreement is
-  reported as a mismatch (what ``diagnose`` looks for), not a refusal;
+* the filter determines it and the balance has a value for it (determined or not): the
+  filter's value and σ stand where the two agree, a Hausman test (Hausman 1978): both
+  come from one flight and the filter is the efficient estimator when the paper's model
+  holds, so their difference has variance σ_b² − σ_f², and they agree within
+  `AGREEMENT_SIGMAS` of its σ, or within the relative tolerance
+  `mavsysid.estimation.guard.AGREEMENT_TOLERANCE`. Where they disagree, or the filter is
+  not the more precise of the two (nothing then speaks for a model-bound estimate over
+  the one that carries the effects beyond the model as nuisance terms), the balance
+  answers: its value and σ where it determines the parameter, the prior's otherwise. A
+  disagreement is reported as a mismatch (what ``diagnose`` looks for), not a refusal;
 * one determines it: that one's value and σ (the filter's only when it followed the flight);
 * neither: c_D whose data value lies within `BOUND_SIGMAS` σ of 0 is "at the bound"
   (drag linear in rotor speed, or none: the value clipped at 0 with the data's σ); anything
@@ -59,6 +64,30 @@ def _filter_determines(estimate: ParameterEstimate) -> np.ndarray:
 def _balance_data_sigma(balance: WrenchBalanceResult) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):  # a σ part of 1e200: inf, not determined
         return np.sqrt(np.sum(balance.sigma_parts**2, axis=0))
+
+
+def _balance_data(balance: WrenchBalanceResult | None) -> tuple[np.ndarray, np.ndarray]:
+    """The balance's data value and σ per parameter; σ inf where it has none."""
+    n = len(PARAMETER_NAMES)
+    if balance is None:
+        return np.full(n, np.nan), np.full(n, np.inf)
+    value = np.asarray(balance.data.value, float)
+    sigma = _balance_data_sigma(balance)
+    ok = np.isfinite(value) & np.isfinite(sigma) & (sigma > 0.0)
+    return value, np.where(ok, sigma, np.inf)
+
+
+def _filter_stands(fv: float, fs: float, bv: float, bs: float, tolerance: float
+                   ) -> tuple[bool, float | None]:
+    """Whether the filter's value stands against the balance's (module docstring), and how
+    many σ of their difference apart they are when they disagree (None when they agree)."""
+    delta = abs(fv - bv)
+    if fs < bs:
+        spread = math.sqrt(bs * bs - fs * fs)  # Hausman: var(b − f) = var(b) − var(f)
+    else:
+        spread = math.hypot(fs, bs)
+    disagree = delta > AGREEMENT_SIGMAS * spread and delta > tolerance * abs(bv)
+    return (fs < bs and not disagree), (delta / spread if disagree else None)
 
 
 def _at_bound(balance: WrenchBalanceResult | None, prior: ParameterEstimate) -> np.ndarray:
@@ -111,20 +140,18 @@ def answer_parameters(
     b_det = np.zeros(n, bool) if balance is None else np.asarray(balance.determined, bool)
     source = np.full(n, "prior", dtype=object)
     mismatch = []
+    b_val, b_sig = _balance_data(balance)
     for j, name in enumerate(PARAMETER_NAMES):
-        if f_det[j] and b_det[j]:
-            assert f_est is not None and balance is not None
+        if f_det[j] and math.isfinite(b_sig[j]):
+            assert f_est is not None
             fv, fs = float(f_est.value[j]), float(f_est.sigma[j])
-            bv, bs = float(balance.estimate.value[j]), float(balance.estimate.sigma[j])
-            spread = math.hypot(fs, bs)
-            delta = abs(fv - bv)
-            if delta > AGREEMENT_SIGMAS * spread and delta > AGREEMENT_TOLERANCE[j] * abs(bv):
-                source[j] = "balance"
+            bv, bs = float(b_val[j]), float(b_sig[j])
+            stands, apart = _filter_stands(fv, fs, bv, bs, float(AGREEMENT_TOLERANCE[j]))
+            source[j] = "filter" if stands else "balance" if b_det[j] else "prior"
+            if apart is not None:
                 mismatch.append(
                     f"{name}: filter {fv:.4g} ± {fs:.2g}, balance {bv:.4g} ± {bs:.2g} "
-                    f"{PARAMETER_UNITS[name]} ({delta / spread:.1f} σ apart)")
-            else:
-                source[j] = "filter"
+                    f"{PARAMETER_UNITS[name]} ({apart:.1f} σ apart)")
         elif f_det[j]:
             source[j] = "filter"
         elif b_det[j]:

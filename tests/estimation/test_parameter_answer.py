@@ -97,3 +97,34 @@ def test_nothing_to_answer_from_is_refused():
     """No filter and no balance: refused, not an answer made of the prior."""
     with pytest.raises(JobFailedError):
         answer_parameters(None, None, PRIOR)
+
+
+def test_filter_outside_the_difference_sigma_gives_way_though_within_the_combined():
+    """Filter σ 5 %, balance σ 6 %, 12 % apart: within 3 combined σ (7.8 %) but beyond
+    3 σ of their difference (σ_b² − σ_f²)^½ = 3.3 %: the balance answers, named."""
+    balance = _balance(THETA, np.full(6, 0.06))
+    filt = _filter(THETA * np.array([1, 1, 1, 1.12, 1, 1]), 0.05 / 1.12)
+    estimate, status, source, mismatch = answer_parameters(filt, balance, PRIOR)
+    assert source[3] == "balance" and estimate.value[3] == pytest.approx(THETA[3])
+    assert [m.split(":")[0] for m in mismatch] == ["j_x"]
+    assert source[4] == "filter"
+
+
+def test_a_filter_no_more_precise_than_the_balance_gives_way():
+    """The filter's σ above the balance's: the balance's value, whether or not they agree."""
+    balance = _balance(THETA, np.full(6, 0.02))
+    filt = _filter(THETA * 1.01, 0.03)
+    estimate, status, source, mismatch = answer_parameters(filt, balance, PRIOR)
+    assert source == ("balance",) * 6 and mismatch == ()
+    np.testing.assert_allclose(estimate.value, THETA)
+
+
+def test_a_filter_contradicted_by_an_undetermined_balance_is_not_determined():
+    """The filter 60 % high on j_x; the balance's j_x (σ 15 %, not determined) far from it:
+    j_x is not determined (the prior), not the filter's value."""
+    rel = np.array([0.01, 0.05, 0.05, 0.15, 0.05, 0.05])
+    filt = _filter(THETA * np.array([1, 1, 1, 1.6, 1, 1]), 0.1 / 1.6)
+    estimate, status, source, mismatch = answer_parameters(filt, _balance(THETA, rel), PRIOR)
+    assert status[3] == NOT_DETERMINED and source[3] == "prior"
+    assert estimate.value[3] == PRIOR.value[3]
+    assert [m.split(":")[0] for m in mismatch] == ["j_x"]
