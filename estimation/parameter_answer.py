@@ -82,10 +82,8 @@ def _filter_stands(fv: float, fs: float, bv: float, bs: float, tolerance: float
     """Whether the filter's value stands against the balance's (module docstring), and how
     many σ of their difference apart they are when they disagree (None when they agree)."""
     delta = abs(fv - bv)
-    if fs < bs:
-        spread = math.sqrt(bs * bs - fs * fs)  # Hausman: var(b − f) = var(b) − var(f)
-    else:
-        spread = math.hypot(fs, bs)
+    # Hausman: var(b − f) = var(b) − var(f) when the filter is the efficient one.
+    spread = math.sqrt(bs * bs - fs * fs) if fs < bs else math.hypot(fs, bs)
     disagree = delta > AGREEMENT_SIGMAS * spread and delta > tolerance * abs(bv)
     return (fs < bs and not disagree), (delta / spread if disagree else None)
 

@@ -104,7 +104,7 @@ def test_filter_outside_the_difference_sigma_gives_way_though_within_the_combine
     3 σ of their difference (σ_b² − σ_f²)^½ = 3.3 %: the balance answers, named."""
     balance = _balance(THETA, np.full(6, 0.06))
     filt = _filter(THETA * np.array([1, 1, 1, 1.12, 1, 1]), 0.05 / 1.12)
-    estimate, status, source, mismatch = answer_parameters(filt, balance, PRIOR)
+    estimate, _, source, mismatch = answer_parameters(filt, balance, PRIOR)
     assert source[3] == "balance" and estimate.value[3] == pytest.approx(THETA[3])
     assert [m.split(":")[0] for m in mismatch] == ["j_x"]
     assert source[4] == "filter"
@@ -114,7 +114,7 @@ def test_a_filter_no_more_precise_than_the_balance_gives_way():
     """The filter's σ above the balance's: the balance's value, whether or not they agree."""
     balance = _balance(THETA, np.full(6, 0.02))
     filt = _filter(THETA * 1.01, 0.03)
-    estimate, status, source, mismatch = answer_parameters(filt, balance, PRIOR)
+    estimate, _, source, mismatch = answer_parameters(filt, balance, PRIOR)
     assert source == ("balance",) * 6 and mismatch == ()
     np.testing.assert_allclose(estimate.value, THETA)
 
