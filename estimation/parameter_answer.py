@@ -10,9 +10,10 @@ noise assumptions hold). Per parameter:
 * the filter determines it and the balance has a value for it (determined or not): the
   filter's value and σ stand where the two agree, a Hausman test (Hausman 1978): both
   come from one flight and the filter is the efficient estimator when the paper's model
-  holds, so their difference has variance σ_b² − σ_f², and they agree within
-  `AGREEMENT_SIGMAS` of its σ, or within the relative tolerance
-  `mavsysid.estimation.guard.AGREEMENT_TOLERANCE`. Where they disagree, or the filter is
+  holds, so their difference has variance σ_b² − σ_f², and the test rejects the filter
+  at the 5 % level (beyond `AGREEMENT_SIGMAS` = 1.96 σ of the difference) unless they lie
+  within the relative tolerance `mavsysid.estimation.guard.AGREEMENT_TOLERANCE` (the
+  accuracy asked of the estimator). Where it is rejected, or the filter is
   not the more precise of the two (nothing then speaks for a model-bound estimate over
   the one that carries the effects beyond the model as nuisance terms), the balance
   answers: its value and σ where it determines the parameter, the prior's otherwise. A
@@ -35,7 +36,12 @@ from dataclasses import replace
 import numpy as np
 from mavsysid.estimation.guard import AGREEMENT_TOLERANCE
 from mavsysid.estimation.parameter_status import MAX_RELATIVE_SIGMA
-from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.estimation.results import (
+    Z95,
+    EstimationHistory,
+    EstimationResult,
+    ParameterEstimate,
+)
 from mavsysid.estimation.wrench_balance_result import WrenchBalanceResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
 from mavsysid.vehicle.linearization import MEAS_DIM
@@ -49,8 +55,9 @@ DETERMINED = "determined"
 NOT_DETERMINED = "not determined by this flight"
 AT_BOUND = "at the bound"
 
-#: Filter and balance disagree beyond this many combined σ (and the relative tolerance).
-AGREEMENT_SIGMAS = 3.0
+#: Filter and balance disagree beyond this many σ of their difference (and the relative
+#: tolerance): the Hausman test at the 5 % level.
+AGREEMENT_SIGMAS = Z95
 #: A data value within this many σ of 0 puts c_D at its bound.
 BOUND_SIGMAS = 2.0
 _C_D = PARAMETER_NAMES.index("c_D")

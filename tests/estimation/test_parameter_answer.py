@@ -100,10 +100,10 @@ def test_nothing_to_answer_from_is_refused():
 
 
 def test_filter_outside_the_difference_sigma_gives_way_though_within_the_combined():
-    """Filter σ 5 %, balance σ 6 %, 12 % apart: within 3 combined σ (7.8 %) but beyond
-    3 σ of their difference (σ_b² − σ_f²)^½ = 3.3 %: the balance answers, named."""
+    """Filter σ 5 %, balance σ 6 %, 8 % apart: within 1.96 combined σ (7.8 %) but beyond
+    1.96 σ of their difference (σ_b² − σ_f²)^½ = 3.3 %: the balance answers, named."""
     balance = _balance(THETA, np.full(6, 0.06))
-    filt = _filter(THETA * np.array([1, 1, 1, 1.12, 1, 1]), 0.05 / 1.12)
+    filt = _filter(THETA * np.array([1, 1, 1, 1.08, 1, 1]), 0.05 / 1.08)
     estimate, _, source, mismatch = answer_parameters(filt, balance, PRIOR)
     assert source[3] == "balance" and estimate.value[3] == pytest.approx(THETA[3])
     assert [m.split(":")[0] for m in mismatch] == ["j_x"]
