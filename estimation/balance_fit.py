@@ -9,9 +9,7 @@ Steps, all chosen from the flight itself:
 2. **Window.** The Savitzky–Golay window is the longest that passes the highest band
    (`smoother_window`); both sides go through it and through the band-pass.
 3. **Offset.** δ minimises the band-passed torque residual
-   (`mavsysid.estimation.time_offset.scan_delay`) without the axial drag's damping
-   columns: a torque proportional to the body rate is in quadrature with the rotor
-   torque, as a time shift of it is, and would trade against δ.
+   (`mavsysid.estimation.time_offset.scan_delay`).
 4. **Regressions.** The force rows give c_T and c_T c_D; the torque rows the ratios of
    `mavsysid.estimation.wrench_regressors.TORQUE_COEFFICIENTS`
    (`mavsysid.estimation.balance_regression.fit_rows`, Newey–West covariance), with the
@@ -41,7 +39,6 @@ from mavsysid.estimation.wrench_regressors import (
     ROTOR_FORCE_COLUMNS,
     ROTOR_TORQUE_COLUMNS,
     TORQUE_AXIS,
-    TORQUE_COEFFICIENTS,
     BalanceBuilder,
     BalanceRows,
 )
@@ -60,9 +57,6 @@ ROWS_PER_PERIOD = 8
 #: measured to a fraction of a per cent (the rotor speeds), so the errors are on the
 #: measured side, where least squares takes them.
 MAIN_COLUMNS = {"force": (), "torque": ((0, (0,)), (3, (1,)), (6, (2,)))}
-#: Torque columns left out of the offset scan (step 3).
-_DAMPING_COLUMNS = [TORQUE_COEFFICIENTS.index(name)
-                    for name in ("axial_drag_x", "axial_drag_y")]
 
 
 @dataclass(frozen=True)
@@ -109,13 +103,6 @@ def _stride(choices: FitChoices, dt: float) -> int:
                if b is not None]
               + [smoother_cutoff(choices.window, dt)])
     return max(1, int(1.0 / (ROWS_PER_PERIOD * top * dt)))
-
-
-def _without_damping(rows: BalanceRows) -> BalanceRows:
-    """``rows`` with the axial drag's damping columns zeroed (the offset scan's model)."""
-    cols = rows.torque_columns.copy()
-    cols[:, :, _DAMPING_COLUMNS] = 0.0
-    return BalanceRows(rows.t, rows.force, rows.force_columns, rows.torque, cols)
 
 
 def _dead_axes(rows: BalanceRows, choices: FitChoices) -> BalanceRows:
@@ -230,8 +217,7 @@ def choose_fit(segments: list[UniformSegment], config: VehicleConfig, c_d: float
         builders = [BalanceBuilder(s, config, window) for s in segments]
     choices = FitChoices(window, roll_pitch, yaw, 0.0, c_d, force)
     if roll_pitch is not None or yaw is not None:
-        rows = [_without_damping(_dead_axes(b.rows(0.0, c_d, roll_pitch, yaw, force), choices))
-                for b in builders]
+        rows = [_dead_axes(b.rows(0.0, c_d, roll_pitch, yaw, force), choices) for b in builders]
         rows = [r for r in rows if len(r) > 0]
         stride = _stride(choices, dt)
         delay, _, _ = scan_delay(lambda d: _torque_objective(rows, d, stride), dt)

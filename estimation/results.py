@@ -182,7 +182,7 @@ class EstimationResult:
     answer_source : tuple of str
         Per parameter, with ``answer``: "filter", "balance" or "prior".
     mismatch : tuple of str
-        Parameters where the filter and the balance disagree (the balance's value stands).
+        Parameters where the filter and the balance disagree (the balance answers).
     balance : WrenchBalanceResult or None
         The force and torque balance (`mavsysid.estimation.wrench_balance`), with its
         held-out check.

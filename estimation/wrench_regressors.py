@@ -17,12 +17,7 @@ rotor speed (`mavsysid.vehicle.model_effects.RotorDragLinear`, in-plane k, per u
 mass) stands beside the quadratic c_T c_D: real rotors show both forms, and without it the
 quadratic c_D absorbs the linear one. In hover n barely varies, so the two columns are
 nearly collinear and c_D's σ with the nuisance included says whether the flight separates
-them (`mavsysid.estimation.parameter_status`). The same drag along the rotor axis (k_z, the
-axial inflow) damps roll and pitch through the arms: a rotor on the side rolling down meets
-air coming up and lifts more. That torque opposes the body rate, and a model without it
-reads the slower response to the same rotor torques as more inertia (ArduPilot's SITL quad:
-roll and pitch inertia 20–80 % high), so the roll and pitch rows carry it as nuisance
-coefficients k_z/j_x and k_z/j_y.
+them (`mavsysid.estimation.parameter_status`).
 
 Each model column goes through the same smoother as the measured side
 (`mavsysid.estimation.equation_error.body_force_readout`, `body_rotation_readout`), so the
@@ -61,15 +56,13 @@ FORCE_COEFFICIENTS = ("c_T", "c_T*c_D", "drag_linear")
 #: coefficients −(j_z − j_y)/j_x, −(j_x − j_z)/j_y, −(j_y − j_x)/j_z; ``rotor_gyro_x`` is
 #: −J_r/j_x on Σε_i n_i ω_y, ``rotor_gyro_y`` is J_r/j_y on Σε_i n_i ω_x; ``drag_z`` is
 #: c_T c_D / j_z (the rotor drag's yaw moment); ``rotor_inertia_z`` is −J_r / j_z on
-#: Σ ε_i ṅ_i; ``axial_drag_x``, ``axial_drag_y`` are k_z/j_x, k_z/j_y on the roll and pitch
-#: moment of a rotor drag linear in rotor speed along the rotor axis, per unit k_z.
+#: Σ ε_i ṅ_i.
 TORQUE_COEFFICIENTS = ("c_T/j_x", "g_x", "rotor_gyro_x", "c_T/j_y", "g_y", "rotor_gyro_y",
-                       "c_M/j_z", "drag_z", "g_z", "rotor_inertia_z", "axial_drag_x",
-                       "axial_drag_y")
+                       "c_M/j_z", "drag_z", "g_z", "rotor_inertia_z")
 #: Which torque axis each torque coefficient's column acts on (0 = x, 1 = y, 2 = z).
-TORQUE_AXIS = (0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 0, 1)
+TORQUE_AXIS = (0, 0, 0, 1, 1, 1, 2, 2, 2, 2)
 #: Columns of the torque rows that depend on the rotor speeds (the rest on the pose only).
-ROTOR_TORQUE_COLUMNS = (0, 2, 3, 5, 6, 7, 9, 10, 11)
+ROTOR_TORQUE_COLUMNS = (0, 2, 3, 5, 6, 7, 9)
 #: Columns of the force rows that depend on the rotor speeds.
 ROTOR_FORCE_COLUMNS = (0, 1, 2)
 #: All coefficients, force then torque: the stacked vector of `parameter_status`.
@@ -90,7 +83,7 @@ class BalanceRows:
         Model body specific force per unit of each `FORCE_COEFFICIENTS` entry.
     torque : ndarray, shape (N, 3)
         Measured body angular acceleration minus the model's rate term, rad/s².
-    torque_columns : ndarray, shape (N, 3, 12)
+    torque_columns : ndarray, shape (N, 3, 10)
         Model angular acceleration per unit of each `TORQUE_COEFFICIENTS` entry.
     """
 
@@ -130,15 +123,13 @@ def _unit_wrenches(n: np.ndarray, config: VehicleConfig, v_b: np.ndarray, w: np.
     return f_t, f_td - f_t, m_t, m_td - m_t, m_m
 
 
-def _linear_drag(n: np.ndarray, config: VehicleConfig, pose: SmoothedPose,
-                 v_b: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The catalogue's linear rotor drag: body force per unit in-plane k (N) and body torque
-    per unit axial k_z (N·m)."""
+def _linear_drag_force(n: np.ndarray, config: VehicleConfig, pose: SmoothedPose,
+                       v_b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Body force of the catalogue's linear rotor drag per unit in-plane k (k_z = 0), N."""
     inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, n, np.zeros(6),
                           config.rotor_positions)
     force, _ = RotorDragLinear(k=1.0, k_z=0.0).wrench(inputs)
-    _, torque = RotorDragLinear(k=0.0, k_z=1.0).wrench(inputs)
-    return force, torque
+    return force
 
 
 def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float,
@@ -226,7 +217,7 @@ class BalanceBuilder:
         pose, config = self.pose, self.config
         v_b = pose.velocity_body()
         f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, v_b, pose.rates)
-        f_l, m_axial = _linear_drag(n, config, pose, v_b, pose.rates)
+        f_l = _linear_drag_force(n, config, pose, v_b, pose.rates)
         force_cols = np.stack([body_force_readout(pose, pose, f / config.mass, self.kernel)
                                for f in (f_t, f_d, f_l)], axis=-1)
         thrust_torque = m_t + c_d * m_d
@@ -235,8 +226,7 @@ class BalanceBuilder:
         rotor_cols = {0: (0, thrust_torque[:, 0]), 2: (0, spin * w[:, 1]),
                       3: (1, thrust_torque[:, 1]), 5: (1, spin * w[:, 0]),
                       6: (2, m_m[:, 2]), 7: (2, m_d[:, 2]),
-                      9: (2, n_dot @ config.rotor_directions),
-                      10: (0, m_axial[:, 0]), 11: (1, m_axial[:, 1])}
+                      9: (2, n_dot @ config.rotor_directions)}
         torque_cols = np.empty((len(n), 3, len(TORQUE_COEFFICIENTS)))
         for col, (axis, values) in rotor_cols.items():
             torque_cols[:, :, col] = self._readout(axis, values)

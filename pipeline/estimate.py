@@ -174,7 +174,8 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
             flight.pose_source, flight.true_theta, tuple(flight.warnings))
     if mismatch:
         notes.append("the filter and the force and torque balance disagree on "
-                     + "; ".join(mismatch) + ": the balance's value stands; the model "
+                     + "; ".join(mismatch) + ": the balance answers for them (where it "
+                     "determines them; not determined where it does not); the model "
                      "misses something (mavsysid diagnose names what)")
     for label, why in ((NOT_DETERMINED, "the prior's value and σ are kept"),
                        (AT_BOUND, f"the data put it within {BOUND_SIGMAS:g} σ of 0")):
