@@ -10,9 +10,9 @@ follow the flight, or whose θ is refused (`check_result`: physically impossible
 outside the prior, contradicting the log's equation-error fit), leaves the balance's
 answer, with the reason in the notes. A flight is refused only when neither determines a
 parameter. A rotor channel that reads a constant share of its speed is rescaled first
-(`mavsysid.estimation.rotor_balance.rescale_wrong_rotor`). `checked_estimate` takes the
-filter's steps on a flight already read and gives θ̂ and Σ (re-planning in flight,
-`mavsysid.pipeline.replanned_stream`, and its offline evaluation).
+(`mavsysid.estimation.rotor_balance.rescale_wrong_rotor`). `estimate_flight` does the same
+on a flight already read, and `checked_estimate` gives its answer's θ̂ and Σ (re-planning in
+flight, `mavsysid.pipeline.replanned_stream`, and its offline evaluation).
 """
 
 from __future__ import annotations
@@ -54,7 +54,8 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["EstimateRun", "Estimator", "check_result", "checked_estimate", "run_estimate"]
+__all__ = ["EstimateRun", "Estimator", "check_result", "checked_estimate", "estimate_flight",
+           "run_estimate"]
 
 #: What estimates θ from a read flight: `estimate_parameters` or a caller's (e.g. with the
 #: effects a diagnosis names, `mavsysid.pipeline.auto_effects`).
@@ -116,6 +117,28 @@ def run_estimate(
     """
     config = load_vehicle(vehicle)
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
+    return estimate_flight(flight, config, settings, estimate)
+
+
+def estimate_flight(flight: FlightData, config: VehicleConfig,
+                    settings: EstimatorSettings | None = None,
+                    estimate: Estimator | None = None) -> EstimateRun:
+    """θ from a flight already read, as `run_estimate` answers it (its docstring).
+
+    Parameters
+    ----------
+    flight : FlightData
+        The flight as read (`load_flight`).
+    config : VehicleConfig
+        The vehicle: known mass and geometry, and the prior.
+    settings : EstimatorSettings, optional
+    estimate : Estimator, optional
+
+    Raises
+    ------
+    JobFailedError, InputError
+        As `run_estimate`.
+    """
     check_kinematics(flight)  # a clock or position unit the attitude denies
     settings = settings or EstimatorSettings()
     prior = prior_from_config(config, settings)
@@ -243,7 +266,8 @@ def checked_estimate(flight: FlightData, config: VehicleConfig,
                      source: str | None = None) -> ParameterEstimate:
     """θ̂ and Σ (SI) as ``mavsysid estimate`` reports them: the final estimate.
 
-    The kinematics check, `estimate_parameters` and `check_result`.
+    The per-parameter answer of `estimate_flight`: what the flight does not determine keeps
+    the prior's value and σ.
 
     Parameters
     ----------
@@ -263,7 +287,6 @@ def checked_estimate(flight: FlightData, config: VehicleConfig,
     InputError
         The log's kinematics are inconsistent (bad input).
     """
-    check_kinematics(flight)
-    result = estimate_parameters(flight, config, settings)
-    check_result(flight.source if source is None else source, result)
-    return result.final
+    if source is not None:
+        flight = replace(flight, source=source)
+    return estimate_flight(flight, config, settings).result.final
