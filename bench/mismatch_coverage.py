@@ -21,6 +21,12 @@ Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
   hover rotor speed √(m g / (rotors · c_T))), so both laws give the same drag in hover.
   The estimate is scored against the nominal θ, i.e. c_D's hover equivalent.
 
+``--answer`` scores what ``mavsysid estimate`` prints: its per-parameter answer
+(`mavsysid.pipeline.estimate.estimate_flight`: the force and torque balance checked by the
+filter, `mavsysid.estimation.parameter_answer`), whose coverage is counted over the
+parameters it marks determined (a parameter not determined keeps the prior, which covers
+the truth by construction); the table then also gives the share determined.
+
 ``--reestimate`` measures θ re-estimated with the named effects (what ``mavsysid estimate
 --auto-effects`` runs): `mavsysid.pipeline.auto_effects.estimate_with_named_effects`
 estimates θ, lets `mavsysid.discrepancy.diagnosis.diagnose_flight` (from the estimate,
@@ -30,7 +36,7 @@ scored (the first estimate when nothing is named). When
 c_D + k / (c_T n_h) with σ² = σ_cD² + (σ_k / (c_T n_h))² (their correlation ignored).
 
     nice python bench/mismatch_coverage.py [--seeds 20] [--truths clean,wind] [--workers 2]
-        [--reestimate]
+        [--reestimate | --answer]
 """
 
 from __future__ import annotations
@@ -49,7 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from mavsysid.estimation.estimator import estimate_parameters
 from mavsysid.estimation.results import Z95, EstimationResult
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
-from mavsysid.pipeline.estimate import check_result
+from mavsysid.pipeline.estimate import check_result, estimate_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
@@ -98,42 +104,55 @@ def scored(result: EstimationResult, config: VehicleConfig) -> tuple[np.ndarray,
     return value, sigma
 
 
-def run(truth: str, seed: int, root: str, reestimate: bool = False
-        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One flight: (scoring truth, estimate, σ), each shape (6,), SI."""
+def run(truth: str, seed: int, root: str, mode: str = "filter"
+        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One flight: (scoring truth, estimate, σ, determined), each shape (6,), SI.
+
+    ``mode``: "filter" (the filter and batch), "reestimate" (with the named effects) or
+    "answer" (the per-parameter answer).
+    """
     config = load_vehicle(VEHICLE)
     flown, effects = truth_side(config, truth)
     flight = hidden_flight(config, Path(root) / f"{truth}-{seed}", effects, seed=seed,
                            true_theta=flown)
     rng = np.random.default_rng(10_000 + seed)
     prior = config.with_parameters(config.theta * (1.0 + rng.uniform(-0.5, 0.5, 6)))
+    everything = np.ones(6, bool)
     try:
-        result = (estimate_with_named_effects(flight, prior)[0] if reestimate
+        if mode == "answer":
+            result = estimate_flight(flight, prior).result
+            determined = np.array([s == "determined" for s in result.status])
+            return config.theta, result.final.value, result.final.sigma, determined
+        result = (estimate_with_named_effects(flight, prior)[0] if mode == "reestimate"
                   else estimate_parameters(flight, prior))
         # what `mavsysid estimate` refuses
         check_result(flight.source, result, prior.limits.rotor_speed_max)
     except JobFailedError:  # refused (exit 3): scored as not covering, error NaN
-        return config.theta, np.full(6, np.nan), np.full(6, np.nan)
-    return (config.theta, *scored(result, prior))
+        return config.theta, np.full(6, np.nan), np.full(6, np.nan), everything
+    return (config.theta, *scored(result, prior), everything)
 
 
-def table(truth: str, rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> str:
-    """Median |relative error| (%), 95 % coverage (%) and median |error|/σ per parameter.
+def table(truth: str, rows: list[tuple[np.ndarray, ...]]) -> str:
+    """Median |relative error| (%), 95 % coverage (%) and median |error|/σ per parameter,
+    over the determined parameters, and the share determined.
 
     A refused flight (NaN) counts as not covered; medians are over the others.
     """
-    reference, value, sigma = (np.array(a) for a in zip(*rows, strict=True))
+    reference, value, sigma, determined = (np.array(a) for a in zip(*rows, strict=True))
     error = value - reference
     z = np.abs(error) / sigma
     refused = int(np.sum(np.isnan(value[:, 0])))
     z = np.where(np.isnan(z), np.inf, z)
-    error = error[~np.isnan(value[:, 0])]
-    reference = reference[~np.isnan(value[:, 0])]
+    answered = ~np.isnan(value[:, 0])
+    with np.errstate(invalid="ignore"):
+        relative = np.where(determined[answered], np.abs(error / reference)[answered], np.nan)
+        stats = (("determined %", 100 * np.mean(determined, 0)),
+                 ("median |error| %", 100 * np.nanmedian(relative, 0)),
+                 ("95 % covers %", 100 * np.sum((z <= Z95) & determined, 0)
+                  / np.maximum(np.sum(determined, 0), 1)),
+                 ("median |error|/σ", np.nanmedian(np.where(determined, z, np.nan), 0)))
     lines = [f"\n{truth}: {len(rows)} flights, {refused} refused", f"{'':22}"
              + "  ".join(f"{n:>8}" for n in PARAMETER_NAMES)]
-    stats = (("median |error| %", 100 * np.median(np.abs(error / reference), 0)),
-             ("95 % covers %", 100 * np.mean(z <= Z95, 0)),
-             ("median |error|/σ", np.median(z, 0)))
     lines += [f"{label:<22}" + "  ".join(f"{v:>8.3f}" for v in stat) for label, stat in stats]
     return "\n".join(lines)
 
@@ -144,15 +163,19 @@ def main() -> None:
     parser.add_argument("--truths", default=",".join(TRUTHS),
                         help=f"comma-separated, of {', '.join(TRUTHS)}")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--reestimate", action="store_true",
-                        help="estimate again with the effects a diagnosis names")
+    modes = parser.add_mutually_exclusive_group()
+    modes.add_argument("--reestimate", action="store_true",
+                       help="estimate again with the effects a diagnosis names")
+    modes.add_argument("--answer", action="store_true",
+                       help="score estimate's per-parameter answer (balance and filter)")
     args = parser.parse_args()
+    mode = "answer" if args.answer else "reestimate" if args.reestimate else "filter"
     truths = [t for t in args.truths.split(",") if t]
     unknown = sorted(set(truths) - set(TRUTHS))
     if unknown:
         parser.error(f"unknown truth {', '.join(unknown)}; expected some of {', '.join(TRUTHS)}")
     with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.workers) as pool:
-        jobs = {t: [pool.submit(run, t, seed, tmp, args.reestimate)
+        jobs = {t: [pool.submit(run, t, seed, tmp, mode)
                     for seed in range(args.seeds)] for t in truths}
         for truth, futures in jobs.items():
             print(table(truth, [f.result() for f in futures]), flush=True)

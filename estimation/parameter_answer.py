@@ -8,15 +8,15 @@ by split disagreements) and the filter with its batch refinement
 noise assumptions hold). Per parameter:
 
 * the filter determines it and the balance has a value for it (determined or not): the
-  filter's value and σ stand where the two agree, a Hausman test (Hausman 1978): both
-  come from one flight and the filter is the efficient estimator when the paper's model
-  holds, so their difference has variance σ_b² − σ_f², and the test rejects the filter
-  at the 5 % level (beyond `AGREEMENT_SIGMAS` = 1.96 σ of the difference) unless they lie
-  within the relative tolerance `mavsysid.estimation.guard.AGREEMENT_TOLERANCE` (the
-  accuracy asked of the estimator). Where it is rejected, or the filter is
-  not the more precise of the two (nothing then speaks for a model-bound estimate over
-  the one that carries the effects beyond the model as nuisance terms), the balance
-  answers: its value and σ where it determines the parameter, the prior's otherwise. A
+  filter's value and σ stand unless a test at the 5 % level (beyond `AGREEMENT_SIGMAS` =
+  1.96 σ of their difference, and beyond the relative tolerance
+  `mavsysid.estimation.guard.AGREEMENT_TOLERANCE`, the accuracy asked of the estimator)
+  rejects them. Where the filter is the more precise, the test is Hausman's (Hausman
+  1978): both come from one flight and the filter is the efficient estimator when the
+  paper's model holds, so their difference has variance σ_b² − σ_f². Where it is not (its
+  σ widened for a mismatch, or a flight it follows poorly), the difference is taken as of
+  two independent estimates, σ_b² + σ_f². When the filter is rejected the balance
+  answers: its value and σ where it determines the parameter, the prior's otherwise; the
   disagreement is reported as a mismatch (what ``diagnose`` looks for), not a refusal;
 * one determines it: that one's value and σ (the filter's only when it followed the flight);
 * neither: c_D whose data value lies within `BOUND_SIGMAS` σ of 0 is "at the bound"
@@ -89,10 +89,11 @@ def _filter_stands(fv: float, fs: float, bv: float, bs: float, tolerance: float
     """Whether the filter's value stands against the balance's (module docstring), and how
     many σ of their difference apart they are when they disagree (None when they agree)."""
     delta = abs(fv - bv)
-    # Hausman: var(b − f) = var(b) − var(f) when the filter is the efficient one.
+    # Hausman: var(b − f) = var(b) − var(f) when the filter is the efficient one; else as
+    # two independent estimates.
     spread = math.sqrt(bs * bs - fs * fs) if fs < bs else math.hypot(fs, bs)
     disagree = delta > AGREEMENT_SIGMAS * spread and delta > tolerance * abs(bv)
-    return (fs < bs and not disagree), (delta / spread if disagree else None)
+    return (not disagree), (delta / spread if disagree else None)
 
 
 def _at_bound(balance: WrenchBalanceResult | None, prior: ParameterEstimate) -> np.ndarray:
