@@ -15,7 +15,7 @@ import math
 import sys
 from pathlib import Path
 
-from mavsysid.cli.options import DEFAULT_BOX, allow_negative_values, parse_numbers
+from mavsysid.cli.options import allow_negative_values, parse_numbers
 from mavsysid.cli.stream import format_summary as flight_summary
 from mavsysid.errors import InputError
 from mavsysid.estimation.estimator import EstimatorSettings
@@ -24,6 +24,7 @@ from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
 from mavsysid.pipeline.autopilot_experiment import ExperimentOutcome, run_autopilot_experiment
 from mavsysid.planner.settings import PlannerSettings
+from mavsysid.vehicle.config import load_vehicle
 
 __all__ = ["add_arguments", "format_report", "main"]
 
@@ -45,8 +46,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "estimate's prior")
     parser.add_argument("--budget", type=float, default=20.0, metavar="S",
                         help="flight time, s, the final stop included (default: 20)")
-    parser.add_argument("--box", default=DEFAULT_BOX, metavar="X0,Y0,Z0,X1,Y1,Z1",
-                        help=f"flight box in m, world ENU (default: {DEFAULT_BOX})")
+    parser.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
+                        help="the operator's flight box in m, world ENU, for the plan and "
+                        "the flight (default: the [flight] box of --vehicle; one of the two "
+                        "is required)")
     parser.add_argument("--time", type=float, metavar="S",
                         help=f"planning time, wall s (default: {PlannerSettings.planning_time:g}, "
                         "or no limit with --samples)")
@@ -79,6 +82,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         f"(default: {EstimatorSettings.prior_relative_sigma:g})")
 
 
+def _operator_box(args: argparse.Namespace) -> tuple[float, ...]:
+    """``--box``, else the vehicle file's ``[flight] box``: nothing flies without one."""
+    if args.box is not None:
+        return parse_numbers(args.box, 6, "--box", "x_min,y_min,z_min,x_max,y_max,z_max")
+    box = load_vehicle(args.vehicle).box
+    if box is None:
+        raise InputError(f"--vehicle {args.vehicle}: no [flight] box in the vehicle file; give "
+                         "the operator's box with --box x_min,y_min,z_min,x_max,y_max,z_max")
+    return tuple(box)
+
+
 def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings]:
     for option in ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout",
                    "prior_sigma"):
@@ -86,7 +100,7 @@ def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings
         if not (value > 0.0 and value < math.inf):
             raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
                              "number")
-    box = parse_numbers(args.box, 6, "--box", "x_min,y_min,z_min,x_max,y_max,z_max")
+    box = _operator_box(args)
     time = args.time
     if time is None:
         time = math.inf if args.samples is not None else PlannerSettings.planning_time

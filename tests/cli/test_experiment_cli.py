@@ -32,6 +32,23 @@ def test_bad_options_exit_2_before_connecting(tmp_path: Path, capsys, extra, nam
     assert not (tmp_path / "logs").exists()
 
 
+def test_no_box_anywhere_exits_2_before_connecting(tmp_path: Path, capsys):
+    """Without --box and without a [flight] box in the vehicle file nothing is planned or
+    flown: exit 2 in one line naming both."""
+    text = (Path(__file__).resolve().parents[2] / "vehicle" / "configs" / "quad_x.toml"
+            ).read_text()
+    start = text.index("[flight]")
+    end = text.find("\n[", start + 1)
+    vehicle = tmp_path / "boxless.toml"
+    vehicle.write_text(text[:start] + (text[end + 1:] if end >= 0 else ""))
+    link = f"tcp:127.0.0.1:{free_tcp_port()}"
+    code = main(["experiment", "--connect", link, "--vehicle", str(vehicle),
+                 "--log-dir", str(tmp_path / "logs")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "[flight] box" in err and "--box" in err and "\n" not in err, err
+    assert not (tmp_path / "logs").exists()
+
+
 def test_no_vehicle_on_the_link_exits_3_in_one_line(tmp_path: Path, capsys):
     """A link nobody answers on fails in one line naming it, before any planning."""
     link = f"tcp:127.0.0.1:{free_tcp_port()}"
