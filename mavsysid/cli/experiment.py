@@ -15,7 +15,13 @@ import math
 import sys
 from pathlib import Path
 
-from mavsysid.cli.options import allow_negative_values, parse_numbers
+from mavsysid.cli.options import (
+    LINK_TIMEOUTS,
+    add_link_arguments,
+    allow_negative_values,
+    parse_numbers,
+    require_positive,
+)
 from mavsysid.cli.stream import format_summary as flight_summary
 from mavsysid.errors import InputError
 from mavsysid.estimation.estimator import EstimatorSettings
@@ -63,19 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="planner seed (default: 0)")
     parser.add_argument("--log-dir", type=Path, default=Path("logs"), metavar="DIR",
                         help="where the flight directory is created (default: ./logs)")
-    parser.add_argument("--signing-key", type=Path, metavar="FILE",
-                        help="MAVLink 2 signing: a file holding the passphrase")
-    parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
-                        help="run the streamer's clock K times faster (only against a "
-                        "simulated vehicle running K times faster; default: 1)")
-    parser.add_argument("--heartbeat-timeout", type=float, default=30.0, metavar="S",
-                        help="how long to wait for the vehicle's first heartbeat (default: 30 s)")
-    parser.add_argument("--prearm-timeout", type=float, default=60.0, metavar="S",
-                        help="how long to wait for the pre-arm checks (default: 60 s)")
-    parser.add_argument("--position-timeout", type=float, default=90.0, metavar="S",
-                        help="how long to wait for a usable local position (default: 90 s)")
-    parser.add_argument("--no-fence", action="store_true",
-                        help="fly without the autopilot's geofence around the box")
+    add_link_arguments(parser)
     parser.add_argument("--prior-sigma", type=float,
                         default=EstimatorSettings.prior_relative_sigma, metavar="REL",
                         help="the estimate's prior σ relative to the vehicle file's θ "
@@ -94,12 +88,7 @@ def _operator_box(args: argparse.Namespace) -> tuple[float, ...]:
 
 
 def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings]:
-    for option in ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout",
-                   "prior_sigma"):
-        value = getattr(args, option)
-        if not (value > 0.0 and value < math.inf):
-            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
-                             "number")
+    require_positive(args, (*LINK_TIMEOUTS, "prior_sigma"))
     box = _operator_box(args)
     time = args.time
     if time is None:

@@ -1,5 +1,5 @@
-"""Option parsing shared by several commands: the flight log and vehicle, comma-separated
-numbers, negative values."""
+"""Option parsing shared by several commands: the flight log and vehicle, the link to a
+vehicle, comma-separated numbers, positive numbers, negative values."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from pathlib import Path
 from mavsysid.errors import InputError
 from mavsysid.planner.settings import PlannerSettings
 
-__all__ = ["DEFAULT_BOX", "OUTPUT_OPTION", "add_log_arguments", "add_output_folder",
-           "add_window_arguments", "allow_negative_values", "parse_numbers"]
+__all__ = ["DEFAULT_BOX", "LINK_TIMEOUTS", "OUTPUT_OPTION", "add_link_arguments",
+           "add_log_arguments", "add_output_folder", "add_window_arguments",
+           "allow_negative_values", "parse_numbers", "require_positive"]
 
 #: The one name of the output-folder option of every command that writes a folder.
 OUTPUT_OPTION = "--log-dir"
@@ -26,6 +27,59 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", type=Path, help="flight log: pose.csv, .tlog, .ulg or .bin")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
+
+
+#: The positive options of `add_link_arguments` (argparse destinations).
+LINK_TIMEOUTS = ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout")
+
+
+def add_link_arguments(parser: argparse.ArgumentParser) -> None:
+    """The link options of the commands that fly a vehicle (stream, experiment): signing,
+    clock speed-up, the waits before flying and the fence.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The command's parser; the options are added to it in place.
+    """
+    parser.add_argument("--signing-key", type=Path, metavar="FILE",
+                        help="MAVLink 2 signing: a file holding the passphrase")
+    parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
+                        help="run the clock K times faster (only against `mavsysid sim "
+                        "--speedup K`; default: 1)")
+    parser.add_argument("--heartbeat-timeout", type=float, default=30.0, metavar="S",
+                        help="how long to wait for the vehicle's first heartbeat, wall "
+                        "time (default: 30 s)")
+    parser.add_argument("--prearm-timeout", type=float, default=60.0, metavar="S",
+                        help="how long to wait for the vehicle's pre-arm checks to pass "
+                        "(default: 60 s)")
+    parser.add_argument("--position-timeout", type=float, default=90.0, metavar="S",
+                        help="how long to wait for a usable local position (default: 90 s)")
+    parser.add_argument("--no-fence", action="store_true",
+                        help="fly without the autopilot's geofence around the box (by default "
+                        "a vehicle without a working fence is refused)")
+
+
+def require_positive(args: argparse.Namespace, options: tuple[str, ...]) -> None:
+    """Refuse, in one line naming it, an option of ``options`` that is not a positive
+    finite number.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    options : tuple of str
+        argparse destinations (``"heartbeat_timeout"`` for ``--heartbeat-timeout``).
+
+    Raises
+    ------
+    InputError
+    """
+    for option in options:
+        value = getattr(args, option)
+        if not (value > 0.0 and value < math.inf):
+            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
+                             "number")
 
 
 def add_output_folder(parser: argparse.ArgumentParser, default: str, what: str,

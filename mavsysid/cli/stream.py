@@ -17,7 +17,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mavsysid.cli.options import add_output_folder, allow_negative_values, parse_numbers
+from mavsysid.cli.options import (
+    LINK_TIMEOUTS,
+    add_link_arguments,
+    add_output_folder,
+    allow_negative_values,
+    parse_numbers,
+    require_positive,
+)
 from mavsysid.errors import InputError
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
@@ -115,11 +122,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the operator's flight box in m, world ENU (default: the "
                         "[flight] box of --vehicle; one of the two is required); a box stored "
                         "in the trajectory file can only narrow it")
-    parser.add_argument("--signing-key", type=Path, metavar="FILE",
-                        help="MAVLink 2 signing: a file holding the passphrase")
-    parser.add_argument("--speedup", type=float, default=1.0, metavar="K",
-                        help="run the clock K times faster (only against `mavsysid sim "
-                        "--speedup K`; default: 1)")
+    add_link_arguments(parser)
     parser.add_argument("--lockstep", action="store_true",
                         help="test/bench tool: share one simulated clock with `mavsysid sim "
                         "--lockstep` (same flight idle or overloaded); other vehicles: the "
@@ -127,23 +130,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-tracking-error", type=float, default=1.0, metavar="M",
                         help="abort to hold beyond this distance from the setpoint "
                         "(default: 1.0 m)")
-    parser.add_argument("--heartbeat-timeout", type=float, default=30.0, metavar="S",
-                        help="how long to wait for the vehicle's first heartbeat, wall "
-                        "time (default: 30 s)")
     parser.add_argument("--heartbeat-loss", type=float, default=3.0, metavar="S",
                         help="stop streaming after this long without a heartbeat "
                         "(default: 3 s)")
-    parser.add_argument("--position-timeout", type=float, default=90.0, metavar="S",
-                        help="how long to wait for a usable local position (default: 90 s)")
     parser.add_argument("--link-loss", type=float, default=1.0, metavar="S",
                         help="stop streaming after this long without any message from the "
                         "vehicle once its telemetry streams (default: 1 s)")
-    parser.add_argument("--prearm-timeout", type=float, default=60.0, metavar="S",
-                        help="how long to wait for the vehicle's pre-arm checks to pass "
-                        "(default: 60 s)")
-    parser.add_argument("--no-fence", action="store_true",
-                        help="fly without the autopilot's geofence around the box (by default "
-                        "a vehicle without a working fence is refused)")
     parser.add_argument("--replan-budget", type=float, metavar="S",
                         help="re-plan in flight: TRAJECTORY is the opening; while the vehicle "
                         "holds at its end, estimate θ from it and plan the rest of S s of "
@@ -169,13 +161,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _settings(args: argparse.Namespace) -> StreamSettings:
-    for option in ("rate", "telemetry_rate", "speedup", "max_tracking_error",
-                   "heartbeat_timeout", "heartbeat_loss", "position_timeout", "link_loss",
-                   "prearm_timeout"):
-        value = getattr(args, option)
-        if not (value > 0.0 and value < float("inf")):
-            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
-                             "number")
+    require_positive(args, ("rate", "telemetry_rate", "max_tracking_error", "heartbeat_loss",
+                            "link_loss", *LINK_TIMEOUTS))
     if args.rate > 500.0:
         raise InputError(f"--rate {args.rate:g}: at most 500 Hz")
     box = None
@@ -195,11 +182,7 @@ def _settings(args: argparse.Namespace) -> StreamSettings:
 def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
     if args.replan_budget is None:
         return None
-    for option in ("replan_budget", "replan_time"):
-        value = getattr(args, option)
-        if not (value > 0.0 and value < float("inf")):
-            raise InputError(f"--{option.replace('_', '-')} {value:g}: expected a positive "
-                             "number")
+    require_positive(args, ("replan_budget", "replan_time"))
     for option in ("replan_samples", "replan_refine_steps"):
         value = getattr(args, option)
         if value is not None and value < (1 if option == "replan_samples" else 0):
