@@ -161,13 +161,25 @@ def check_rates(achieved: Mapping[str, float], wanted: float, rotor_count: int,
                 minimum_pose_rate: float = 5.0) -> PreflightReport:
     """Warn when telemetry the estimator needs comes slower than 90 % of ``wanted`` Hz.
 
-    Refuses when LOCAL_POSITION_NED comes slower than ``minimum_pose_rate`` Hz: the
-    streamer could not watch the tracking error.
+    Slow ESC rpm with the motor outputs (SERVO_OUTPUT_RAW) at the rate is a note of its own:
+    ``estimate`` then reads the rotor speeds from the outputs in ``flight.tlog`` through the
+    vehicle file's ``[motor]`` curve (commanded, not measured). Refuses when
+    LOCAL_POSITION_NED comes slower than ``minimum_pose_rate`` Hz: the streamer could not
+    watch the tracking error.
     """
-    needed = ["LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ESC_TELEMETRY_1_TO_4"]
-    if rotor_count > 4:
-        needed.append("ESC_TELEMETRY_5_TO_8")
-    refusals, slow = [], []
+    esc = ["ESC_TELEMETRY_1_TO_4"] + (["ESC_TELEMETRY_5_TO_8"] if rotor_count > 4 else [])
+    refusals, slow, warnings = [], [], []
+    outputs = achieved.get("SERVO_OUTPUT_RAW", 0.0)
+    slow_esc = [f"{n} {achieved.get(n, 0.0):.1f} Hz" for n in esc
+                if achieved.get(n, 0.0) < 0.9 * wanted]
+    needed = ["LOCAL_POSITION_NED", "ATTITUDE_QUATERNION"]
+    if slow_esc and outputs >= 0.9 * wanted:
+        warnings.append(f"no ESC rpm at the rate asked for ({', '.join(slow_esc)}): "
+                        f"estimate will read the motor outputs (SERVO_OUTPUT_RAW "
+                        f"{outputs:.1f} Hz in flight.tlog) through the vehicle file's "
+                        "[motor] curve, commanded speeds, not measured ones")
+    else:
+        needed += esc
     for name in needed:
         rate = achieved.get(name, 0.0)
         if rate < 0.9 * wanted:
@@ -176,9 +188,10 @@ def check_rates(achieved: Mapping[str, float], wanted: float, rotor_count: int,
         refusals.append(f"LOCAL_POSITION_NED arrives at "
                         f"{achieved.get('LOCAL_POSITION_NED', 0.0):.1f} Hz, below "
                         f"{minimum_pose_rate:g} Hz: cannot watch the tracking error")
-    warnings = [] if not slow else [
-        f"telemetry slower than the {wanted:g} Hz asked for ({', '.join(slow)}): the pose "
-        "log will have less information for estimation"]
+    if slow:
+        warnings.insert(0, f"telemetry slower than the {wanted:g} Hz asked for "
+                        f"({', '.join(slow)}): the pose log will have less information for "
+                        "estimation")
     return PreflightReport(tuple(refusals), tuple(warnings))
 
 

@@ -108,6 +108,19 @@ def test_rates_warn_and_refuse():
     assert "cannot watch the tracking error" in report.refusals[0]
 
 
+def test_missing_esc_rpm_with_motor_outputs_says_where_the_speeds_come_from():
+    """No ESC rpm but SERVO_OUTPUT_RAW at the rate: one note naming the motor outputs and
+    the [motor] curve, not "less information"; without the outputs, the slow-rate warning."""
+    pose = {"LOCAL_POSITION_NED": 50.0, "ATTITUDE_QUATERNION": 50.0}
+    report = check_rates({**pose, "SERVO_OUTPUT_RAW": 49.9}, 50.0, 4)
+    assert report.refusals == () and len(report.warnings) == 1
+    assert "SERVO_OUTPUT_RAW 49.9 Hz" in report.warnings[0]
+    assert "[motor] curve" in report.warnings[0]
+    assert "ESC_TELEMETRY_1_TO_4 0.0 Hz" in report.warnings[0]
+    report = check_rates(pose, 50.0, 4)
+    assert len(report.warnings) == 1 and "less information" in report.warnings[0]
+
+
 def test_load_plan_refuses_before_connecting(tmp_path, firefly, figure):
     """load_plan: the embedded vehicle by default; no box is bad input; a bad box refuses."""
     path = tmp_path / "figure.json"
