@@ -26,38 +26,23 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.results import Z95
 from mavsysid.estimation.wrench_balance import fit_wrench_balance
-from mavsysid.flight.offline.effects import hidden_effect
-from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
-from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.formats.flight_dir import read_meta
-from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from mavsysid.vehicle.model_effects import RotorDragLinear
+
+from tests.support.hidden import hidden_flight
 
 CONFIG = load_vehicle("micro_quad")
 #: The prior of the balance tests: 30–50 % off the truth, both directions.
 PRIOR = CONFIG.with_parameters(CONFIG.theta * np.array([1.4, 0.6, 1.5, 0.65, 1.35, 1.5]))
 
 
-def flight(seed: int, k_z: float, directory: Path) -> FlightData:
-    """A 30 s, 500 Hz motion-capture flight with the axial drag hidden."""
-    settings = SimulationSettings(seed=seed, log_rate=500.0, control_rate=500.0)
-    Simulator(CONFIG, settings=settings,
-              effects=[hidden_effect(RotorDragLinear(k=0.0, k_z=k_z))]).run(
-        excitation_trajectory(ExcitationSpec(duration=30.0)), directory)
-    log = read_pose_log(directory / "pose.csv", CONFIG.rotor_count)
-    truth = read_meta(directory / "meta.json")["truth"]
-    return FlightData(log.t, log.position, log.quaternion, log.rotor_speeds,
-                      str(directory / "pose.csv"), truth=truth)
-
-
 def row(seed: int, k_z: float) -> str:
     """One seed's line: δ, then per parameter status, error ± σ (%) and '!' if not covered."""
     with tempfile.TemporaryDirectory() as tmp:
-        data = flight(seed, k_z, Path(tmp))
+        data = hidden_flight(CONFIG, Path(tmp) / "flight", [RotorDragLinear(k=0.0, k_z=k_z)],
+                             seed=seed, log_rate=500.0)
     result = fit_wrench_balance(data, PRIOR)
     truth = np.asarray(data.true_theta)
     sigma = np.sqrt(np.sum(result.sigma_parts**2, axis=0))

@@ -68,18 +68,14 @@ def _filter_determines(estimate: ParameterEstimate) -> np.ndarray:
         return (estimate.value > 0.0) & (estimate.sigma <= MAX_RELATIVE_SIGMA * estimate.value)
 
 
-def _balance_data_sigma(balance: WrenchBalanceResult) -> np.ndarray:
-    with np.errstate(over="ignore", invalid="ignore"):  # a σ part of 1e200: inf, not determined
-        return np.sqrt(np.sum(balance.sigma_parts**2, axis=0))
-
-
 def _balance_data(balance: WrenchBalanceResult | None) -> tuple[np.ndarray, np.ndarray]:
     """The balance's data value and σ per parameter; σ inf where it has none."""
     n = len(PARAMETER_NAMES)
     if balance is None:
         return np.full(n, np.nan), np.full(n, np.inf)
     value = np.asarray(balance.data.value, float)
-    sigma = _balance_data_sigma(balance)
+    with np.errstate(over="ignore", invalid="ignore"):  # a σ part of 1e200: inf, not determined
+        sigma = np.sqrt(np.sum(balance.sigma_parts**2, axis=0))
     ok = np.isfinite(value) & np.isfinite(sigma) & (sigma > 0.0)
     return value, np.where(ok, sigma, np.inf)
 
@@ -96,14 +92,12 @@ def _filter_stands(fv: float, fs: float, bv: float, bs: float, tolerance: float
     return (not disagree), (delta / spread if disagree else None)
 
 
-def _at_bound(balance: WrenchBalanceResult | None, prior: ParameterEstimate) -> np.ndarray:
-    """c_D whose data value lies within `BOUND_SIGMAS` of 0, more tightly than the prior."""
+def _at_bound(b_val: np.ndarray, b_sig: np.ndarray, prior: ParameterEstimate) -> np.ndarray:
+    """c_D whose data value (`_balance_data`) lies within `BOUND_SIGMAS` of 0, more tightly
+    than the prior."""
     out = np.zeros(len(PARAMETER_NAMES), bool)
-    if balance is None:
-        return out
-    v, s = float(balance.data.value[_C_D]), float(_balance_data_sigma(balance)[_C_D])
-    out[_C_D] = (math.isfinite(v) and math.isfinite(s) and s > 0.0
-                 and abs(v) <= BOUND_SIGMAS * s and s < float(prior.sigma[_C_D]))
+    v, s = float(b_val[_C_D]), float(b_sig[_C_D])
+    out[_C_D] = math.isfinite(s) and abs(v) <= BOUND_SIGMAS * s and s < float(prior.sigma[_C_D])
     return out
 
 
@@ -162,7 +156,7 @@ def answer_parameters(
             source[j] = "filter"
         elif b_det[j]:
             source[j] = "balance"
-    bound = _at_bound(balance, prior) & (source == "prior")
+    bound = _at_bound(b_val, b_sig, prior) & (source == "prior")
     value = prior.value.astype(float).copy()
     cov = np.diag(prior.sigma**2)
     for name, est in (("filter", f_est), ("balance", None if balance is None
@@ -173,12 +167,11 @@ def answer_parameters(
         value[idx] = est.value[idx]
         cov[np.ix_(idx, idx)] = est.covariance[np.ix_(idx, idx)]
     status = [DETERMINED if s != "prior" else NOT_DETERMINED for s in source]
-    if balance is not None:
-        for j in np.flatnonzero(bound):
-            value[j] = max(float(balance.data.value[j]), 0.0)
-            cov[j, :] = cov[:, j] = 0.0
-            cov[j, j] = float(_balance_data_sigma(balance)[j]) ** 2
-            status[j], source[j] = AT_BOUND, "balance"
+    for j in np.flatnonzero(bound):
+        value[j] = max(float(b_val[j]), 0.0)
+        cov[j, :] = cov[:, j] = 0.0
+        cov[j, j] = float(b_sig[j]) ** 2
+        status[j], source[j] = AT_BOUND, "balance"
     return (ParameterEstimate(value, cov), tuple(status), tuple(str(s) for s in source),
             tuple(mismatch))
 

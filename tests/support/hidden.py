@@ -78,7 +78,7 @@ def ground_trajectory(duration: float = 30.0, low: float = 0.15) -> PiecewisePol
 def hidden_flight(
     config: VehicleConfig, directory: Path, effects: Sequence[ModelEffect] = (), seed: int = 0,
     duration: float = 30.0, true_theta: np.ndarray | None = None,
-    trajectory: Trajectory | None = None,
+    trajectory: Trajectory | None = None, log_rate: float = SimulationSettings.log_rate,
 ) -> FlightData:
     """Fly with ``effects`` hidden on the truth side; read the pose log back.
 
@@ -96,10 +96,12 @@ def hidden_flight(
         s, of the built-in excitation (when no ``trajectory``).
     true_theta : ndarray, shape (6,), optional
     trajectory : Trajectory, optional
+    log_rate : float
+        Hz, of ``pose.csv``.
     """
     theta = config.theta if true_theta is None else np.asarray(true_theta, float)
     trajectory = trajectory or excitation_trajectory(ExcitationSpec(duration=duration))
-    Simulator(config, true_theta=theta, settings=SimulationSettings(seed=seed),
+    Simulator(config, true_theta=theta, settings=SimulationSettings(seed=seed, log_rate=log_rate),
               effects=[hidden_effect(e) for e in effects]).run(trajectory, directory)
     log = read_pose_log(directory / "pose.csv", config.rotor_count)
     truth = read_meta(directory / "meta.json")["truth"]
