@@ -3,7 +3,7 @@
 The Savitzky–Golay smoother of `mavsysid.discrepancy.residuals` needs uniform samples;
 autopilot logs and real motion-capture logs jitter and drop samples. `resample_flight`
 puts a flight on a grid at its median sample interval: position by a cubic spline,
-attitude by slerp (`mavsysid.estimation.readers.slerp.interpolate_quaternions`), rotor
+attitude by slerp (`mavsysid.vehicle.rotation.interpolate_quaternions`), rotor
 speeds linearly. An interval longer than `MAX_INTERPOLATED` median intervals, or between
 two of the reader's segments (`FlightData.segment_starts`), is a *gap*:
 nothing is interpolated across it (the grid samples inside hold a straight line only so
@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from mavsysid.estimation.equation_error import MAX_JITTER, uniform_step
 from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.readers.slerp import interpolate_quaternions
+from mavsysid.vehicle.rotation import continuous_sign, interpolate_quaternions
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import binary_dilation
 
@@ -226,9 +226,7 @@ def average_blocks(flight: FlightData, resampling: Resampling,
         x = np.asarray(x, float)[:n * m]
         return x.reshape(n, m, *x.shape[1:]).mean(axis=1)
 
-    q = np.array(flight.quaternion, dtype=float)
-    q[np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2 == 1] *= -1.0
-    q = mean(q)
+    q = mean(continuous_sign(flight.quaternion))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     valid = resampling.valid[:n * m].reshape(n, m).all(axis=1)
     averaged = FlightData(mean(flight.t), mean(flight.position), q, mean(flight.rotor_speeds),

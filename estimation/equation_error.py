@@ -27,7 +27,7 @@ import numpy as np
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
 from mavsysid.vehicle.model_effects import EffectInputs, ModelEffect, total_wrench
-from mavsysid.vehicle.rotation import quat_multiply, quat_to_matrix
+from mavsysid.vehicle.rotation import continuous_sign, quat_multiply, quat_to_matrix
 from scipy.ndimage import convolve1d
 from scipy.signal import oaconvolve, savgol_coeffs
 
@@ -188,10 +188,7 @@ def smooth_pose(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
     if len(t) < 2 * w:
         raise InputError(f"{source}: {len(t)} pose samples: the diagnosis needs at least "
                          f"{2 * w}")
-    q = np.array(quaternion, dtype=float)
-    # Sign continuity: q and −q are the same attitude, but not the same signal.
-    flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2
-    q[flips == 1] *= -1.0
+    q = continuous_sign(quaternion)
 
     signal = np.hstack([q, np.asarray(position, float)])
     # savgol_filter(mode="mirror") with the kernels computed once. Edge handling does not

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from mavsysid.estimation.equation_error import savgol_kernel
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.rotation import continuous_sign
 from scipy.ndimage import convolve1d
 
 __all__ = ["NOISE_TOLERANCE", "NOISE_WINDOW", "measured_pose_noise", "pose_sigma"]
@@ -46,9 +47,7 @@ def measured_pose_noise(flight: FlightData) -> tuple[float, float]:
         flight = flight.segment(flight.longest_segment())
     if len(flight) < 3 * NOISE_WINDOW:
         return 0.0, 0.0
-    q = np.array(flight.quaternion, float)
-    flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2
-    q[flips == 1] *= -1.0
+    q = continuous_sign(flight.quaternion)
     position = float(np.median(_white_sigma(np.asarray(flight.position, float))))
     attitude = float(2.0 * np.sqrt(np.sum(_white_sigma(q) ** 2) / 3.0))
     return position, attitude

@@ -29,7 +29,7 @@ import numpy as np
 from mavsysid.estimation.flight_data import FlightData
 from mavsysid.estimation.wrench_check import SMOOTHING_WINDOW
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.rotation import quat_to_matrix
+from mavsysid.vehicle.rotation import continuous_sign, quat_to_matrix
 from scipy.signal import savgol_filter
 
 from mavsysid.errors import JobFailedError
@@ -59,10 +59,7 @@ def _segment_terms(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
     grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
     if grid.size < 3 * window:
         return None
-    q = quaternion.copy()
-    # q and −q are one attitude; make the sequence continuous before interpolating it.
-    flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2 == 1
-    q[flips] *= -1.0
+    q = continuous_sign(quaternion)
     p = np.column_stack([np.interp(grid, t, position[:, i]) for i in range(3)])
     qg = np.column_stack([np.interp(grid, t, q[:, i]) for i in range(4)])
     qg /= np.linalg.norm(qg, axis=1)[:, None]

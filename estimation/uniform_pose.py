@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.estimation.flight_data import FlightData
+from mavsysid.vehicle.rotation import continuous_sign
 
 __all__ = ["UniformSegment", "fresh_pose", "uniform_segments"]
 
@@ -44,14 +45,6 @@ def fresh_pose(position: np.ndarray, quaternion: np.ndarray) -> np.ndarray:
     pose = np.hstack([np.asarray(position, float), np.asarray(quaternion, float)])
     repeat = np.all(np.diff(pose, axis=0) == 0.0, axis=1)
     return np.concatenate([[True], ~repeat])
-
-
-def _sign_continuous(q: np.ndarray) -> np.ndarray:
-    """q with signs flipped so that consecutive rows have a non-negative dot product."""
-    q = np.array(q, dtype=float)
-    flips = np.cumsum(np.concatenate([[False], np.sum(q[1:] * q[:-1], axis=1) < 0.0])) % 2
-    q[flips == 1] *= -1.0
-    return q
 
 
 def _interp_columns(t_new: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -110,7 +103,7 @@ def _segment(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
         return None
     grid = tf[0] + dt * np.arange(int(np.floor((tf[-1] - tf[0]) / dt)) + 1)
     p = _interp_columns(grid, tf, position[fresh])
-    q = _interp_columns(grid, tf, _sign_continuous(quaternion[fresh]))
+    q = _interp_columns(grid, tf, continuous_sign(quaternion[fresh]))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     return UniformSegment(grid, dt, p, q, np.asarray(t, float), np.asarray(rotors, float),
                           float(fresh.mean()))

@@ -19,7 +19,12 @@ from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.mav_model import rotor_wrench
-from mavsysid.vehicle.rotation import quat_conjugate, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.rotation import (
+    continuous_sign,
+    quat_conjugate,
+    quat_multiply,
+    quat_to_matrix,
+)
 from scipy.signal import savgol_filter
 
 __all__ = ["SMOOTHING_WINDOW", "WrenchComparison", "compare_wrench", "uniform_grid"]
@@ -58,10 +63,7 @@ def uniform_grid(flight: FlightData
     t = np.asarray(flight.t, float)
     dt = float(np.median(np.diff(t)))
     grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
-    q = np.asarray(flight.quaternion, float).copy()
-    # q and −q are one attitude; make the sequence continuous before interpolating it.
-    flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2 == 1
-    q[flips] *= -1.0
+    q = continuous_sign(flight.quaternion)
 
     def interp(x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, float)

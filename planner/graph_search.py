@@ -45,9 +45,10 @@ from mavsysid.planner.segments import (
     stop_segment,
 )
 from mavsysid.planner.settings import PlannerSettings
-from mavsysid.planner.yaw_branch import nearest_yaw_branch, wrap_angle
+from mavsysid.planner.yaw_branch import nearest_yaw_branch
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel
+from mavsysid.vehicle.rotation import wrap_angle
 
 __all__ = ["GraphSearch"]
 

@@ -7,13 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 from mavsysid.planner.segments import Segment, VertexState
+from mavsysid.vehicle.rotation import wrap_angle
 
-__all__ = ["nearest_yaw_branch", "shift_segment_yaw", "shift_vertex_yaw", "wrap_angle"]
-
-
-def wrap_angle(angle: float) -> float:
-    """Angle in [-π, π)."""
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+__all__ = ["nearest_yaw_branch", "shift_segment_yaw", "shift_vertex_yaw"]
 
 
 def nearest_yaw_branch(state: VertexState, yaw: float) -> VertexState:

@@ -464,7 +464,6 @@ NOT_YET_DOCUMENTED: frozenset[str] = frozenset({
     "mavsysid.planner.yaw_branch.nearest_yaw_branch",
     "mavsysid.planner.yaw_branch.shift_segment_yaw",
     "mavsysid.planner.yaw_branch.shift_vertex_yaw",
-    "mavsysid.planner.yaw_branch.wrap_angle",
     "mavsysid.vehicle.model_effects.GroundEffect.gain",
     "mavsysid.vehicle.model_effects.effect_from_values",
     "mavsysid.vehicle.model_effects.parse_effect",

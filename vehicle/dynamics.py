@@ -35,6 +35,7 @@ import numpy as np
 from mavsysid.vehicle.config_types import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.mav_model import add_rotor_wrench, euler_kernel
+from mavsysid.vehicle.rotation import rotation_kernel
 
 __all__ = [
     "ATT",
@@ -46,7 +47,6 @@ __all__ = [
     "hover_state",
     "rk4_linear_step_kernel",
     "rk4_step_kernel",
-    "rotation_kernel",
     "state_derivative",
 ]
 
@@ -55,30 +55,6 @@ POS = slice(0, 3)
 VEL = slice(3, 6)
 ATT = slice(6, 10)
 RATE = slice(10, 13)
-
-
-@numba.njit(cache=True)
-def rotation_kernel(q):
-    """R(q), body → world, as a (3, 3) array, for numba code; q (4,) need not be unit.
-
-    Parameters
-    ----------
-    q : ndarray, shape (4,)
-        Quaternion [w, x, y, z].
-    """
-    inv = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    w, x, y, z = q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv
-    R = np.empty((3, 3))
-    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    R[0, 1] = 2.0 * (x * y - w * z)
-    R[0, 2] = 2.0 * (x * z + w * y)
-    R[1, 0] = 2.0 * (x * y + w * z)
-    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    R[1, 2] = 2.0 * (y * z - w * x)
-    R[2, 0] = 2.0 * (x * z - w * y)
-    R[2, 1] = 2.0 * (y * z + w * x)
-    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return R
 
 
 @numba.njit(cache=True, fastmath=False)

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.dynamics import rotation_kernel
 from mavsysid.vehicle.mav_model import add_rotor_wrench, euler_kernel, rotor_thrust_kernel
+from mavsysid.vehicle.rotation import rotation_kernel
 
 __all__ = ["jacobian_kernel"]
 

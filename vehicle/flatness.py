@@ -20,9 +20,10 @@ from mavsysid.vehicle.allocation import allocation_pinv
 from mavsysid.vehicle.config_types import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
+from mavsysid.vehicle.rotation import matrix_to_quat_kernel
 from mavsysid.vehicle.trajectory import FlatOutputs
 
-__all__ = ["SAMPLE_SIZE", "FlatState", "flat_sample", "flat_to_state"]
+__all__ = ["SAMPLE_RATE", "SAMPLE_SIZE", "FlatState", "flat_sample", "flat_to_state"]
 
 
 @dataclass(frozen=True)
@@ -159,29 +160,6 @@ def flat_sample(ax: float, ay: float, az: float, jx: float, jy: float, jz: float
 
 
 @numba.njit(cache=True)
-def _matrix_quaternion(R: np.ndarray, q: np.ndarray) -> None:
-    """Unit quaternion [w, x, y, z] of a rotation matrix (Shepperd's branch choice), w ≥ 0."""
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
-    if trace >= R[0, 0] and trace >= R[1, 1] and trace >= R[2, 2]:
-        q[0] = 1.0 + trace
-        q[1], q[2], q[3] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
-    elif R[0, 0] >= R[1, 1] and R[0, 0] >= R[2, 2]:
-        q[1] = 1.0 + R[0, 0] - R[1, 1] - R[2, 2]
-        q[0], q[2], q[3] = R[2, 1] - R[1, 2], R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]
-    elif R[1, 1] >= R[2, 2]:
-        q[2] = 1.0 + R[1, 1] - R[0, 0] - R[2, 2]
-        q[0], q[1], q[3] = R[0, 2] - R[2, 0], R[0, 1] + R[1, 0], R[1, 2] + R[2, 1]
-    else:
-        q[3] = 1.0 + R[2, 2] - R[0, 0] - R[1, 1]
-        q[0], q[1], q[2] = R[1, 0] - R[0, 1], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1]
-    scale = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if q[0] < 0.0:
-        scale = -scale
-    for i in range(4):
-        q[i] *= scale
-
-
-@numba.njit(cache=True)
 def _flat_states_kernel(acc, jerk, snap, yaw, yaw_rate, yaw_acc, velocity, J, mass, pinv):
     """Every sample of `flat_to_state`; NaN rows where the attitude is singular."""
     S, k = acc.shape[0], pinv.shape[0]
@@ -206,7 +184,7 @@ def _flat_states_kernel(acc, jerk, snap, yaw, yaw_rate, yaw_acc, velocity, J, ma
         for b in range(3):
             v_body[i, b] = R[i, 0, b] * velocity[i, 0] + R[i, 1, b] * velocity[i, 1] \
                 + R[i, 2, b] * velocity[i, 2]
-        _matrix_quaternion(R[i], quat[i])
+        matrix_to_quat_kernel(R[i], quat[i])
         # Sign-continuous along the samples: consecutive q in the same hemisphere.
         if have_previous and (quat[i, 0] * quat[i - 1, 0] + quat[i, 1] * quat[i - 1, 1]
                               + quat[i, 2] * quat[i - 1, 2] + quat[i, 3] * quat[i - 1, 3]) < 0.0:

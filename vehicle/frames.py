@@ -16,6 +16,7 @@ whole logs convert in one call. Quaternions are Hamilton, scalar first, body →
 from __future__ import annotations
 
 import numpy as np
+from mavsysid.vehicle.rotation import wrap_angle
 
 __all__ = [
     "enu_to_ned",
@@ -25,7 +26,6 @@ __all__ = [
     "ned_to_enu",
     "quaternion_enu_to_ned",
     "quaternion_ned_to_enu",
-    "wrap_angle",
     "yaw_enu_to_ned",
     "yaw_ned_to_enu",
     "yaw_rate_enu_to_ned",
@@ -79,17 +79,6 @@ def frd_to_flu(v: np.ndarray) -> np.ndarray:
         Body vectors, FRD.
     """
     return flu_to_frd(v)
-
-
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Angle(s) wrapped to [−π, π), rad.
-
-    Parameters
-    ----------
-    angle : float or ndarray
-        rad.
-    """
-    return (np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def yaw_enu_to_ned(yaw: np.ndarray | float) -> np.ndarray | float:

@@ -23,10 +23,10 @@ from mavsysid.estimation.readers.checks import (
     repair_samples,
     validate_flight,
 )
-from mavsysid.estimation.readers.slerp import interpolate_quaternions
 from mavsysid.formats.parsed_log import PoseSource, Series
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
+from mavsysid.vehicle.rotation import interpolate_quaternions
 
 from mavsysid.errors import LogFormatError
 

@@ -14,11 +14,16 @@ from __future__ import annotations
 
 import numpy as np
 from mavsysid.estimation.readers.checks import repair_samples
-from mavsysid.estimation.readers.slerp import interpolate_quaternions
 from mavsysid.estimation.readers.streams import LogStreams
 from mavsysid.formats.parsed_log import Series
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.rotation import quat_conjugate, quat_log, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.rotation import (
+    interpolate_quaternions,
+    quat_conjugate,
+    quat_log,
+    quat_multiply,
+    quat_to_matrix,
+)
 from scipy.signal import correlate, correlation_lags, savgol_filter
 
 from mavsysid.errors import LogFormatError

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.frames import enu_to_ned, wrap_angle, yaw_enu_to_ned, yaw_rate_enu_to_ned
+from mavsysid.vehicle.frames import enu_to_ned, yaw_enu_to_ned, yaw_rate_enu_to_ned
+from mavsysid.vehicle.rotation import wrap_angle
 from mavsysid.vehicle.trajectory import Trajectory
 
 from mavsysid.errors import JobFailedError

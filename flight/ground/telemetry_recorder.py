@@ -37,6 +37,7 @@ from mavsysid.formats.tlog import ESC_TELEMETRY
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
+from mavsysid.vehicle.rotation import quat_yaw
 
 __all__ = [
     "EXTRA_COLUMNS",
@@ -218,7 +219,7 @@ class TelemetryRecorder:
         position = ned_to_enu(np.array([msg.x, msg.y, msg.z], dtype=float))
         velocity = ned_to_enu(np.array([msg.vx, msg.vy, msg.vz], dtype=float))
         q = self._quaternion
-        yaw = math.atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
+        yaw = float(quat_yaw(np.asarray(q, dtype=float)))
         offset = self.offset.value
         ref = self.history.at(t + offset) if offset is not None else None
         if ref is None:

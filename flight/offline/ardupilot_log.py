@@ -43,7 +43,7 @@ from mavsysid.formats.motor_curve import pwm_from_rotor_speed
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import enu_to_ned, quaternion_enu_to_ned
-from scipy.spatial.transform import Rotation
+from mavsysid.vehicle.rotation import quat_to_euler
 
 Stamp = Callable[[float], int]  # flight time, s → log time, µs since boot
 
@@ -89,7 +89,7 @@ def _ekf_rows(flight: LoggedFlight, rate: float, stamp: Stamp) -> list[Message]:
     i = sample_indices(flight.t, rate, phase=0.002)
     position, velocity = enu_to_ned(flight.position[i]), enu_to_ned(flight.velocity[i])
     q = quaternion_enu_to_ned(flight.quaternion[i])
-    yaw, pitch, roll = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_euler("ZYX", degrees=True).T
+    roll, pitch, yaw = np.degrees(quat_to_euler(q)).T
     rows: list[Message] = []
     for j, t in enumerate(flight.t[i]):
         us = stamp(t)

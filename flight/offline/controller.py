@@ -29,8 +29,8 @@ from mavsysid.flight.offline.null_space_mixer import (
 )
 from mavsysid.vehicle.allocation import allocation_matrix, allocation_pinv
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
-from mavsysid.vehicle.dynamics import rotation_kernel
 from mavsysid.vehicle.flatness import flat_to_state
+from mavsysid.vehicle.rotation import rotation_kernel
 from mavsysid.vehicle.trajectory import Trajectory
 
 __all__ = ["REFERENCE_DIM", "ControllerGains", "GeometricController", "reference_samples"]

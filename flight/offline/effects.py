@@ -30,7 +30,6 @@ them as ``CatalogEffect(effect, hidden=False)`` themselves (`config_truth_effect
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -45,6 +44,7 @@ from mavsysid.vehicle.model_effects import (
     RotorInertia,
     RotorSpeedLag,
 )
+from mavsysid.vehicle.rotation import rotation_kernel
 
 if TYPE_CHECKING:
     from mavsysid.vehicle.config import VehicleConfig
@@ -206,16 +206,6 @@ class _OneSample(EffectInputs):
         return self.matrix  # type: ignore[return-value]
 
 
-def _rotation_1x3x3(q: list[float]) -> np.ndarray:
-    """R(q) of shape (1, 3, 3) for q = [w, x, y, z] (numpy's stacking is slow at N = 1)."""
-    w, x, y, z = q
-    s = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w * s, x * s, y * s, z * s
-    return np.array([[[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]])
-
-
 class CatalogEffect(TruthEffect):
     """An effect of the catalogue (`mavsysid.vehicle.model_effects`) acting on the truth.
 
@@ -294,7 +284,7 @@ class CatalogEffect(TruthEffect):
         return _OneSample(np.array([t]), x[None, 0:3], x[None, 6:10], x[None, 3:6],
                           x[None, 10:13], n[None, :], self._theta, self._rotors,
                           rotor_directions=self._directions, rotor_speed_rates=rates,
-                          matrix=_rotation_1x3x3(x[6:10].tolist()))
+                          matrix=rotation_kernel(x[6:10])[None])
 
     def wrench(
         self, t: float, x: np.ndarray, n: np.ndarray

@@ -47,6 +47,7 @@ from mavsysid.formats.flight_log import FlightRecorder
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.dynamics import STATE_DIM
 from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
+from mavsysid.vehicle.rotation import quat_yaw
 
 __all__ = [
     "CONTROL_DT_US",
@@ -250,8 +251,7 @@ class SimVehicle:
 
     def yaw(self) -> float:
         """True heading, rad, ENU."""
-        w, x, y, z = self.y[6:10].tolist()
-        return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        return float(quat_yaw(self.y[6:10]))
 
     def tilt(self) -> float:
         """Angle between the body z axis and the vertical, rad."""

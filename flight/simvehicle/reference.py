@@ -30,7 +30,8 @@ import math
 
 import numba
 import numpy as np
-from mavsysid.vehicle.constants import GRAVITY
+from mavsysid.vehicle.flatness import SAMPLE_RATE, SAMPLE_SIZE, flat_sample
+from mavsysid.vehicle.rotation import wrap_angle_kernel
 
 __all__ = [
     "LIMITS_DIM",
@@ -99,28 +100,9 @@ def _sqrt_slope(error, gain, accel):
     return gain
 
 
-@numba.njit(cache=True)
-def _wrap(angle):
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-@numba.njit(cache=True)
-def _body_rates(acc, jerk, yaw, yaw_rate, out):
-    """Desired body rates (FLU, rad/s) of the flat outputs' a, j, ψ, ψ̇ into out[0:3]."""
-    tx, ty, tz = acc[0], acc[1], acc[2] + GRAVITY
-    s = math.sqrt(tx * tx + ty * ty + tz * tz)
-    zx, zy, zz = tx / s, ty / s, tz / s
-    cx, cy = math.cos(yaw), math.sin(yaw)
-    # y_B = z_B × x_C, x_B = y_B × z_B (as in mavsysid.vehicle.flatness).
-    yx, yy, yz = -zz * cy, zz * cx, zx * cy - zy * cx
-    ny = math.sqrt(yx * yx + yy * yy + yz * yz)
-    yx, yy, yz = yx / ny, yy / ny, yz / ny
-    xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
-    jz = jerk[0] * zx + jerk[1] * zy + jerk[2] * zz
-    dzx, dzy, dzz = (jerk[0] - jz * zx) / s, (jerk[1] - jz * zy) / s, (jerk[2] - jz * zz) / s
-    out[0] = -(yx * dzx + yy * dzy + yz * dzz)
-    out[1] = xx * dzx + xy * dzy + xz * dzz
-    out[2] = yaw_rate * zz
+#: Inertia handed to the flatness kernel, which needs one for its torque; only the rates
+#: it returns are used here.
+_UNIT_INERTIA = np.ones(3)
 
 
 @numba.njit(cache=True)
@@ -190,7 +172,7 @@ def shape_step(target, state, limits, dt, ref):
     acc = np.empty(3)
     _shaped_acceleration(target, state, limits, acc)
 
-    yaw_err = _wrap(target[12] - state[6])
+    yaw_err = wrap_angle_kernel(target[12] - state[6])
     yaw_rate = target[13] + min(max(k_yaw * yaw_err, -yaw_rate_max), yaw_rate_max)
 
     jerk = np.zeros(3)
@@ -202,7 +184,13 @@ def shape_step(target, state, limits, dt, ref):
         ref[6 + i] = acc[i]
         ref[13 + i] = 0.0
     ref[9] = state[6]
-    _body_rates(acc, jerk, state[6], yaw_rate, ref[10:13])
+    # Desired body rates of the flat outputs a, j, ψ, ψ̇ (FLU, rad/s).
+    flat = np.empty(SAMPLE_SIZE)
+    if flat_sample(acc[0], acc[1], acc[2], jerk[0], jerk[1], jerk[2], 0.0, 0.0, 0.0,
+                   state[6], yaw_rate, 0.0, _UNIT_INERTIA, flat):
+        ref[10:13] = flat[SAMPLE_RATE:SAMPLE_RATE + 3]
+    else:
+        ref[10:13] = 0.0
 
     # Advance the shaper with the commanded acceleration, the target with its own.
     for i in range(3):
@@ -212,8 +200,8 @@ def shape_step(target, state, limits, dt, ref):
                       + jerk[i] * dt * dt * dt / 6.0)
         target[3 + i] += target[6 + i] * dt + 0.5 * jerk[i] * dt * dt
         target[6 + i] += jerk[i] * dt
-    state[6] = _wrap(state[6] + yaw_rate * dt)
-    target[12] = _wrap(target[12] + target[13] * dt)
+    state[6] = wrap_angle_kernel(state[6] + yaw_rate * dt)
+    target[12] = wrap_angle_kernel(target[12] + target[13] * dt)
     if target[16] > 0.0:
         target[16] -= dt
         if target[16] <= 0.0:

@@ -27,6 +27,7 @@ from mavsysid.flight.simvehicle.geodesy import enu_to_lat_lon
 from mavsysid.flight.simvehicle.link import mavlink
 from mavsysid.flight.simvehicle.physics import ORIGIN
 from mavsysid.vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ned, yaw_enu_to_ned
+from mavsysid.vehicle.rotation import quat_to_euler
 
 __all__ = [
     "ORIGIN",
@@ -289,10 +290,7 @@ class TelemetryBuilder:
 
     def attitude(self):
         _, q, _ = self._pose_ned()
-        w, x, y, z = q
-        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-        pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        roll, pitch, yaw = (float(a) for a in quat_to_euler(q))
         return M.MAVLink_attitude_message(self._ms(), roll, pitch, yaw, *self._rates_frd())
 
     def attitude_quaternion(self):

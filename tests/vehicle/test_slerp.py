@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from mavsysid.estimation.readers.slerp import interpolate_quaternions
-from mavsysid.vehicle.rotation import quat_exp, quat_to_matrix
+from mavsysid.vehicle.rotation import interpolate_quaternions, quat_exp, quat_to_matrix
 
 
 def test_slerp_halves_the_turn_and_ignores_sign_flips() -> None:
