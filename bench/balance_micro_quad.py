@@ -28,9 +28,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from mavsysid.estimation.balance.fit import fit_wrench_balance
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
-from mavsysid.estimation.wrench_balance import fit_wrench_balance
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 from mavsysid.vehicle.constants import GRAVITY
 

@@ -58,11 +58,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.parameter_status import widened_sigma
+from mavsysid.estimation.balance.fit import fit_wrench_balance
+from mavsysid.estimation.balance.theta import widened_sigma
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
-from mavsysid.estimation.wrench_balance import fit_wrench_balance
 from mavsysid.formats.poselog import PoseLogWriter, read_pose_log
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, vehicle_to_toml
 from mavsysid.vehicle.config_types import RotorConfig

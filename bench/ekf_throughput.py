@@ -15,8 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     estimate_parameters,
     flight_initial_state_sigma,

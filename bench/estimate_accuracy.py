@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.estimator import estimate_parameters
+from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator

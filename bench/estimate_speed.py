@@ -5,7 +5,7 @@ the estimate once (compiling the numba kernels into their cache), then times it 
 prints the time of each stage (from the estimator's own stage messages) and the total.
 ``--cli`` also times the whole command in a fresh process (imports included);
 ``--least-squares`` also solves the batch refinement's problem with
-`scipy.optimize.least_squares` (`mavsysid.estimation.batch_scipy`) for comparison.
+`scipy.optimize.least_squares` (`mavsysid.estimation.batch.refine`) for comparison.
 
     python bench/estimate_speed.py [--duration 60] [--rate 500] [--cli] [--least-squares]
 """
@@ -20,15 +20,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.batch import refine, shooting_problem
-from mavsysid.estimation.batch_scipy import solve_least_squares
-from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.batch.refine import refine, shooting_problem, solve_least_squares
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
     prior_from_config,
 )
-from mavsysid.estimation.noise_fit import fit_noise_scale
+from mavsysid.estimation.filter.likelihood import fit_noise_scale
 from mavsysid.estimation.progress import stage_listener
 from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory

@@ -4,7 +4,7 @@ Five truths, each hidden from the model, plus the clean flight as a control. For
 truth and seed: fly the Firefly on the built-in 30 s excitation (`tests.support.hidden`,
 catalogue physics from `mavsysid.vehicle.model_effects`), draw the prior ±50 % around the
 scoring truth (seeded, as `bench/estimate_accuracy.py` does), run
-`mavsysid.estimation.estimator.estimate_parameters` (what ``mavsysid estimate`` runs) and
+`mavsysid.estimation.filter.estimator.estimate_parameters` (what ``mavsysid estimate`` runs) and
 score its final (refined) θ after the checks `mavsysid estimate` applies
 (`mavsysid.pipeline.estimate.check_result`; a refusal counts as not covering).
 Prints per truth and parameter the median |relative error| and the share of flights
@@ -23,7 +23,7 @@ Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
 
 ``--answer`` scores what ``mavsysid estimate`` prints: its per-parameter answer
 (`mavsysid.pipeline.estimate.estimate_flight`: the force and torque balance checked by the
-filter, `mavsysid.estimation.parameter_answer`), whose coverage is counted over the
+filter, `mavsysid.estimation.answer`), whose coverage is counted over the
 parameters it marks determined (a parameter not determined keeps the prior, which covers
 the truth by construction); the table then also gives the share determined.
 
@@ -52,7 +52,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from mavsysid.estimation.estimator import estimate_parameters
+from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.results import Z95, EstimationResult
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
 from mavsysid.pipeline.estimate import check_result, estimate_flight

@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.experiments.evaluation_intervals import OFF_PATH_RMS, SATURATED_SHARE
 from mavsysid.experiments.experiment import CONTROLLER_MODELS, controller_config

@@ -348,7 +348,7 @@ def _scored(value: np.ndarray, sigma: np.ndarray,
 def _estimate(log: Path, vehicle: Path, ref: dict[str, Any], auto: bool, progress: bool,
               out: Path | None) -> dict[str, Any]:
     """`run_estimate` (``mavsysid estimate``) or, with ``auto``, ``--auto-effects``."""
-    from mavsysid.estimation.report import write_estimate_json
+    from mavsysid.estimation.report.text import write_estimate_json
     from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
     from mavsysid.pipeline.estimate import run_estimate
 

@@ -13,7 +13,7 @@ lies in value ± 1.96 σ). Then, on the flight's own ``flight.tlog``, per
 parameter against `vehicle/configs/sitl_quad.toml`'s reference (docs/vehicles/sitl_quad.md):
 what ``estimate`` computes before its checks (the EKF and batch refinement, the final
 estimate) and the force and torque balance
-(`mavsysid.estimation.wrench_balance.fit_wrench_balance`, with its determination status).
+(`mavsysid.estimation.balance.fit.fit_wrench_balance`, with its determination status).
 
     python bench/sitl_experiment.py [--seeds 1 2 3] [--budget 20] [--samples 200]
         [--refine-steps 300] [--keep DIR]
@@ -37,9 +37,9 @@ from tests.support.sitl import running_sitl  # noqa: E402
 SITL_PARMS = REPO / "vehicle" / "configs" / "sitl_quad.parm"
 def per_parameter(log: Path) -> None:
     """The final estimate and the balance on ``log``, each parameter against the reference."""
-    from mavsysid.estimation.estimator import estimate_parameters
+    from mavsysid.estimation.balance.fit import fit_wrench_balance
+    from mavsysid.estimation.filter.estimator import estimate_parameters
     from mavsysid.estimation.readers import load_flight
-    from mavsysid.estimation.wrench_balance import fit_wrench_balance
     from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
 
     config = load_vehicle("sitl_quad")

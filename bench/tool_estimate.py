@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.estimator import estimate_parameters
+from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects

@@ -40,13 +40,13 @@ from mavsysid.discrepancy.selection import (
     Tie,
     forward_select,
 )
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.plausibility import (
+from mavsysid.estimation.checks import (
     check_plausible,
     implausibility,
     vanishing_floor,
     vanishing_parameters,
 )
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.progress import report_stage
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
@@ -100,7 +100,7 @@ class DiagnosisSettings:
 class HeldOutGap:
     """Held-out RMSE of the prior model, the diagnosed θ, and θ with the named effects.
 
-    The ratios pool the axes as `mavsysid.estimation.holdout.HoldoutCheck` does: the
+    The ratios pool the axes as `mavsysid.estimation.balance.fit.HoldoutCheck` does: the
     specific force (m/s², three axes) and the angular acceleration (rad/s², three axes),
     each RMSE over the prior model's; below 1 predicts unseen data better than the prior.
 
@@ -382,7 +382,7 @@ def check_refits(source: str, diagnosis: Diagnosis, config: VehicleConfig) -> tu
 
     The answer is θ refitted with the named effects, judged under all of the model's
     effects: an entry the named effects take over (c_D when ``rotor_drag_linear`` carries
-    the rotor drag) may then be ≈ 0, within its σ (`mavsysid.estimation.plausibility`).
+    the rotor drag) may then be ≈ 0, within its σ (`mavsysid.estimation.checks`).
     θ refitted *without* them is what the mismatch does to the paper's model: with effects
     named, an impossible one is a note (the named effects explain it), not a refusal;
     with none named it is the answer itself.
@@ -424,7 +424,7 @@ def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
                refine: bool = False) -> Any:
     """Step 3 with the estimator: θ and ``effects``' parameters estimated jointly.
 
-    Runs `mavsysid.estimation.estimator.estimate_with_effects` (the EKF, and the batch refinement
+    Runs `mavsysid.estimation.filter.estimator.estimate_with_effects` (the EKF, and the batch refinement
     if ``refine``) with ``effects`` as the model's complete list (a diagnosis'
     ``augmented_effects``, or only the known ones for the comparison); their values
     are the start of the fit.
@@ -434,7 +434,7 @@ def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
     EstimationResult
         (`mavsysid.estimation.results`; imported lazily, as the estimator loads compiled kernels.)
     """
-    from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
+    from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_with_effects
 
     return estimate_with_effects(flight, config, tuple(effects),
                                  EstimatorSettings(refine=refine), fit_effects=True)

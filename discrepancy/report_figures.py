@@ -1,14 +1,14 @@
 """``diagnose --report DIR``: PNG figures and a one-page HTML report of a diagnosis.
 
 Files written into DIR (the page is plain HTML, no script, nothing fetched; built by
-`mavsysid.estimation.report_html.html_page`):
+`mavsysid.estimation.report.figures.html_page`):
 
 - ``index.html``: the named effects, the gap per axis, the notes and the figures;
 - ``residuals.png``: the residual per axis before and after the named effects, with the
   start of the held-out part marked (`plot_residuals`);
 - ``rotor_speeds.png``: the rotor inputs;
 - ``wrench.png``: measured vs model body force and torque at the diagnosed θ, the paper's
-  model without effects (`mavsysid.estimation.wrench_check`).
+  model without effects (`mavsysid.estimation.report.figures`).
 """
 
 from __future__ import annotations
@@ -19,10 +19,17 @@ import numpy as np
 from matplotlib.figure import Figure
 from mavsysid.discrepancy.diagnosis import Diagnosis
 from mavsysid.discrepancy.residuals import AXIS_NAMES, AXIS_UNITS
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.report_figures import plot_rotor_speeds, plot_wrench, save_figure
-from mavsysid.estimation.report_html import ReportTable, flight_lines, html_page, write_index
-from mavsysid.estimation.wrench_check import compare_wrench
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.report.figures import (
+    ReportTable,
+    compare_wrench,
+    flight_lines,
+    html_page,
+    plot_rotor_speeds,
+    plot_wrench,
+    save_figure,
+    write_index,
+)
 from mavsysid.vehicle.config import VehicleConfig
 
 __all__ = ["DIAGNOSIS_REPORT_FILES", "effects_table", "gap_table", "plot_residuals",

@@ -9,7 +9,7 @@ acceleration (rad/s²), both derived from the pose log by a Savitzky–Golay smo
 (`smooth_pose`), and F_B, M_B the model's wrench (paper Eq. drag plus the given
 `ModelEffect` wrenches) at the smoothed state and the logged rotor speeds. The law-level
 pieces (smoothing, the model's accelerations, the common smoother) are the estimator's
-(`mavsysid.estimation.equation_error`, re-exported here); this module adds the diagnosis'
+(`mavsysid.estimation.signals`, re-exported here); this module adds the diagnosis'
 problem: one flight, resampled, with model effects.
 
 Effects enter through their catalogue channels: ``corrected_pose`` changes the measured
@@ -26,19 +26,21 @@ from functools import cached_property
 
 import numpy as np
 from mavsysid.discrepancy.resample import Resampling
-from mavsysid.estimation.equation_error import (
+from mavsysid.estimation.balance.rows import (
+    consistent_accelerations,
+    model_accelerations,
+)
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.signals import (
     AXIS_NAMES,
     AXIS_UNITS,
     SmoothedPose,
     SmootherSettings,
     acceleration_kernel,
-    consistent_accelerations,
-    model_accelerations,
     noise_gain,
     smooth_pose,
     uniform_step,
 )
-from mavsysid.estimation.flight_data import FlightData
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 

@@ -1,6 +1,6 @@
 """θ by equation error: the force and torque balance of the smoothed pose, least squares.
 
-The residual of `mavsysid.estimation.equation_error` (measured minus model [f_B, ω̇],
+The residual of `mavsysid.estimation.signals` (measured minus model [f_B, ω̇],
 both through the same Savitzky–Golay smoother) is driven to zero over θ by Gauss–Newton
 with a finite-difference Jacobian (the model is linear in c_T, c_D, c_M and nearly so in
 J). Yaw only fixes the ratio c_M / j_z, so the prior (the vehicle file's θ and σ, as in
@@ -14,7 +14,7 @@ give the long-run covariance S by a Newey–West (Bartlett) estimator over two w
 κ = tr S / tr Σ g_i g_iᵀ weights the data against the prior, and the reported covariance
 is the sandwich A⁻¹ (S/κ² + P⁻¹) A⁻¹ with A = XᵀX/κ + P⁻¹ (scaled units).
 
-The fit is the estimator's robust start (`mavsysid.estimation.guard`) and its independent
+The fit is the estimator's robust start (`mavsysid.estimation.filter.guard`) and its independent
 check of the final θ: it needs no filter, so it cannot diverge.
 """
 
@@ -24,16 +24,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from mavsysid.estimation.equation_error import (
-    MAX_JITTER,
-    SmootherSettings,
+from mavsysid.estimation.balance.rows import (
     consistent_accelerations,
     model_accelerations,
+)
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.report.figures import uniform_grid
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation.signals import (
+    MAX_JITTER,
+    SmootherSettings,
     smooth_pose,
 )
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.estimation.wrench_check import uniform_grid
 from mavsysid.vehicle.config import VehicleConfig
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 

@@ -7,10 +7,27 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from mavsysid.vehicle.config import PARAMETER_NAMES
+from mavsysid.estimation.signals import AXIS_NAMES, Band
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
 from mavsysid.vehicle.model_effects import ModelEffect
 
-__all__ = ["EstimationHistory", "EstimationResult", "FittedEffect", "ParameterEstimate"]
+__all__ = [
+    "AT_BOUND",
+    "COMBINATION_NAMES",
+    "DETERMINED",
+    "MAX_RELATIVE_SIGMA",
+    "NOT_DETERMINED",
+    "SIGMA_PARTS",
+    "DataTheta",
+    "EstimationHistory",
+    "EstimationResult",
+    "FitChoices",
+    "FittedEffect",
+    "HoldoutCheck",
+    "ParameterEstimate",
+    "WrenchBalanceResult",
+    "parameter_status",
+]
 
 #: Two-sided 95 % quantile of the standard normal.
 Z95 = 1.959963984540054
@@ -171,9 +188,9 @@ class EstimationResult:
     mismatch_widening : ndarray, shape (6,), or None
         σ multipliers (≥ 1) already applied to the final θ's covariance where it and the
         equation-error θ disagree beyond their σ
-        (`mavsysid.estimation.robust_covariance.disagreement_widening`); None if not checked.
+        (`mavsysid.estimation.robust.disagreement_widening`); None if not checked.
     answer : ParameterEstimate or None
-        The per-parameter answer (`mavsysid.estimation.parameter_answer`): the filter's or
+        The per-parameter answer (`mavsysid.estimation.answer`): the filter's or
         the force and torque balance's value per parameter, the prior's where the flight
         determines nothing; `final` when set.
     status : tuple of str
@@ -184,7 +201,7 @@ class EstimationResult:
     mismatch : tuple of str
         Parameters where the filter and the balance disagree (the balance answers).
     balance : WrenchBalanceResult or None
-        The force and torque balance (`mavsysid.estimation.wrench_balance`), with its
+        The force and torque balance (`mavsysid.estimation.balance.fit`), with its
         held-out check.
     filter_refusal : str or None
         Why the filter and batch could not answer (then ``filtered`` is the balance's θ and
@@ -217,3 +234,247 @@ class EstimationResult:
         if self.answer is not None:
             return self.answer
         return self.refined if self.refined is not None else self.filtered
+
+
+#: Largest widened σ / |θ| of a determined parameter (module docstring).
+MAX_RELATIVE_SIGMA = 0.125
+
+
+#: The parts of σ, in the order of `DataTheta.parts`.
+SIGMA_PARTS = ("newey_west", "errors_in_variables", "flight_halves", "band_halves",
+               "j_z_routes", "thrust_row")
+
+
+#: Combinations a flight may determine when a parameter alone is not: the yaw ratio and
+#: the rotors' inertia relative to the yaw inertia.
+COMBINATION_NAMES = ("c_M/j_z", "J_r/j_z")
+
+
+@dataclass(frozen=True)
+class DataTheta:
+    """θ (and the combinations) as the flight's data alone give them.
+
+    Attributes
+    ----------
+    value : ndarray, shape (6,)
+        SI; NaN where not formed.
+    covariance : ndarray, shape (6, 6)
+        Delta-method covariance of the Newey–West sandwich.
+    combinations : ndarray, shape (2,)
+        `COMBINATION_NAMES` values.
+    combination_sigma : ndarray, shape (2,)
+    route_sigma : ndarray, shape (6,)
+        σ added by the disagreement of the two routes to j_z (on j_z and c_M).
+    """
+
+    value: np.ndarray
+    covariance: np.ndarray
+    combinations: np.ndarray
+    combination_sigma: np.ndarray
+    route_sigma: np.ndarray
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """Sandwich σ of θ, shape (6,)."""
+        return np.sqrt(np.abs(np.diag(self.covariance)))
+
+
+def parameter_status(value: np.ndarray, sigma: np.ndarray,
+                     max_relative_sigma: float = MAX_RELATIVE_SIGMA) -> np.ndarray:
+    """Which parameters the flight determines (module docstring), shape like ``value``.
+
+    Parameters
+    ----------
+    value, sigma : ndarray
+        Data-only values and widened σ (c_D may be 0 only if its σ is too).
+    max_relative_sigma : float
+    """
+    value, sigma = np.asarray(value, float), np.asarray(sigma, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ok = np.isfinite(value) & np.isfinite(sigma) & (value > 0.0)
+        return ok & (sigma <= max_relative_sigma * np.abs(value))
+
+
+@dataclass(frozen=True)
+class FitChoices:
+    """What the flight chose: window (s), bands (or None), offset δ (s), c_D for the rows.
+
+    ``force`` is the force rows' low-pass (a `Band` with ``low = 0``); ``drag_linear``
+    (k / c_T, s·rad/m) and ``drag_c_d`` (s/m) the fitted drag in the thrust row's
+    magnitude (NaN: ``c_d``).
+    """
+
+    window: float
+    roll_pitch: Band | None
+    yaw: Band | None
+    delay: float
+    c_d: float
+    force: Band | None = None
+    drag_linear: float = 0.0
+    drag_c_d: float = float("nan")
+
+
+@dataclass(frozen=True)
+class HoldoutCheck:
+    """Held-out RMSE of the fitted model and of the prior (per axis of `AXIS_NAMES`).
+
+    Attributes
+    ----------
+    start : float
+        Time the held-out part starts, s.
+    rmse : ndarray, shape (6,)
+        Fitted model, SI (NaN for an axis without a band).
+    prior_rmse : ndarray, shape (6,)
+        Prior θ.
+    rows : int
+        Held-out rows compared.
+    """
+
+    start: float
+    rmse: np.ndarray
+    prior_rmse: np.ndarray
+    rows: int
+
+    @property
+    def ratio(self) -> np.ndarray:
+        """rmse / prior_rmse per axis, shape (6,)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.rmse / self.prior_rmse
+
+    def group_ratio(self, axes: slice) -> float:
+        """RMSE pooled over ``axes`` (one unit), fitted model / prior; NaN if none live."""
+        model, prior = self.rmse[axes], self.prior_rmse[axes]
+        live = np.isfinite(model) & np.isfinite(prior)
+        if not live.any() or not np.any(prior[live] > 0):
+            return float("nan")
+        return float(np.sqrt(np.sum(model[live] ** 2) / np.sum(prior[live] ** 2)))
+
+    @property
+    def force_ratio(self) -> float:
+        """Force RMSE (the three axes pooled), fitted / prior."""
+        return self.group_ratio(slice(0, 3))
+
+    @property
+    def torque_ratio(self) -> float:
+        """Angular-acceleration RMSE (the axes with a band pooled), fitted / prior."""
+        return self.group_ratio(slice(3, 6))
+
+    @property
+    def overall_ratio(self) -> float:
+        """Geometric mean of the force and torque ratios (the one that exists if only one)."""
+        live = [r for r in (self.force_ratio, self.torque_ratio) if np.isfinite(r)]
+        return float(np.exp(np.mean(np.log(live)))) if live else float("nan")
+
+    def as_dict(self) -> dict:
+        """JSON-ready: per axis rmse, prior_rmse, ratio; the force, torque and overall ratios."""
+        def num(x: float) -> float | None:
+            return float(x) if np.isfinite(x) else None
+
+        return {"start_s": self.start, "rows": self.rows,
+                "axes": {a: {"rmse": num(m), "prior_rmse": num(p), "ratio": num(r)}
+                         for a, m, p, r in zip(AXIS_NAMES, self.rmse, self.prior_rmse,
+                                               self.ratio, strict=True)},
+                "force_ratio": num(self.force_ratio), "torque_ratio": num(self.torque_ratio),
+                "ratio": num(self.overall_ratio)}
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class WrenchBalanceResult:
+    """What the flight's force and torque balance says about θ.
+
+    Attributes
+    ----------
+    estimate : ParameterEstimate
+        θ: the data's value and widened σ where determined, the prior's elsewhere (SI).
+    determined : ndarray of bool, shape (6,)
+    data : DataTheta
+        The data-only values (also where not determined) and the combinations.
+    sigma_parts : ndarray, shape (6, 6)
+        σ of θ by source (`SIGMA_PARTS`), SI.
+    combination_sigma : ndarray, shape (2,)
+        Widened σ of the combinations (`COMBINATION_NAMES`).
+    prior : ParameterEstimate
+    choices : FitChoices
+        Window, bands and the offset δ (the pose lags the rotor speeds by δ).
+    delay_sigma : float
+        σ of δ, s.
+    holdout : HoldoutCheck or None
+    rows : int
+        Rows of the force fit (after thinning).
+    notes : tuple of str
+    """
+
+    estimate: ParameterEstimate
+    determined: np.ndarray
+    data: DataTheta
+    sigma_parts: np.ndarray
+    combination_sigma: np.ndarray
+    prior: ParameterEstimate
+    choices: FitChoices
+    delay_sigma: float
+    holdout: HoldoutCheck | None
+    rows: int
+    notes: tuple[str, ...] = ()
+
+    @property
+    def status(self) -> tuple[str, ...]:
+        """Per parameter: "determined" or "not determined"."""
+        return tuple("determined" if d else "not determined" for d in self.determined)
+
+    @property
+    def combination_determined(self) -> np.ndarray:
+        """Which combinations (`COMBINATION_NAMES`) the flight determines, by the same rule."""
+        return parameter_status(np.abs(self.data.combinations), self.combination_sigma,
+                                MAX_RELATIVE_SIGMA)
+
+    def as_dict(self) -> dict:
+        """JSON-ready (SI; absent or infinite quantities are None).
+
+        ``{"parameters": {name: {"value", "sigma", "unit", "status", "data_value",
+        "data_sigma", "sigma_parts": {part: σ}, "prior_value", "prior_sigma"}},
+        "combinations": {name: {"value", "sigma", "status"}}, "choices": {"window_s",
+        "roll_pitch_band_hz", "yaw_band_hz", "force_lowpass_hz", "delay_s",
+        "delay_sigma_s"}, "holdout": {…} or None, "rows", "notes"}``.
+        """
+        with np.errstate(over="ignore", invalid="ignore"):
+            data_sigma = np.sqrt(np.sum(self.sigma_parts**2, axis=0))
+        parameters = {}
+        for k, name in enumerate(PARAMETER_NAMES):
+            parameters[name] = {
+                "value": _num(self.estimate.value[k]), "sigma": _num(self.estimate.sigma[k]),
+                "unit": PARAMETER_UNITS[name], "status": self.status[k],
+                "data_value": _num(self.data.value[k]), "data_sigma": _num(data_sigma[k]),
+                "sigma_parts": {p: _num(v) for p, v in zip(SIGMA_PARTS, self.sigma_parts[:, k],
+                                                          strict=True)},
+                "prior_value": _num(self.prior.value[k]), "prior_sigma": _num(self.prior.sigma[k])}
+        combinations = {
+            name: {"value": _num(v), "sigma": _num(s),
+                   "status": "determined" if d else "not determined"}
+            for name, v, s, d in zip(COMBINATION_NAMES, self.data.combinations,
+                                     self.combination_sigma, self.combination_determined,
+                                     strict=True)}
+        c = self.choices
+
+        def band(b):
+            return None if b is None else [float(b.low), float(b.high)]
+
+        return {"parameters": parameters, "combinations": combinations,
+                "choices": {"window_s": c.window, "roll_pitch_band_hz": band(c.roll_pitch),
+                            "yaw_band_hz": band(c.yaw),
+                            "force_lowpass_hz": None if c.force is None else float(c.force.high),
+                            "delay_s": c.delay, "delay_sigma_s": _num(self.delay_sigma)},
+                "holdout": None if self.holdout is None else self.holdout.as_dict(),
+                "rows": self.rows, "notes": list(self.notes)}
+
+
+DETERMINED = "determined"
+
+
+NOT_DETERMINED = "not determined by this flight"
+
+
+AT_BOUND = "at the bound"

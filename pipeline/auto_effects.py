@@ -4,7 +4,7 @@ Under a model mismatch (wind, a pose delay, a motor lag, rotor drag linear in ro
 …) the estimator's θ is biased, and no widening of its σ makes the 95 % interval cover
 the truth (``bench/mismatch_coverage.py``): the bias must be removed. The diagnosis
 (`mavsysid.discrepancy.diagnosis.diagnose_flight`) names the effects the log shows; with
-them in the model (`mavsysid.estimation.estimator.estimate_with_effects`, their parameters
+them in the model (`mavsysid.estimation.filter.estimator.estimate_with_effects`, their parameters
 fitted jointly with θ) the bias goes and the σ include the effects' uncertainty.
 
 `estimate_with_named_effects`:
@@ -29,12 +29,12 @@ from pathlib import Path
 import numpy as np
 from mavsysid.discrepancy.diagnosis import Diagnosis, DiagnosisSettings, diagnose_flight
 from mavsysid.discrepancy.selection import FittedEffect
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     estimate_parameters,
     estimate_with_effects,
 )
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import EstimationResult
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.vehicle.config import VehicleConfig

@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port

@@ -6,14 +6,14 @@ command itself only parses its options, calls it and prints.
 Where the parameter filter could not follow the flight (the estimate's ``filter_refusal``),
 or, without ``--estimate``, where θ refitted on the diagnosis' own accelerations is refused,
 the θ diagnosed is the force and torque balance's answer (from ``--estimate``'s ``balance``
-section, or fitted here by `mavsysid.estimation.wrench_balance.fit_wrench_balance`): the
+section, or fitted here by `mavsysid.estimation.balance.fit.fit_wrench_balance`): the
 parameters it determines may move with the named effects, the others stay at their prior,
 and the residual is taken on derivatives smoothed over the balance's window. Refitting θ on
 the diagnosis' own accelerations there lets the noise in logged rotor speeds bias the
 inertia (on a real Crazyflie flight, 20× the bifilar value). A refit with the named effects
 that is physically impossible is then a note and the balance's θ is kept. Otherwise θ (the
 estimate's, or the config's) is refitted, and an impossible one is refused in one line,
-before anything is written (`mavsysid.estimation.plausibility`).
+before anything is written (`mavsysid.estimation.checks`).
 """
 
 from __future__ import annotations
@@ -32,15 +32,15 @@ from mavsysid.discrepancy.diagnosis import (
     diagnose_flight,
     reestimate,
 )
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.plausibility import (
+from mavsysid.estimation.checks import (
+    check_kinematics,
     check_plausible,
     vanishing_floor,
     vanishing_parameters,
 )
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.tilt_consistency import check_kinematics
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
@@ -114,7 +114,7 @@ def balance_start(flight: FlightData, config: VehicleConfig,
         if found.filter_followed:
             return None, None  # the estimate's θ followed the flight: refit from it
         return found, None
-    from mavsysid.estimation.wrench_balance import fit_wrench_balance  # loads the estimator
+    from mavsysid.estimation.balance.fit import fit_wrench_balance  # loads the estimator
 
     report_stage("fitting the force and torque balance")
     try:

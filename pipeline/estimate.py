@@ -2,15 +2,15 @@
 
 `run_estimate` is what the command line and the tests call; the console layer
 (``mavsysid estimate``) only parses its options, calls it and prints. Two estimates come
-from the flight: the force and torque balance (`mavsysid.estimation.wrench_balance`, with
+from the flight: the force and torque balance (`mavsysid.estimation.balance.fit`, with
 its held-out check) and the filter with its batch refinement
-(`mavsysid.estimation.estimator`). When the balance answers, the filter checks it and θ is
-answered per parameter (`mavsysid.estimation.parameter_answer`): a filter that cannot
+(`mavsysid.estimation.filter.estimator`). When the balance answers, the filter checks it and θ is
+answered per parameter (`mavsysid.estimation.answer`): a filter that cannot
 follow the flight, or whose θ is refused (`check_result`: physically impossible, far
 outside the prior, contradicting the log's equation-error fit), leaves the balance's
 answer, with the reason in the notes. A flight is refused only when neither determines a
 parameter. A rotor channel that reads a constant share of its speed is rescaled first
-(`mavsysid.estimation.rotor_balance.rescale_wrong_rotor`). `estimate_flight` does the same
+(`mavsysid.estimation.checks.rescale_wrong_rotor`). `estimate_flight` does the same
 on a flight already read, and `checked_estimate` gives its answer's θ̂ and Σ (re-planning in
 flight, `mavsysid.pipeline.replanned_stream`, and its offline evaluation).
 """
@@ -22,34 +22,38 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.estimator import (
-    EstimatorSettings,
-    estimate_parameters,
-    prior_from_config,
-)
-from mavsysid.estimation.flight_data import MIN_DURATION, FlightData
-from mavsysid.estimation.guard import check_agreement
-from mavsysid.estimation.parameter_answer import (
-    AT_BOUND,
+from mavsysid.estimation.answer import (
     BOUND_SIGMAS,
-    DETERMINED,
-    NOT_DETERMINED,
     answer_parameters,
     balance_only_result,
     with_answer,
 )
-from mavsysid.estimation.plausibility import (
+from mavsysid.estimation.balance.fit import fit_wrench_balance
+from mavsysid.estimation.checks import (
+    check_kinematics,
     check_plausible,
+    rescale_wrong_rotor,
     vanishing_floor,
     vanishing_parameters,
 )
+from mavsysid.estimation.filter.estimator import (
+    EstimatorSettings,
+    estimate_parameters,
+    prior_from_config,
+)
+from mavsysid.estimation.filter.guard import check_agreement
+from mavsysid.estimation.flight import MIN_DURATION, FlightData
 from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.results import EstimationResult, ParameterEstimate
-from mavsysid.estimation.robust_covariance import widened
-from mavsysid.estimation.rotor_balance import rescale_wrong_rotor
-from mavsysid.estimation.tilt_consistency import check_kinematics
-from mavsysid.estimation.wrench_balance import WrenchBalanceResult, fit_wrench_balance
+from mavsysid.estimation.results import (
+    AT_BOUND,
+    DETERMINED,
+    NOT_DETERMINED,
+    EstimationResult,
+    ParameterEstimate,
+    WrenchBalanceResult,
+)
+from mavsysid.estimation.robust import widened
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 
 from mavsysid.errors import JobFailedError
@@ -110,10 +114,10 @@ def run_estimate(
         The balance determines nothing (or could not run) and the filter's θ is physically
         impossible (c_T, c_D, c_M or J ≤ 0, J breaking the triangle inequality), far
         outside the prior, contradicted by the log's equation-error fit
-        (`mavsysid.estimation.guard.check_agreement`), or the filter diverged; one line
+        (`mavsysid.estimation.filter.guard.check_agreement`), or the filter diverged; one line
         naming the log and both reasons. Also before estimating, when the logged motion
         contradicts the logged tilt: a wrong clock or position unit
-        (`mavsysid.estimation.tilt_consistency.check_kinematics`).
+        (`mavsysid.estimation.checks.check_kinematics`).
     """
     config = load_vehicle(vehicle)
     flight = load_flight(log, config, pose=pose, time_offset=time_offset, start=start, end=end)
@@ -186,7 +190,7 @@ def _balance(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
 def _answered(result: EstimationResult | None, filter_refusal: str | None,
               balance: WrenchBalanceResult, config: VehicleConfig, flight: FlightData,
               prior: ParameterEstimate) -> EstimationResult:
-    """The per-parameter answer (`mavsysid.estimation.parameter_answer`) and its notes."""
+    """The per-parameter answer (`mavsysid.estimation.answer`) and its notes."""
     estimate, status, source, mismatch = answer_parameters(result, balance, prior)
     notes = list(balance.notes)
     if result is None:
@@ -231,8 +235,8 @@ def check_result(source: str, result: EstimationResult,
     """Refuse, in one line naming ``source``, a result `run_estimate` would not print.
 
     The final θ must be physically possible and near the prior
-    (`mavsysid.estimation.plausibility.check_plausible`), and, for the paper's model, agree
-    with the log's own force and torque balance (`mavsysid.estimation.guard.check_agreement`,
+    (`mavsysid.estimation.checks.check_plausible`), and, for the paper's model, agree
+    with the log's own force and torque balance (`mavsysid.estimation.filter.guard.check_agreement`,
     judged on the σ before the disagreement widened it).
 
     Parameters
@@ -243,7 +247,7 @@ def check_result(source: str, result: EstimationResult,
         The estimate to check.
     rotor_speed_max : float, optional
         Top rotor speed, rad/s: with a linear rotor drag in the model, c_D may go as low as
-        keeps the rotor drag a drag up to it (`mavsysid.estimation.plausibility.vanishing_floor`).
+        keeps the rotor drag a drag up to it (`mavsysid.estimation.checks.vanishing_floor`).
 
     Raises
     ------

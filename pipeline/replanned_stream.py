@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mavsysid.estimation.estimator import EstimatorSettings
+from mavsysid.estimation.filter.estimator import EstimatorSettings
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment

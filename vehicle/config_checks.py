@@ -40,7 +40,7 @@ class InertiaWarning(UserWarning):
 
     A prior is a guess (the paper's own Firefly values break the inequality), so it is
     reported, not refused; an *estimate* that breaks it is refused
-    (`mavsysid.estimation.plausibility`).
+    (`mavsysid.estimation.checks`).
     """
 
 

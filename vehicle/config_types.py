@@ -289,7 +289,7 @@ def default_noise_densities(
 
     Stated as unmodelled accelerations so that one default suits a 30 g quad and a 3 kg
     hexacopter alike: 0.02 m/s²·√s of linear and 0.02 rad/s²·√s of angular acceleration
-    noise. Estimation can fit the level to a flight (`mavsysid.estimation.noise_fit`).
+    noise. Estimation can fit the level to a flight (`mavsysid.estimation.filter.likelihood`).
 
     Parameters
     ----------

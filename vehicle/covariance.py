@@ -3,10 +3,10 @@
 The planner's belief is the estimator's covariance (paper Section "Belief Propagation"),
 so both take the step from here: the prediction P ← F P Fᵀ + Q (paper Eq. prior) and
 the Joseph-form measurement update (paper Eqs. S_k, K_k, posterior) are numba kernels
-called by the parameter EKF (`mavsysid.estimation.ekf`), by the planner's step-by-step
+called by the parameter EKF (`mavsysid.estimation.filter.ekf`), by the planner's step-by-step
 recursion and its star-product transfer (`mavsysid.planner.belief`) and, for the
 process noise accumulated between shooting nodes, by the batch refinement
-(`mavsysid.estimation.batch_kernels`).
+(`mavsysid.estimation.batch.kernels`).
 
 The measurement is a motion-capture pose, z = [p (3), q (4)], with
 ``q_meas = q ⊗ Exp(φ)`` (paper measurement model). Its residual is

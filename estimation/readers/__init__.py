@@ -3,7 +3,7 @@
 Formats, by file extension: ``.csv`` (mavsysid's pose log), ``.tlog`` (MAVLink telemetry),
 ``.ulg`` (PX4 ULog), ``.bin`` (ArduPilot DataFlash). Each is read by its module in
 `mavsysid.formats`; `READERS` gives, per extension, the pose and rotor speeds in the
-project's conventions (`mavsysid.estimation.readers.streams.LogStreams`: ENU/FLU, rad/s,
+project's conventions (`mavsysid.estimation.readers.samples.LogStreams`: ENU/FLU, rad/s,
 the config's rotor order; `pose_csv`, `autopilot_logs`). Then `window` picks the part of
 the log to use, `merge` optionally replaces the pose by an external motion-capture file,
 `streams.to_flight_data` resamples the rotor speeds to the pose times and
@@ -17,12 +17,16 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.readers.autopilot_logs import read_autopilot_log
-from mavsysid.estimation.readers.merge import merge_pose
-from mavsysid.estimation.readers.pose_csv import read_pose_csv
-from mavsysid.estimation.readers.streams import LogStreams, to_flight_data
-from mavsysid.estimation.readers.window import TimeWindow, choose_window, control_spans
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.readers.logs import (
+    TimeWindow,
+    choose_window,
+    control_spans,
+    merge_pose,
+    read_autopilot_log,
+    read_pose_csv,
+)
+from mavsysid.estimation.readers.samples import LogStreams, to_flight_data
 from mavsysid.formats.bounded_parse import check_log_size
 from mavsysid.formats.dataflash import read_dataflash, read_dataflash_modes
 from mavsysid.formats.parsed_log import ModeChanges
@@ -103,7 +107,7 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
         replaces the default window.
     auto_window : bool
         Without `start` and `end`, use the default window
-        (`mavsysid.estimation.readers.window.choose_window`: the trajectory flown by
+        (`mavsysid.estimation.readers.logs.choose_window`: the trajectory flown by
         ``mavsysid stream``, else the longest GUIDED/OFFBOARD span); False: the whole log.
 
     Returns
@@ -118,7 +122,7 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     InputError
         An unsupported extension or a missing file.
     LogFormatError
-        A log that cannot be read or fails a check (`mavsysid.estimation.readers.checks`); the
+        A log that cannot be read or fails a check (`mavsysid.estimation.readers.samples`); the
         message is one line naming the file.
     """
     path = _existing_file(path, "flight log")

@@ -22,10 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
-from mavsysid.estimation.estimator import EstimatorSettings
-from mavsysid.estimation.history_table import write_history_csv
+from mavsysid.estimation.filter.estimator import EstimatorSettings
 from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
-from mavsysid.estimation.report import format_table, updated_vehicle, write_estimate_json
+from mavsysid.estimation.report.text import (
+    format_table,
+    updated_vehicle,
+    write_estimate_json,
+    write_history_csv,
+)
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
@@ -117,7 +121,7 @@ def main(args: argparse.Namespace) -> int:
     if args.update_vehicle is not None:
         save_vehicle(updated_vehicle(run.config, run.result), args.update_vehicle)
     if args.rrd is not None:
-        from mavsysid.estimation.recording import write_estimation_rrd  # rerun loads slowly
+        from mavsysid.estimation.report.recording import write_estimation_rrd  # rerun loads slowly
 
         write_estimation_rrd(args.rrd, run.result, run.flight)
     if args.verbosity >= 0:
@@ -138,6 +142,6 @@ def _write_extras(args: argparse.Namespace, run: EstimateRun) -> None:
         write_history_csv(args.history, run.result.history)
     if args.report is not None:
         report_stage(f"writing the report into {args.report}")
-        from mavsysid.estimation.report_html import write_estimate_report  # matplotlib: slow
+        from mavsysid.estimation.report.figures import write_estimate_report  # matplotlib: slow
 
         write_estimate_report(args.report, run.result, run.flight, run.config, str(args.log))

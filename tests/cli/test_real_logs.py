@@ -4,7 +4,7 @@ Every log in ``../shared/real-logs/`` (public PX4 and ArduPilot logs, PROVENANCE
 every shipped vehicle, through the console script in-process: ``estimate`` and
 ``diagnose`` exit with 0, 2 or 3, never show a traceback, refuse in exactly one line that
 names the file, and exit 0 only with a physically possible θ. The physical rules are
-written here independently of `mavsysid.estimation.plausibility`.
+written here independently of `mavsysid.estimation.checks`.
 """
 
 from __future__ import annotations

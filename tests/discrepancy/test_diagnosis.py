@@ -19,7 +19,7 @@ from mavsysid.discrepancy.residuals import (
     acceleration_kernel,
     smooth_pose,
 )
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.model_effects import effect_from_values
 from mavsysid.vehicle.rotation import quat_exp
@@ -257,7 +257,7 @@ def test_motor_lag_filter_matches_its_recursion():
 
 def test_a_filter_that_cannot_follow_the_log_refuses_the_diagnosis(config, flights, monkeypatch):
     """A diverged EKF refuses the diagnosis (exit 3) instead of reporting no discrepancy."""
-    import mavsysid.estimation.estimator as estimator
+    import mavsysid.estimation.filter.estimator as estimator
 
     def diverges(*args, **kwargs):
         raise JobFailedError("x.csv: the parameter filter diverged")

@@ -16,7 +16,7 @@ from mavsysid.discrepancy.diagnosis import diagnose_flight
 from mavsysid.discrepancy.regression import Regression
 from mavsysid.discrepancy.resample import DIAGNOSIS_RATE, average_blocks, resample_flight
 from mavsysid.discrepancy.residuals import ResidualProblem, SmootherSettings
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.progress import stage_listener
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory

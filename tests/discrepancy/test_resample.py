@@ -18,7 +18,7 @@ from mavsysid.discrepancy.resample import (
     resample_flight,
 )
 from mavsysid.discrepancy.residuals import ResidualProblem, SmootherSettings
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.flight.offline.effects import TruthEffect
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.balance_regression import fit_rows, reverse_coefficient
+from mavsysid.estimation.balance.regression import fit_rows, reverse_coefficient
 from scipy.signal import lfilter
 
 BETA = np.array([2.0, -0.5])

@@ -6,18 +6,22 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.batch import factor_at_optimum, refine, shooting_problem
-from mavsysid.estimation.batch_problem import node_indices
-from mavsysid.estimation.batch_scipy import solve_least_squares
-from mavsysid.estimation.block_solve import BlockSystem, factor
-from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.batch.kernels import BlockSystem, factor
+from mavsysid.estimation.batch.refine import (
+    factor_at_optimum,
+    node_indices,
+    refine,
+    shooting_problem,
+    solve_least_squares,
+)
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
     prior_from_config,
 )
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.noise_fit import scaled_noise
+from mavsysid.estimation.filter.likelihood import scaled_noise
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
@@ -148,7 +152,7 @@ def test_refinement_from_a_worse_start_reaches_the_same_optimum(start):
 
 def test_covariance_is_the_theta_block_of_the_inverse_hessian(start):
     """At the optimum, the θ covariance is the θ block of (JᵀJ)⁻¹ from the sparse J, times the
-    σ inflation (`mavsysid.estimation.robust_covariance`) on both sides."""
+    σ inflation (`mavsysid.estimation.robust`) on both sides."""
     batch = refine(*start.args)
     problem, _ = shooting_problem(*start.args)
     _, J = problem.jacobian(batch.states, batch.estimate.value)

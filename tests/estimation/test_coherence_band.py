@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.coherence_band import (
+from mavsysid.estimation.balance.choices import (
     PASS_GAIN,
-    Band,
     choose_band,
     choose_lowpass,
     smoother_window,
     welch_length,
 )
-from mavsysid.estimation.equation_error import savgol_kernel
+from mavsysid.estimation.signals import Band, savgol_kernel
 from scipy.signal import butter, freqz, sosfiltfilt
 
 DT = 0.002

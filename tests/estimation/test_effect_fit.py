@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     estimate_parameters,
     estimate_with_effects,
 )
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.flight.offline.effects import ProcessNoise, hidden_effect
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.model_effects import BodyDrag, MotorLag, PoseDelay, Wind

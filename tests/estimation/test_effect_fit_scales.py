@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.effect_fit import fit_scales
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_with_effects
+from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_with_effects
+from mavsysid.estimation.filter.likelihood import fit_scales
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.vehicle.config import GRAVITY, load_vehicle
 from mavsysid.vehicle.model_effects import MarkerOffset, MotorLag, RotorDragLinear

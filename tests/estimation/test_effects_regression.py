@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import estimate_parameters
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.filter.estimator import estimate_parameters
+from mavsysid.estimation.flight import FlightData
 from mavsysid.vehicle.config import load_vehicle
 
 GOLDEN = Path(__file__).parent / "golden" / "no_effects_regression"

@@ -7,8 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
-from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
     prior_from_config,

@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mavsysid.discrepancy import residuals
-from mavsysid.estimation import equation_error
+from mavsysid.estimation import signals
+from mavsysid.estimation.balance import rows
 from mavsysid.estimation.equation_error_fit import fit_equation_error
-from mavsysid.estimation.estimator import EstimatorSettings, prior_from_config
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.pose_noise import NOISE_TOLERANCE, measured_pose_noise, pose_sigma
+from mavsysid.estimation.filter.estimator import EstimatorSettings, prior_from_config
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.signals import NOISE_TOLERANCE, measured_pose_noise, pose_sigma
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.rotation import quat_exp, quat_multiply
 from scipy.ndimage import uniform_filter1d
@@ -19,9 +20,9 @@ from mavsysid.errors import JobFailedError
 
 def test_discrepancy_uses_the_estimation_law():
     """The diagnosis' smoother and model are the estimator's objects, not copies."""
-    assert residuals.smooth_pose is equation_error.smooth_pose
-    assert residuals.model_accelerations is equation_error.model_accelerations
-    assert residuals.SmootherSettings is equation_error.SmootherSettings
+    assert residuals.smooth_pose is signals.smooth_pose
+    assert residuals.model_accelerations is rows.model_accelerations
+    assert residuals.SmootherSettings is signals.SmootherSettings
 
 
 @pytest.mark.slow
@@ -102,7 +103,7 @@ def test_noise_matching_the_assumption_changes_nothing():
 @pytest.mark.parametrize("shape", [(3000,), (3000, 4)])
 def test_smoother_filter_is_the_zero_padded_convolution(taps, shape):
     """Direct or by FFT overlap-add, the filter is np.convolve(mode="same") per column."""
-    from mavsysid.estimation.equation_error import convolve_columns
+    from mavsysid.estimation.signals import convolve_columns
 
     rng = np.random.default_rng(taps)
     x, kernel = rng.standard_normal(shape), rng.standard_normal(taps)

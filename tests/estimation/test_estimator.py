@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.constants import GRAVITY

@@ -19,11 +19,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.checks import check_kinematics, tilt_gain
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.checks import MAX_GAP
-from mavsysid.estimation.readers.unphysical_samples import attitude_jumps, drop_unphysical_samples
-from mavsysid.estimation.tilt_consistency import check_kinematics, tilt_gain
+from mavsysid.estimation.readers.samples import MAX_GAP, attitude_jumps, drop_unphysical_samples
 from mavsysid.formats import bounded_parse
 from mavsysid.vehicle.config import load_vehicle
 

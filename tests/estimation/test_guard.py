@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import mavsysid.estimation.filter.estimator as estimator_module
 import numpy as np
 import pytest
-from mavsysid.estimation import estimator as estimator_module
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.guard import (
+from mavsysid.estimation.checks import vanishing_parameters
+from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.filter.guard import (
     AGREEMENT_SIGMAS,
     AGREEMENT_TOLERANCE,
     DIVERGED_NIS,
@@ -19,10 +19,10 @@ from mavsysid.estimation.guard import (
     divergence,
     nis_level,
 )
-from mavsysid.estimation.noise_fit import fit_noise_scale
-from mavsysid.estimation.plausibility import vanishing_parameters
+from mavsysid.estimation.filter.likelihood import fit_noise_scale
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.estimation.robust_covariance import disagreement_widening
+from mavsysid.estimation.robust import disagreement_widening
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.linearization import MEAS_DIM
@@ -181,8 +181,8 @@ def test_vanishing_c_d_is_no_divergence_with_linear_rotor_drag():
 def test_an_impossible_theta_is_not_reported_as_divergence() -> None:
     """A run that ends at an inertia breaking the triangle inequality 'ended at a θ that is
     not physical'; only innovations beyond the bound or an overflow are 'diverged'."""
-    from mavsysid.estimation.guarded_filter import failure_phrase
-    from mavsysid.estimation.plausibility import implausibility
+    from mavsysid.estimation.checks import implausibility
+    from mavsysid.estimation.filter.guard import failure_phrase
 
     theta = load_vehicle("quad_x").theta.copy()
     theta[5] = 3.0 * (theta[3] + theta[4])

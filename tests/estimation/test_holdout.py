@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.holdout import HoldoutCheck
+from mavsysid.estimation.results import HoldoutCheck
 
 
 def test_group_ratios_pool_the_axes():

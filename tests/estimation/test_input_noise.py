@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.input_noise import InputSamples
+from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.flight import InputSamples
 from mavsysid.vehicle.config import load_vehicle
 
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from mavsysid.estimation.ekf import ParameterEKF
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.flight.offline.log_timing import LogTiming
 from mavsysid.vehicle.config import load_vehicle

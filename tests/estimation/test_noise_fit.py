@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from mavsysid.estimation.estimator import (
+from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
     prior_from_config,
 )
-from mavsysid.estimation.noise_fit import fit_noise_scale
+from mavsysid.estimation.filter.likelihood import fit_noise_scale
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
 

@@ -6,17 +6,20 @@ import dataclasses
 
 import numpy as np
 import pytest
-from mavsysid.estimation.balance_fit import FitChoices
-from mavsysid.estimation.parameter_answer import (
-    AT_BOUND,
-    DETERMINED,
-    NOT_DETERMINED,
+from mavsysid.estimation.answer import (
     answer_parameters,
     balance_only_result,
 )
-from mavsysid.estimation.parameter_status import DataTheta
-from mavsysid.estimation.results import EstimationResult, ParameterEstimate
-from mavsysid.estimation.wrench_balance_result import WrenchBalanceResult
+from mavsysid.estimation.results import (
+    AT_BOUND,
+    DETERMINED,
+    NOT_DETERMINED,
+    DataTheta,
+    EstimationResult,
+    FitChoices,
+    ParameterEstimate,
+    WrenchBalanceResult,
+)
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import JobFailedError

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.parameter_status import (
-    MAX_RELATIVE_SIGMA,
+from mavsysid.estimation.balance.rows import STACKED_COEFFICIENTS
+from mavsysid.estimation.balance.theta import (
     coefficients_from_theta,
     errors_in_variables_sigma,
-    parameter_status,
     split_widening,
     theta_from_coefficients,
     widened_sigma,
 )
-from mavsysid.estimation.results import Z95
-from mavsysid.estimation.wrench_regressors import STACKED_COEFFICIENTS
+from mavsysid.estimation.results import (
+    MAX_RELATIVE_SIGMA,
+    Z95,
+    parameter_status,
+)
 from mavsysid.vehicle.config import load_vehicle
 
 THETA = load_vehicle("micro_quad").theta

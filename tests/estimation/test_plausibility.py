@@ -1,10 +1,10 @@
-"""Tests of the plausibility check of an estimated θ (`mavsysid.estimation.plausibility`)."""
+"""Tests of the plausibility check of an estimated θ (`mavsysid.estimation.checks`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.plausibility import (
+from mavsysid.estimation.checks import (
     PRIOR_FACTOR_MAX,
     check_plausible,
     implausibility,

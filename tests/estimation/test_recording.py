@@ -10,8 +10,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pytest
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.recording import APPLICATION_ID, recording_id_for, write_estimation_rrd
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.report.recording import (
+    APPLICATION_ID,
+    recording_id_for,
+    write_estimation_rrd,
+)
 from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
 from mavsysid.vehicle.config import PARAMETER_NAMES
 from rerun.chunk import RrdReader

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.report import (
+from mavsysid.estimation.report.text import (
     convergence_time,
     format_table,
     result_to_json,

@@ -8,16 +8,16 @@ import io
 import numpy as np
 import pandas as pd
 import pytest
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.history_table import HISTORY_COLUMNS, history_frame, write_history_csv
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
-from mavsysid.estimation.report_html import (
+from mavsysid.estimation.report.figures import (
     ESTIMATE_REPORT_FILES,
     ReportTable,
+    compare_wrench,
     html_page,
     write_estimate_report,
 )
-from mavsysid.estimation.wrench_check import compare_wrench
+from mavsysid.estimation.report.text import HISTORY_COLUMNS, history_frame, write_history_csv
 from mavsysid.vehicle.config import PARAMETER_NAMES
 from mavsysid.vehicle.rotation import quat_exp
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from mavsysid.estimation.robust_covariance import (
+from mavsysid.estimation.robust import (
     andrews_bartlett_bandwidth,
     disagreement_widening,
     hac_covariance,

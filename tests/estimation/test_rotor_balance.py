@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.rotor_balance import (
+from mavsysid.estimation.checks import (
     check_rotor_balance,
     rescale_wrong_rotor,
     thrust_centroid_offset,
 )
+from mavsysid.estimation.flight import FlightData
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import JobFailedError

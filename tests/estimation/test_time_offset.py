@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.time_offset import GRID_STEP, MAX_DELAY, scan_delay
+from mavsysid.estimation.balance.choices import GRID_STEP, MAX_DELAY, scan_delay
 
 
 @pytest.mark.parametrize("true", [-0.0473, 0.0, 0.0081, 0.0612])

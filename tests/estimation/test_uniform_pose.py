@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.flight_data import FlightData
-from mavsysid.estimation.uniform_pose import fresh_pose, uniform_segments
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.signals import fresh_pose, uniform_segments
 from mavsysid.vehicle.rotation import quat_exp
 
 

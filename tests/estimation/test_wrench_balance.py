@@ -7,10 +7,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import EstimatorSettings, prior_from_config
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.balance.fit import fit_wrench_balance
+from mavsysid.estimation.filter.estimator import EstimatorSettings, prior_from_config
+from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import Z95
-from mavsysid.estimation.wrench_balance import fit_wrench_balance
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.sensor_path import OnboardPoseEstimate
 from mavsysid.vehicle.config import load_vehicle

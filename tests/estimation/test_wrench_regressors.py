@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.coherence_band import Band
-from mavsysid.estimation.parameter_status import coefficients_from_theta
-from mavsysid.estimation.uniform_pose import uniform_segments
-from mavsysid.estimation.wrench_regressors import FORCE_COEFFICIENTS, BalanceBuilder
+from mavsysid.estimation.balance.rows import FORCE_COEFFICIENTS, BalanceBuilder
+from mavsysid.estimation.balance.theta import coefficients_from_theta
+from mavsysid.estimation.signals import Band, uniform_segments
 from mavsysid.vehicle.config import load_vehicle
 
 SPLIT = len(FORCE_COEFFICIENTS)

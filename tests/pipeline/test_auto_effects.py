@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import estimate_parameters
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.filter.estimator import estimate_parameters
+from mavsysid.estimation.flight import FlightData
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import effect_from_values

@@ -121,7 +121,7 @@ def test_diagnose_answers_a_flight_with_on_board_estimator_noise(tmp_path: Path)
     and a prior 30–50 % off, diagnosed as the workflow does (estimate, then diagnose
     --estimate): no refusal, and the held-out gap before and after; θ from the balance
     holds what it does not determine at the prior."""
-    from mavsysid.estimation.report import write_estimate_json
+    from mavsysid.estimation.report.text import write_estimate_json
     from mavsysid.pipeline.estimate import run_estimate
 
     from tests.support.realistic import prior_config, realistic_micro_quad_flight

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.report import result_to_json
+from mavsysid.estimation.report.text import result_to_json
 from mavsysid.estimation.results import Z95
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavsysid.discrepancy.diagnosis import diagnose_flight
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.pipeline.diagnose import run_diagnose
 from mavsysid.vehicle.config import GRAVITY, load_vehicle
 from mavsysid.vehicle.model_effects import RotorDragLinear, effect_from_values
@@ -51,7 +51,7 @@ def test_vanishing_c_d_beside_linear_rotor_drag_is_an_answer(tmp_path):
 
 def test_a_filter_that_cannot_follow_either_model_costs_only_the_nis(monkeypatch, tmp_path):
     """With an effect named, a diverged EKF is a note (NIS missing), not a refusal."""
-    import mavsysid.estimation.estimator as estimator
+    import mavsysid.estimation.filter.estimator as estimator
 
     config = load_vehicle("firefly")
     flight = hidden_flight(config, tmp_path / "f",

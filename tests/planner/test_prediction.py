@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.estimator import EstimatorSettings, estimate_parameters
+from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator

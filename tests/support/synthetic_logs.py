@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from mavsysid.estimation.flight_data import FlightData
+from mavsysid.estimation.flight import FlightData
 from mavsysid.formats.dataflash import write_dataflash
 from mavsysid.formats.ulog import write_ulog
 from mavsysid.vehicle.config import VehicleConfig

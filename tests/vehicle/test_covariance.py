@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mavsysid.estimation.ekf import ParameterEKF
+from mavsysid.estimation.filter.ekf import ParameterEKF
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.planner.belief import apply_transfer, edge_samples, edge_transfer, propagate_steps
 from mavsysid.vehicle.covariance import (

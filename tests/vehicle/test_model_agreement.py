@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mavsysid.estimation.equation_error import SmoothedPose, model_accelerations
+from mavsysid.estimation.balance.rows import model_accelerations
+from mavsysid.estimation.signals import SmoothedPose
 from mavsysid.vehicle.config import GRAVITY, VehicleConfig
 from mavsysid.vehicle.dynamics import RATE, STATE_DIM, VEL, state_derivative
 from mavsysid.vehicle.linearization import E_RATE, E_THETA, E_VEL, ErrorStateModel

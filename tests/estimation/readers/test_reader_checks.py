@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.checks import MAX_GAP, check_sampling
+from mavsysid.estimation.readers.samples import MAX_GAP, check_sampling
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError, LogFormatError

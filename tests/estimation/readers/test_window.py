@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.window import longest_span, spans_of
+from mavsysid.estimation.readers.logs import longest_span, spans_of
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError

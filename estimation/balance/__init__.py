@@ -1,0 +1,3 @@
+"""balance."""
+
+__all__: list[str] = []

@@ -1,0 +1,329 @@
+"""balance.fit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from mavsysid.estimation.balance.choices import (
+    MAIN_COLUMNS,
+    BalanceFit,
+    balance_rows_for,
+    fit_balance,
+    regress,
+)
+from mavsysid.estimation.balance.regression import fit_rows
+from mavsysid.estimation.balance.rows import (
+    FORCE_COEFFICIENTS,
+    STACKED_COEFFICIENTS,
+    BalanceBuilder,
+    BalanceRows,
+)
+from mavsysid.estimation.balance.theta import (
+    coefficients_from_theta,
+    errors_in_variables_sigma,
+    split_widening,
+    theta_from_coefficients,
+    widened_sigma,
+)
+from mavsysid.estimation.checks import check_rotor_balance
+from mavsysid.estimation.filter.estimator import EstimatorSettings, prior_from_config
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.results import (
+    MAX_RELATIVE_SIGMA,
+    DataTheta,
+    FitChoices,
+    HoldoutCheck,
+    ParameterEstimate,
+    WrenchBalanceResult,
+    parameter_status,
+)
+from mavsysid.estimation.signals import Band, UniformSegment, uniform_segments
+from mavsysid.vehicle.config import VehicleConfig
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["WrenchBalanceSettings", "fit_wrench_balance", "predict_holdout"]
+
+
+def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
+                    choices: FitChoices, coefficients: np.ndarray,
+                    prior_coefficients: np.ndarray) -> HoldoutCheck | None:
+    """Predict the held-out segments with the training part's choices and coefficients.
+
+    Parameters
+    ----------
+    segments : list of UniformSegment
+        The held-out part.
+    config : VehicleConfig
+    choices : FitChoices
+        The training part's window, bands and offset.
+    coefficients, prior_coefficients : ndarray, shape (P,)
+        Stacked force and torque coefficients (`STACKED_COEFFICIENTS`) of the fitted model
+        and of the prior.
+
+    Returns
+    -------
+    HoldoutCheck or None
+        None when no held-out rows remain after the smoother's edges.
+    """
+    builders = [BalanceBuilder(s, config, choices.window) for s in segments
+                if len(s) > 4 * choices.window / s.dt]
+    rows = balance_rows_for(builders, choices) if builders else []
+    if not rows:
+        return None
+    measured = np.concatenate([np.hstack([r.force, r.torque]) for r in rows])
+
+    split = len(FORCE_COEFFICIENTS)
+
+    def prediction(b: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.hstack([r.force_columns @ b[:split],
+                                          r.torque_columns @ b[split:]]) for r in rows])
+
+    def rmse(b: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.mean((measured - prediction(b)) ** 2, axis=0))
+
+    live = np.any(measured != 0.0, axis=0)
+    nan = np.where(live, 1.0, np.nan)
+    return HoldoutCheck(float(segments[0].t[0]), rmse(coefficients) * nan,
+                        rmse(prior_coefficients) * nan, len(measured))
+
+
+#: Stacked coefficients, and where the torque ones start.
+COUNT, TORQUE_START = len(STACKED_COEFFICIENTS), len(FORCE_COEFFICIENTS)
+
+
+@dataclass(frozen=True)
+class WrenchBalanceSettings:
+    """Choices of `fit_wrench_balance`.
+
+    Attributes
+    ----------
+    min_segment : float
+        Shortest gap-free stretch used, s.
+    holdout_fraction : float
+        Share of the flight (its end) held out for validation; 0 skips the check.
+    max_relative_sigma : float
+        Largest widened σ / |θ| of a determined parameter.
+    """
+
+    min_segment: float = 2.0
+    holdout_fraction: float = 0.3
+    max_relative_sigma: float = MAX_RELATIVE_SIGMA
+
+
+def _theta(fit_force: np.ndarray, fit_torque: np.ndarray, cov_force: np.ndarray,
+           cov_torque: np.ndarray) -> DataTheta:
+    cov = np.zeros((COUNT, COUNT))
+    cov[:TORQUE_START, :TORQUE_START] = cov_force
+    cov[TORQUE_START:, TORQUE_START:] = cov_torque
+    return theta_from_coefficients(np.concatenate([fit_force, fit_torque]), cov)
+
+
+def _fit_theta(fit: BalanceFit) -> DataTheta:
+    return _theta(fit.force.coefficients, fit.torque.coefficients, fit.force.covariance,
+                  fit.torque.covariance)
+
+
+def _eiv_sigma(fit: BalanceFit, base: DataTheta) -> tuple[np.ndarray, np.ndarray]:
+    """σ of θ and of the combinations from each main column's reverse value."""
+    parts, combos = [], []
+    for name, offset in (("force", 0), ("torque", TORQUE_START)):
+        for column, _ in MAIN_COLUMNS[name]:
+            reverse = fit.reverse[name].get(column)
+            if reverse is None or not np.isfinite(reverse):
+                continue
+            b = np.concatenate([fit.force.coefficients, fit.torque.coefficients])
+            b[offset + column] = reverse
+            with np.errstate(divide="ignore", invalid="ignore"):
+                other = theta_from_coefficients(b, np.zeros((COUNT, COUNT)))
+            parts.append(errors_in_variables_sigma(base.value, other.value))
+            combos.append(errors_in_variables_sigma(base.combinations, other.combinations))
+    if not parts:
+        return np.zeros(6), np.zeros(2)
+    return widened_sigma(parts), widened_sigma(combos)
+
+
+def _split_sigma(rows_a: list[BalanceRows], rows_b: list[BalanceRows]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """σ added by two parts of the rows that disagree beyond their own σ."""
+    try:
+        fits = [regress(rows) for rows in (rows_a, rows_b)]
+    except np.linalg.LinAlgError:
+        return np.zeros(6), np.zeros(2)
+    a, b = (_theta(f.coefficients, m.coefficients, f.covariance, m.covariance)
+            for f, m, _ in fits)
+    return (split_widening(a.value, a.sigma, b.value, b.sigma),
+            split_widening(a.combinations, a.combination_sigma, b.combinations,
+                           b.combination_sigma))
+
+
+def _thrust_row_sigma(fit: BalanceFit, rows: list[BalanceRows], theta: np.ndarray
+                      ) -> np.ndarray:
+    """σ of θ from the thrust row's second-order bias, bounded by the noise across thrust.
+
+    The thrust row compares magnitudes (`mavsysid.estimation.balance.rows`): noise
+    perpendicular to the thrust lengthens the measured |f| by σ_⊥² / (2 |f|), and an
+    attitude error would shorten its z component by as much. The horizontal rows'
+    residuals measure σ_⊥² (pose noise, attitude error times g, unmodelled horizontal
+    force), so ±σ_⊥² / (2 |f|²) of c_T, and of everything scaled by c_T (c_M and J), is
+    a bias the sandwich cannot see.
+    """
+    magnitude = float(np.mean(np.concatenate([r.force[:, 2] for r in rows]))) if rows else 0.0
+    if not magnitude > 0.0:
+        return np.zeros(6)
+    relative = float(np.sum(fit.force.residual_rms[:2] ** 2)) / (2.0 * magnitude**2)
+    scaled = np.array([1.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+    with np.errstate(invalid="ignore"):
+        return np.nan_to_num(relative * np.abs(theta) * scaled)
+
+
+def _halves(rows: list[BalanceRows]) -> tuple[list[BalanceRows], list[BalanceRows]]:
+    """The rows before and after the middle of their time span."""
+    t = np.concatenate([r.t for r in rows])
+    middle = 0.5 * (t.min() + t.max())
+    first = [r.rows(r.t < middle) for r in rows]
+    second = [r.rows(r.t >= middle) for r in rows]
+    return [r for r in first if len(r) > 4], [r for r in second if len(r) > 4]
+
+
+def _band_halves(builders: list[BalanceBuilder], choices: FitChoices
+                 ) -> tuple[list[BalanceRows], list[BalanceRows]]:
+    """Rows in the lower and upper halves of each torque band.
+
+    The force rows, whose information starts at zero frequency, are compared at half
+    their low-pass cut against the full cut instead: what the faster part of the motion
+    adds must not move c_T or c_D beyond their σ (an unmodelled filter on the pose, such
+    as an on-board estimator's, would).
+    """
+    low, high = [], []
+    force = choices.force
+    for band, out in ((0, low), (1, high)):
+        rp = choices.roll_pitch.halves()[band] if choices.roll_pitch else None
+        yw = choices.yaw.halves()[band] if choices.yaw else None
+        fc = Band(0.0, 0.5 * force.high) if force is not None and band == 0 else None
+        out.extend(balance_rows_for(builders, choices, rp, yw, fc))
+    return low, high
+
+
+def _delay_sigma(fit: BalanceFit, builders: list[BalanceBuilder]) -> float:
+    """σ of δ: the torque residual regressed on the model's derivative in δ (Newey–West)."""
+    c = fit.choices
+    h = builders[0].dt
+    b = fit.torque.coefficients
+    rows = balance_rows_for(builders, c)
+    plus, minus = (balance_rows_for(builders, replace(c, delay=c.delay + s)) for s in (h, -h))
+    if not (len(rows) == len(plus) == len(minus)) or not rows:
+        return float("nan")
+    y = [r.torque - r.torque_columns @ b for r in rows]
+    X = [((p.torque_columns - m.torque_columns) @ b / (2 * h))[:, :, None]
+         for p, m in zip(plus, minus, strict=True)]
+    if any(len(x) != len(e) for x, e in zip(X, y, strict=True)):
+        return float("nan")
+    try:
+        return float(fit_rows(y, X).sigma[0])
+    except np.linalg.LinAlgError:
+        return float("nan")
+
+
+def _segments(flight: FlightData, settings: WrenchBalanceSettings) -> list[UniformSegment]:
+    segments = uniform_segments(flight, settings.min_segment)
+    if not segments:
+        raise JobFailedError(f"{flight.source}: no stretch of at least "
+                             f"{settings.min_segment:g} s without a gap in which the pose "
+                             "changes: too short for the force and torque balance")
+    return segments
+
+
+def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
+            settings: WrenchBalanceSettings) -> tuple[WrenchBalanceResult, BalanceFit]:
+    """The fit, θ, its widened σ and the statuses (no held-out check)."""
+    segments = _segments(flight, settings)
+    fit, builders = fit_balance(segments, config, float(prior.value[1]))
+    base = _fit_theta(fit)
+    eiv, eiv_c = _eiv_sigma(fit, base)
+    rows = balance_rows_for(builders, fit.choices)
+    halves, halves_c = _split_sigma(*_halves(rows))
+    bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices))
+    parts = np.vstack([base.sigma, eiv, halves, bands, base.route_sigma,
+                       _thrust_row_sigma(fit, rows, base.value)])
+    sigma = widened_sigma(parts)
+    combo_sigma = widened_sigma([base.combination_sigma, eiv_c, halves_c, bands_c])
+    determined = parameter_status(base.value, sigma, settings.max_relative_sigma)
+    value = np.where(determined, base.value, prior.value)
+    cov = np.diag(np.where(determined, sigma, prior.sigma) ** 2)
+    keep = np.flatnonzero(determined)
+    corr = base.covariance[np.ix_(keep, keep)]
+    scale = np.sqrt(np.abs(np.diag(corr)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = np.nan_to_num(corr / np.outer(scale, scale))
+    corr[np.diag_indices_from(corr)] = 1.0
+    cov[np.ix_(keep, keep)] = corr * np.outer(sigma[keep], sigma[keep])
+    result = WrenchBalanceResult(
+        ParameterEstimate(value, cov), determined, base, parts, combo_sigma, prior,
+        fit.choices, _delay_sigma(fit, builders), None, fit.force.rows)
+    return result, fit
+
+
+def fit_wrench_balance(flight: FlightData, config: VehicleConfig,
+                       prior: ParameterEstimate | None = None,
+                       settings: WrenchBalanceSettings | None = None) -> WrenchBalanceResult:
+    """θ per parameter from the flight's force and torque balance (module docstring).
+
+    Parameters
+    ----------
+    flight : FlightData
+        Pose and rotor speeds (any segments; stretches shorter than ``min_segment`` are
+        left out).
+    config : VehicleConfig
+        Mass and rotor geometry (known), and the prior θ.
+    prior : ParameterEstimate, optional
+        Default: the config's θ with the tool's default relative σ (50 %).
+    settings : WrenchBalanceSettings, optional
+
+    Returns
+    -------
+    WrenchBalanceResult
+
+    Raises
+    ------
+    JobFailedError
+        No usable stretch, rotor speeds that contradict the vehicle's balance
+        (`mavsysid.estimation.checks`), or the flight determines no parameter (one
+        line).
+    """
+    settings = settings or WrenchBalanceSettings()
+    prior = prior or prior_from_config(config, EstimatorSettings())
+    check_rotor_balance(flight, config)
+    result, _ = _answer(flight, config, prior, settings)
+    if not result.determined.any():
+        raise JobFailedError(f"{flight.source}: the force and torque balance determines no "
+                             "parameter of θ (every σ above "
+                             f"{100 * settings.max_relative_sigma:g} % of its value)")
+    holdout = _holdout(flight, config, prior, settings)
+    return WrenchBalanceResult(result.estimate, result.determined, result.data,
+                               result.sigma_parts, result.combination_sigma, prior,
+                               result.choices, result.delay_sigma, holdout, result.rows,
+                               result.notes)
+
+
+def _holdout(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
+             settings: WrenchBalanceSettings) -> HoldoutCheck | None:
+    """Fit the start of the flight, predict its end (`mavsysid.estimation.balance.fit`)."""
+    if not 0.0 < settings.holdout_fraction < 1.0:
+        return None
+    t0, t1 = float(flight.t[0]), float(flight.t[-1])
+    cut = t1 - settings.holdout_fraction * (t1 - t0)
+    try:
+        train = uniform_segments(flight.time_slice(t0, cut), settings.min_segment)
+        fit, _ = fit_balance(train, config, float(prior.value[1])) if train else (None, None)
+    except np.linalg.LinAlgError:
+        return None
+    if fit is None:
+        return None
+    test = uniform_segments(flight.time_slice(cut, t1), 4 * fit.choices.window)
+    if not test:
+        return None
+    model = np.concatenate([fit.force.coefficients, fit.torque.coefficients])
+    return predict_holdout(test, config, fit.choices, model,
+                           coefficients_from_theta(prior.value))

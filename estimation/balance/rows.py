@@ -1,0 +1,308 @@
+"""balance.rows."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from mavsysid.estimation.signals import (
+    SmoothedPose,
+    SmootherSettings,
+    UniformSegment,
+    acceleration_kernel,
+    body_force_readout,
+    body_rotation_readout,
+    smooth_pose,
+)
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.effect_base import EffectInputs
+from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
+from mavsysid.vehicle.model_effects import ModelEffect, RotorDragLinear, total_wrench
+
+__all__ = [
+    "FORCE_COEFFICIENTS",
+    "ROTOR_FORCE_COLUMNS",
+    "ROTOR_TORQUE_COLUMNS",
+    "STACKED_COEFFICIENTS",
+    "TORQUE_AXIS",
+    "TORQUE_COEFFICIENTS",
+    "BalanceBuilder",
+    "BalanceRows",
+    "BandFilter",
+    "consistent_accelerations",
+    "model_accelerations",
+]
+
+
+#: Coefficients of the force rows: c_T, c_T c_D and the nuisance ``drag_linear``, the
+#: in-plane k of a rotor drag linear in rotor speed (N·s/(m·rad)).
+FORCE_COEFFICIENTS = ("c_T", "c_T*c_D", "drag_linear")
+#: Coefficients of the torque rows, in column order. ``g_*`` are the gyroscopic
+#: coefficients −(j_z − j_y)/j_x, −(j_x − j_z)/j_y, −(j_y − j_x)/j_z; ``rotor_gyro_x`` is
+#: −J_r/j_x on Σε_i n_i ω_y, ``rotor_gyro_y`` is J_r/j_y on Σε_i n_i ω_x; ``drag_z`` is
+#: c_T c_D / j_z (the rotor drag's yaw moment); ``rotor_inertia_z`` is −J_r / j_z on
+#: Σ ε_i ṅ_i.
+TORQUE_COEFFICIENTS = ("c_T/j_x", "g_x", "rotor_gyro_x", "c_T/j_y", "g_y", "rotor_gyro_y",
+                       "c_M/j_z", "drag_z", "g_z", "rotor_inertia_z")
+#: Which torque axis each torque coefficient's column acts on (0 = x, 1 = y, 2 = z).
+TORQUE_AXIS = (0, 0, 0, 1, 1, 1, 2, 2, 2, 2)
+#: Columns of the torque rows that depend on the rotor speeds (the rest on the pose only).
+ROTOR_TORQUE_COLUMNS = (0, 2, 3, 5, 6, 7, 9)
+#: Columns of the force rows that depend on the rotor speeds.
+ROTOR_FORCE_COLUMNS = (0, 1, 2)
+#: All coefficients, force then torque: the stacked vector of `parameter_status`.
+STACKED_COEFFICIENTS = FORCE_COEFFICIENTS + TORQUE_COEFFICIENTS
+
+
+@dataclass(frozen=True)
+class BalanceRows:
+    """The measured side and the model columns of one segment (N rows, smoother edges cut).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        s.
+    force : ndarray, shape (N, 3)
+        Measured body specific force, m/s².
+    force_columns : ndarray, shape (N, 3, 3)
+        Model body specific force per unit of each `FORCE_COEFFICIENTS` entry.
+    torque : ndarray, shape (N, 3)
+        Measured body angular acceleration minus the model's rate term, rad/s².
+    torque_columns : ndarray, shape (N, 3, 10)
+        Model angular acceleration per unit of each `TORQUE_COEFFICIENTS` entry.
+    """
+
+    t: np.ndarray
+    force: np.ndarray
+    force_columns: np.ndarray
+    torque: np.ndarray
+    torque_columns: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def rows(self, keep: np.ndarray | slice) -> BalanceRows:
+        """A subset of the rows."""
+        return BalanceRows(self.t[keep], self.force[keep], self.force_columns[keep],
+                           self.torque[keep], self.torque_columns[keep])
+
+
+class BandFilter(Protocol):
+    """A zero-phase linear filter along time (axis 0), and how long its edges settle."""
+
+    def apply(self, x: np.ndarray, dt: float) -> np.ndarray:
+        """``x`` filtered along axis 0, same shape."""
+
+    def settle(self) -> float:
+        """Time to cut off each end after filtering, s."""
+
+
+def _unit_wrenches(n: np.ndarray, config: VehicleConfig, v_b: np.ndarray, w: np.ndarray
+                   ) -> tuple[np.ndarray, ...]:
+    """Body force and torque per unit c_T, per unit c_T c_D (drag) and per unit c_M."""
+    r, eps = config.rotor_positions, config.rotor_directions
+    e = np.eye(6)
+    f_t, m_t = rotor_wrench(n, e[0], r, eps, v_b, w)
+    f_td, m_td = rotor_wrench(n, e[0] + e[1], r, eps, v_b, w)
+    _, m_m = rotor_wrench(n, e[2], r, eps, v_b, w)
+    return f_t, f_td - f_t, m_t, m_td - m_t, m_m
+
+
+def _linear_drag_force(n: np.ndarray, config: VehicleConfig, pose: SmoothedPose,
+                       v_b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Body force of the catalogue's linear rotor drag per unit in-plane k (k_z = 0), N."""
+    inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, n, np.zeros(6),
+                          config.rotor_positions)
+    force, _ = RotorDragLinear(k=1.0, k_z=0.0).wrench(inputs)
+    return force
+
+
+def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float,
+                             drag_linear: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The z row replaced by magnitudes: |f| against |thrust + drag| per unit c_T.
+
+    An attitude error ε turns the measured specific force out of z_B and shortens its z
+    component by cos ε ≈ 1 − ε²/2: with a noisy attitude (an on-board estimator's, 1°) the
+    z row alone would bias c_T low by σ_ε². The magnitude is free of it. The rotor drag,
+    perpendicular to the thrust, lengthens it at second order, so the model's magnitude
+    includes it: c_D times the quadratic column and ``drag_linear`` (k / c_T) times the
+    linear one (linear in c_T; the drag columns leave this row).
+    """
+    force, cols = force.copy(), cols.copy()
+    force[:, 2] = np.linalg.norm(force, axis=1)
+    drag = c_d * cols[:, :, 1] + drag_linear * cols[:, :, 2]
+    cols[:, 2, 0] = np.linalg.norm(cols[:, :, 0] + drag, axis=1)
+    cols[:, 2, 1:] = 0.0
+    return force, cols
+
+
+class BalanceBuilder:
+    """Builds `BalanceRows` of one segment for any delay, smoothing the pose once.
+
+    Parameters
+    ----------
+    segment : UniformSegment
+        Fresh pose on a uniform grid, and the rotor speeds.
+    config : VehicleConfig
+        Mass, rotor positions and spin directions.
+    window : float
+        Savitzky–Golay window (cubic), s.
+    """
+
+    def __init__(self, segment: UniformSegment, config: VehicleConfig, window: float
+                 ) -> None:
+        self.segment, self.config, self.dt = segment, config, segment.dt
+        self.settings = SmootherSettings(window=window, polyorder=3)
+        self.pose = smooth_pose(segment.t, segment.position, segment.quaternion,
+                                self.settings, "flight segment")
+        self.kernel = acceleration_kernel(self.settings, self.dt)
+        w = self.pose.rates
+        self._rate_term = body_rotation_readout(self.pose, self.pose, np.zeros_like(w),
+                                                self.kernel)
+        products = np.column_stack([w[:, 1] * w[:, 2], w[:, 2] * w[:, 0], w[:, 0] * w[:, 1]])
+        self._gyroscopic = {col: self._readout(axis, products[:, axis])
+                            for col, axis in ((1, 0), (4, 1), (8, 2))}
+
+    def _readout(self, axis: int, values: np.ndarray) -> np.ndarray:
+        omega_dot = np.zeros((len(values), 3))
+        omega_dot[:, axis] = values
+        return body_rotation_readout(self.pose, self.pose, omega_dot, self.kernel,
+                                     rate_term=False)
+
+    @property
+    def edge(self) -> int:
+        """Samples at each end where the smoother is one-sided."""
+        return self.settings.samples(self.dt)
+
+    def rows(self, delay: float, c_d: float, roll_pitch: BandFilter | None = None,
+             yaw: BandFilter | None = None, force: BandFilter | None = None,
+             trim: float = 0.0, magnitude: bool = True, drag_linear: float = 0.0,
+             drag_c_d: float = float("nan")) -> BalanceRows:
+        """The balance rows at ``delay`` (module docstring).
+
+        Parameters
+        ----------
+        delay : float
+            The pose lags the rotor speeds by this much, s.
+        c_d : float
+            c_D used to add the rotor drag's roll and pitch moment to the thrust torque,
+            s/m (zero when the rotors lie in the plane of the centre of gravity).
+        roll_pitch, yaw, force : BandFilter, optional
+            Applied to both sides of the ω̇_x, ω̇_y rows, the ω̇_z rows and the force rows.
+        trim : float
+            Time cut off each end, s, beyond the smoother's and the filters' edges.
+        magnitude : bool
+            Make the thrust row the specific force's magnitude (else its z component).
+        drag_linear, drag_c_d : float
+            k / c_T of the linear rotor drag (s·rad/m) and c_D (s/m, NaN: ``c_d``) in the
+            thrust row's magnitude.
+        """
+        n = self.segment.rotor_speeds(delay)
+        n_dot = np.gradient(n, self.dt, axis=0)
+        pose, config = self.pose, self.config
+        v_b = pose.velocity_body()
+        f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, v_b, pose.rates)
+        f_l = _linear_drag_force(n, config, pose, v_b, pose.rates)
+        force_cols = np.stack([body_force_readout(pose, pose, f / config.mass, self.kernel)
+                               for f in (f_t, f_d, f_l)], axis=-1)
+        thrust_torque = m_t + c_d * m_d
+        spin = n @ config.rotor_directions
+        w = pose.rates
+        rotor_cols = {0: (0, thrust_torque[:, 0]), 2: (0, spin * w[:, 1]),
+                      3: (1, thrust_torque[:, 1]), 5: (1, spin * w[:, 0]),
+                      6: (2, m_m[:, 2]), 7: (2, m_d[:, 2]),
+                      9: (2, n_dot @ config.rotor_directions)}
+        torque_cols = np.empty((len(n), 3, len(TORQUE_COEFFICIENTS)))
+        for col, (axis, values) in rotor_cols.items():
+            torque_cols[:, :, col] = self._readout(axis, values)
+        for col, readout in self._gyroscopic.items():
+            torque_cols[:, :, col] = readout
+        torque = pose.angular_acceleration - self._rate_term
+        specific_force = pose.specific_force()
+        edge, settle = self.edge, trim
+        if force is not None:
+            specific_force = force.apply(specific_force, self.dt)
+            force_cols = force.apply(force_cols, self.dt)
+            settle = max(settle, trim + force.settle())
+        if magnitude:
+            specific_force, force_cols = _thrust_row_as_magnitude(specific_force, force_cols,
+                c_d if np.isnan(drag_c_d) else drag_c_d, drag_linear)
+        for band, axes in ((roll_pitch, [0, 1]), (yaw, [2])):
+            if band is not None:
+                torque[:, axes] = band.apply(torque[:, axes], self.dt)
+                torque_cols[:, axes] = band.apply(torque_cols[:, axes], self.dt)
+                settle = max(settle, trim + band.settle())
+        edge = max(edge, int(np.ceil(settle / self.dt)))
+        rows = BalanceRows(self.segment.t, specific_force, force_cols, torque, torque_cols)
+        return rows.rows(slice(edge, max(edge, len(n) - edge)))
+
+
+def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.ndarray,
+                        config: VehicleConfig, effects: Sequence[ModelEffect] = ()
+                        ) -> np.ndarray:
+    """The model's [F_B/m, ω̇] at the smoothed states and given rotor speeds, shape (N, 6).
+
+    Parameters
+    ----------
+    pose : SmoothedPose
+    rotor_speeds : ndarray, shape (N, k)
+        Speeds acting on the body, rad/s.
+    theta : ndarray, shape (6,)
+    config : VehicleConfig
+        Mass and rotor geometry.
+    effects : sequence of ModelEffect
+        Effects whose wrench is added (paper F_ext, M_ext).
+    """
+    theta = np.asarray(theta, float)
+    r = config.rotor_positions
+    v_b = pose.velocity_body()
+    w = pose.rates
+    # Paper Eq. drag and the rotor moments, summed (the kernel the dynamics use).
+    force, torque = rotor_wrench(rotor_speeds, theta, r, config.rotor_directions, v_b, w)
+    if effects:
+        inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, rotor_speeds,
+                              theta, r, rotor_directions=config.rotor_directions)
+        f_e, m_e = total_wrench(list(effects), inputs)
+        force = force + f_e
+        torque = torque + m_e
+    # Paper Eq. euler: ω̇ = J⁻¹ (M_B − ω × J ω).
+    omega_dot = euler_acceleration(torque, w, theta[3:6])
+    return np.hstack([force / config.mass, omega_dot])
+
+
+def consistent_accelerations(pose: SmoothedPose, inputs: SmoothedPose, model: np.ndarray,
+                             settings: SmootherSettings, dt: float
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """Measured and model [f_B, ω̇] that went through the same (linear) smoother.
+
+    Smoothing does not commute with the rotation to the body frame, so the comparison is
+    made where the smoother acted: world acceleration a − g for the force (model: R F_B/m,
+    paper Eq. newton in the world frame), and the quaternion's second derivative for the
+    rotation (model: q̈ = q ⊗ (½[0, ω̇] − ¼‖ω‖² [1, 0]), from q̇ = ½ q ⊗ [0, ω]). The model's
+    side is filtered by `acceleration_kernel`; both are then read in the smoothed body
+    frame: f = Rᵀ(a − g), ω̇ = 2 Im(q* ⊗ q̈) (`body_force_readout`,
+    `body_rotation_readout`).
+
+    Parameters
+    ----------
+    pose : SmoothedPose
+        The log smoothed with ``settings`` (the measured side).
+    inputs : SmoothedPose
+        The log smoothed with the light input window (the model's states).
+    model : ndarray, shape (N, 6)
+        `model_accelerations` at ``inputs``.
+    settings : SmootherSettings
+    dt : float
+        Sample time, s.
+
+    Returns
+    -------
+    measured, model : ndarray, shape (N, 6)
+    """
+    kernel = acceleration_kernel(settings, dt)
+    measured = np.hstack([pose.specific_force(), pose.angular_acceleration])
+    model_b = np.hstack([body_force_readout(pose, inputs, model[:, :3], kernel),
+                         body_rotation_readout(pose, inputs, model[:, 3:], kernel)])
+    return measured, model_b

@@ -1,0 +1,135 @@
+"""balance.theta."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from mavsysid.estimation.balance.rows import STACKED_COEFFICIENTS
+from mavsysid.estimation.results import Z95, DataTheta
+
+__all__ = ["coefficients_from_theta", "errors_in_variables_sigma", "split_widening",
+           "theta_from_coefficients", "widened_sigma"]
+
+
+# Indices into the stacked coefficient vector (`STACKED_COEFFICIENTS`).
+_CT, _CTCD, _AX, _GX, _AY, _GY, _BZ, _DZ, _GZ, _RZ = (
+    STACKED_COEFFICIENTS.index(name) for name in (
+        "c_T", "c_T*c_D", "c_T/j_x", "g_x", "c_T/j_y", "g_y", "c_M/j_z", "drag_z", "g_z",
+        "rotor_inertia_z"))
+_COUNT = len(STACKED_COEFFICIENTS)
+
+
+def _j_z_routes(b: np.ndarray) -> np.ndarray:
+    c_t = b[_CT]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        j_x, j_y = c_t / b[_AX], c_t / b[_AY]
+        return np.array([j_y - b[_GX] * j_x, j_x + b[_GY] * j_y])
+
+
+def _jacobian(f: Callable[[np.ndarray], np.ndarray], b: np.ndarray) -> np.ndarray:
+    f0 = f(b)
+    jac = np.zeros((f0.size, b.size))
+    for k in range(b.size):
+        step = 1e-6 * (abs(b[k]) if b[k] != 0.0 else 1.0)
+        shifted = b.copy()
+        shifted[k] += step
+        jac[:, k] = (f(shifted) - f0) / step
+    return jac
+
+
+def theta_from_coefficients(coefficients: np.ndarray, covariance: np.ndarray) -> DataTheta:
+    """θ and the combinations from the stacked coefficients (module docstring).
+
+    Parameters
+    ----------
+    coefficients : ndarray, shape (P,)
+        `STACKED_COEFFICIENTS`: force, then torque coefficients.
+    covariance : ndarray, shape (P, P)
+        Their covariance (inf on the diagonal of a coefficient not excited).
+
+    Returns
+    -------
+    DataTheta
+    """
+    b = np.asarray(coefficients, float)
+    cov = np.where(np.isfinite(covariance), covariance, 0.0)
+    unexcited = ~np.isfinite(np.diag(covariance))
+    routes_cov = _jacobian(_j_z_routes, b)
+    routes_cov = routes_cov @ cov @ routes_cov.T
+    route_var = np.diag(routes_cov).copy()
+    route_var[[unexcited[[_GX, _AX]].any(), unexcited[[_GY, _AY]].any()]] = np.inf
+    weight = np.where(np.isfinite(route_var) & (route_var > 0), 1.0 / route_var, 0.0)
+    weight = weight / weight.sum() if weight.sum() > 0 else np.array([0.5, 0.5])
+
+    def theta(x: np.ndarray) -> np.ndarray:
+        c_t = x[_CT]
+        j_z = float(weight @ _j_z_routes(x))
+        return np.array([c_t, x[_CTCD] / c_t, x[_BZ] * j_z, c_t / x[_AX], c_t / x[_AY], j_z,
+                         x[_BZ], -x[_RZ]])
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        full = theta(b)
+        jac = _jacobian(theta, b)
+    full_cov = jac @ cov @ jac.T
+    # A coefficient the flight does not excite makes everything that uses it unknown.
+    unknown = (np.abs(jac[:, unexcited]) > 0).any(axis=1) if unexcited.any() else \
+        np.zeros(full.size, bool)
+    var = np.where(unknown, np.inf, np.diag(full_cov))
+    full_cov[np.diag_indices_from(full_cov)] = var
+    with np.errstate(divide="ignore", invalid="ignore"):
+        routes = _j_z_routes(b)
+        spread = split_widening(routes[0], np.sqrt(route_var[0]), routes[1],
+                                np.sqrt(route_var[1]))
+        route_sigma = np.zeros(6)
+        route_sigma[5] = spread
+        route_sigma[2] = abs(full[6]) * spread
+    return DataTheta(full[:6], full_cov[:6, :6], full[6:], np.sqrt(np.abs(var[6:])),
+                     route_sigma)
+
+
+def coefficients_from_theta(theta: np.ndarray, nuisance: np.ndarray | None = None
+                            ) -> np.ndarray:
+    """The stacked coefficients a θ implies, shape (P,): the inverse of the mapping above.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (6,)
+        SI.
+    nuisance : ndarray, shape (P,), optional
+        Coefficients beyond the paper's model (the rotors' gyroscopic and reaction terms)
+        are taken from here; 0 without it.
+    """
+    c_t, c_d, c_m, j_x, j_y, j_z = np.asarray(theta, float)
+    out = np.zeros(_COUNT) if nuisance is None else np.array(nuisance, float)
+    out[[_CT, _CTCD, _AX, _GX, _AY, _GY, _BZ, _DZ, _GZ]] = [
+        c_t, c_t * c_d, c_t / j_x, -(j_z - j_y) / j_x, c_t / j_y, -(j_x - j_z) / j_y, c_m / j_z,
+        c_t * c_d / j_z, -(j_y - j_x) / j_z]
+    return out
+
+
+def split_widening(a: np.ndarray, sigma_a: np.ndarray, b: np.ndarray, sigma_b: np.ndarray
+                   ) -> np.ndarray:
+    """σ added by two independent estimates that disagree beyond their σ, shape like ``a``.
+
+    sqrt(max(0, (a − b)² − σ_a² − σ_b²) / 4); 0 where either is not finite.
+    """
+    with np.errstate(invalid="ignore"):
+        excess = (np.asarray(a) - b) ** 2 - np.asarray(sigma_a) ** 2 - np.asarray(sigma_b) ** 2
+        out = np.sqrt(np.maximum(excess, 0.0) / 4.0)
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def widened_sigma(parts: np.ndarray) -> np.ndarray:
+    """The quadrature sum of σ parts, shape (P,) from (len(SIGMA_PARTS), P)."""
+    with np.errstate(over="ignore"):  # a part beyond float range is an infinite σ
+        return np.sqrt(np.sum(np.asarray(parts, float) ** 2, axis=0))
+
+
+def errors_in_variables_sigma(forward: np.ndarray, reverse: np.ndarray) -> np.ndarray:
+    """|forward − reverse| / 1.96 (0 where the reverse value is not formed)."""
+    with np.errstate(invalid="ignore"):
+        out = np.abs(np.asarray(forward) - reverse) / Z95
+    return np.where(np.isfinite(out), out, 0.0)
+
+

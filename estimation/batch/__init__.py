@@ -1,0 +1,3 @@
+"""batch."""
+
+__all__: list[str] = []

@@ -1,0 +1,309 @@
+"""batch.kernels."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from mavsysid.vehicle.covariance import (
+    MEASURED_ERROR_INDICES,
+    pose_residual_kernel,
+    predict_covariance_kernel,
+)
+from mavsysid.vehicle.dynamics import rk4_linear_step_kernel
+from mavsysid.vehicle.linearization import jacobian_kernel, transition_kernel
+from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
+
+__all__ = ["MODE_COO", "MODE_NORMAL", "MODE_RESIDUALS", "BlockSystem", "ThetaBorderedFactor",
+           "accumulate_kernel", "difference_kernel", "factor", "inject_kernel", "shoot_kernel"]
+
+
+@dataclass(frozen=True)
+class BlockSystem:
+    """A symmetric block tridiagonal matrix with a θ border, and a right-hand side.
+
+    Attributes
+    ----------
+    D : ndarray, shape (K, 12, 12)
+        Diagonal node blocks.
+    U : ndarray, shape (max(K-1, 1), 12, 12)
+        Blocks (k, k+1).
+    B : ndarray, shape (K, 12, 6)
+        Node–θ blocks.
+    T : ndarray, shape (6, 6)
+        θ block.
+    g : ndarray, shape (K, 12)
+        Right-hand side (Jᵀr) of the nodes.
+    gt : ndarray, shape (6,)
+        Right-hand side of θ.
+    """
+
+    D: np.ndarray
+    U: np.ndarray
+    B: np.ndarray
+    T: np.ndarray
+    g: np.ndarray
+    gt: np.ndarray
+
+    @classmethod
+    def zeros(cls, K: int) -> BlockSystem:
+        """An all-zero system of K nodes."""
+        return cls(np.zeros((K, 12, 12)), np.zeros((max(K - 1, 1), 12, 12)),
+                   np.zeros((K, 12, 6)), np.zeros((6, 6)), np.zeros((K, 12)), np.zeros(6))
+
+    def diagonal(self) -> tuple[np.ndarray, np.ndarray]:
+        """The matrix diagonal: of the nodes (K, 12) and of θ (6,)."""
+        return np.diagonal(self.D, axis1=1, axis2=2).copy(), np.diag(self.T).copy()
+
+    def dense(self) -> np.ndarray:
+        """The full matrix (12K + 6 square); for tests on small systems."""
+        K = self.D.shape[0]
+        A = np.zeros((12 * K + 6, 12 * K + 6))
+        for k in range(K):
+            A[12 * k:12 * k + 12, 12 * k:12 * k + 12] = self.D[k]
+            A[12 * k:12 * k + 12, 12 * K:] = self.B[k]
+            A[12 * K:, 12 * k:12 * k + 12] = self.B[k].T
+            if k < K - 1:
+                A[12 * k:12 * k + 12, 12 * k + 12:12 * k + 24] = self.U[k]
+                A[12 * k + 12:12 * k + 24, 12 * k:12 * k + 12] = self.U[k].T
+        A[12 * K:, 12 * K:] = self.T
+        return A
+
+
+@numba.njit(cache=True)
+def _factor_kernel(D, U, B, T, dn, dt, lam, Linv, C, P):
+    """Block Cholesky of the Jacobi-scaled matrix with λ·diag added; returns S (6, 6).
+
+    Linv[k] = L_kk⁻¹, C[k] = L_{k+1,k}, P[k] = L_{θ,k}; S is the Schur complement of θ.
+    Raises numba's LinAlgError if a block is not positive definite.
+    """
+    K = D.shape[0]
+    S = T * np.outer(dt, dt)
+    for j in range(6):
+        S[j, j] += lam * max(T[j, j], 1e-12) * dt[j] * dt[j]
+    for k in range(K):
+        Dk = D[k] * np.outer(dn[k], dn[k])
+        for j in range(12):
+            Dk[j, j] += lam * max(D[k, j, j], 1e-12) * dn[k, j] * dn[k, j]
+        Bt = np.ascontiguousarray((B[k] * np.outer(dn[k], dt)).T)
+        if k > 0:
+            Ct = np.ascontiguousarray(C[k - 1].T)
+            Dk -= C[k - 1] @ Ct
+            Bt -= P[k - 1] @ Ct
+        Li = np.linalg.inv(np.linalg.cholesky(Dk))
+        LiT = np.ascontiguousarray(Li.T)
+        Linv[k] = Li
+        P[k] = Bt @ LiT
+        S -= P[k] @ np.ascontiguousarray(P[k].T)
+        if k < K - 1:
+            C[k] = np.ascontiguousarray((U[k] * np.outer(dn[k], dn[k + 1])).T) @ LiT
+    return S
+
+
+@numba.njit(cache=True)
+def _solve_kernel(Linv, C, P, Lt_inv, bn, bt):
+    """Solve L Lᵀ x = b with the factors of `_factor_kernel` (scaled units)."""
+    K = Linv.shape[0]
+    y = np.empty_like(bn)
+    yt = bt.copy()
+    for k in range(K):
+        rhs = bn[k].copy()
+        if k > 0:
+            rhs -= C[k - 1] @ y[k - 1]
+        y[k] = Linv[k] @ rhs
+        yt -= P[k] @ y[k]
+    xt = Lt_inv.T @ (Lt_inv @ yt)
+    x = np.empty_like(bn)
+    for k in range(K - 1, -1, -1):
+        rhs = y[k] - xt @ P[k]
+        if k < K - 1:
+            rhs -= x[k + 1] @ C[k]
+        x[k] = rhs @ Linv[k]
+    return x, xt
+
+
+class ThetaBorderedFactor:
+    """The factorisation of a `BlockSystem`'s matrix plus λ·diag(matrix) (LM damping).
+
+    Parameters
+    ----------
+    system : BlockSystem
+    lam : float
+        Levenberg–Marquardt damping, relative to the diagonal (floored at 1e-12).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        The damped matrix is not positive definite.
+    """
+
+    def __init__(self, system: BlockSystem, lam: float = 0.0) -> None:
+        K = system.D.shape[0]
+        diag_n, diag_t = system.diagonal()
+        self.dn = 1.0 / np.sqrt(np.maximum(diag_n, 1e-300))
+        self.dt = 1.0 / np.sqrt(np.maximum(diag_t, 1e-300))
+        self.Linv = np.empty((K, 12, 12))
+        self.C = np.empty((max(K - 1, 1), 12, 12))
+        self.P = np.empty((K, 6, 12))
+        S = _factor_kernel(system.D, system.U, system.B, system.T, self.dn, self.dt, lam,
+                           self.Linv, self.C, self.P)
+        self.Lt_inv = np.linalg.inv(np.linalg.cholesky(S))
+        self.schur_scaled = S
+
+    def solve(self, bn: np.ndarray, bt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """x with A x = b: nodes (K, 12) and θ (6,), for b given as ``bn`` (K, 12), ``bt`` (6,)."""
+        x, xt = _solve_kernel(self.Linv, self.C, self.P, self.Lt_inv, bn * self.dn, bt * self.dt)
+        return x * self.dn, xt * self.dt
+
+    def theta_inverse(self) -> np.ndarray:
+        """The θ block (6, 6) of the matrix's inverse: the inverse Schur complement."""
+        inv_scaled = self.Lt_inv.T @ self.Lt_inv
+        return inv_scaled * np.outer(self.dt, self.dt)
+
+
+def factor(system: BlockSystem, lam: float = 0.0) -> ThetaBorderedFactor:
+    """Factor ``system``'s matrix + λ·diag; see `ThetaBorderedFactor`."""
+    return ThetaBorderedFactor(system, lam)
+
+
+#: ``shoot_kernel`` modes: residuals only; with J in COO form; with JᵀJ and Jᵀr in blocks.
+MODE_RESIDUALS, MODE_COO, MODE_NORMAL = 0, 1, 2
+
+
+@numba.njit(cache=True)
+def inject_kernel(x, d, out):
+    """out = x ⊞ d for a model state x (13,) and a 12-D error d."""
+    out[0:6] = x[0:6] + d[0:6]
+    q = multiply_kernel(x[6:10], exp_kernel(d[6:9]))
+    out[6:10] = q / np.sqrt(np.sum(q * q))
+    out[10:13] = x[10:13] + d[9:12]
+
+
+@numba.njit(cache=True)
+def difference_kernel(x, x_ref, out):
+    """out = x ⊟ x_ref, 12-D."""
+    out[0:6] = x[0:6] - x_ref[0:6]
+    c = np.array([x_ref[6], -x_ref[7], -x_ref[8], -x_ref[9]])
+    out[6:9] = log_kernel(multiply_kernel(c, x[6:10]))
+    out[9:12] = x[10:13] - x_ref[10:13]
+
+
+@numba.njit(cache=True)
+def accumulate_kernel(Jr, r, m, ncols, k, D, U, B, T, g, gt):
+    """Add the rows Jr[:m, :ncols] (residuals r[:m]) to the blocks of JᵀJ and Jᵀr.
+
+    Local columns: 0–11 node k, 12–17 θ, 18–29 node k+1 (only with ``ncols`` 30).
+    D (K, 12, 12) diagonal node blocks; U (K-1, 12, 12) the (k, k+1) blocks; B (K, 12, 6)
+    node–θ blocks; T (6, 6) the θ block; g (K, 12) and gt (6,) Jᵀr.
+    """
+    J = np.ascontiguousarray(Jr[:m, :ncols])
+    Jt = np.ascontiguousarray(J.T)
+    M = Jt @ J
+    v = Jt @ np.ascontiguousarray(r[:m])
+    D[k] += M[0:12, 0:12]
+    B[k] += M[0:12, 12:18]
+    T += M[12:18, 12:18]
+    g[k] += v[0:12]
+    gt += v[12:18]
+    if ncols > 18:
+        U[k] += M[0:12, 18:30]
+        B[k + 1] += M[18:30, 12:18]
+        D[k + 1] += M[18:30, 18:30]
+        g[k + 1] += v[18:30]
+
+
+@numba.njit(cache=True)
+def _write_coo(Jr, m, ncols, row, k, th_col, rows, cols, vals, e):
+    for a in range(m):
+        for b in range(ncols):
+            rows[e] = row + a
+            if b < 12:
+                cols[e] = 12 * k + b
+            elif b < 18:
+                cols[e] = th_col + b - 12
+            else:
+                cols[e] = 12 * (k + 1) + b - 18
+            vals[e] = Jr[a, b]
+            e += 1
+    return e
+
+
+@numba.njit(cache=True)
+def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p, sig_a,
+                 mode, want_q, res, rows, cols, vals, Q_out, D, U, B, T, g, gt):
+    """Residuals of the shooting problem, and its Jacobian as ``mode`` asks.
+
+    w (N, 6) is the known effects' extra body force and torque per sample (as in the EKF);
+    Qc (N, 6, 6) the process-noise density of the step from each sample to the next.
+    Column layout of J: node k's error at 12k … 12k+11, the θ error (scaled) at 12K … 12K+5.
+    ``mode`` 1 writes J as COO (rows, cols, vals); ``mode`` 2 adds JᵀJ and Jᵀr into the
+    blocks D, U, B, T, g, gt (see `accumulate_kernel`; zero them first). ``Q_out``
+    (K-1, 12, 12) receives the process noise accumulated over each interval if ``want_q``.
+    Returns the number of residual rows and of COO entries written.
+    """
+    K = nodes.shape[0]
+    th_col = 12 * K
+    row = 0
+    e = 0
+    A = np.empty((18, 18))
+    G = np.empty((18, 6))
+    F = np.empty((18, 18))
+    Qs = np.empty((18, 18))
+    x = np.empty(13)
+    x_next = np.empty(13)
+    y = np.empty(6)
+    d = np.empty(12)
+    Jr = np.zeros((12, 30))
+    want_jac = mode != MODE_RESIDUALS
+    for k in range(K):
+        x[:] = nodes[k]
+        Phi = np.eye(18)
+        Qacc = np.zeros((18, 18))
+        last = node_idx[k + 1] if k < K - 1 else node_idx[K] - 1
+        for i in range(node_idx[k], last + 1):
+            if i < node_idx[k + 1]:  # measurement at sample i
+                pose_residual_kernel(z[i], x, y)
+                res[row:row + 3] = y[0:3] / sig_p
+                res[row + 3:row + 6] = y[3:6] / sig_a
+                if want_jac:  # the rows H Φ of the measured error-state entries
+                    for a in range(6):
+                        s = sig_p if a < 3 else sig_a
+                        for b in range(18):
+                            Jr[a, b] = -Phi[MEASURED_ERROR_INDICES[a], b] / s
+                    if mode == MODE_COO:
+                        e = _write_coo(Jr, 6, 18, row, k, th_col, rows, cols, vals, e)
+                    else:
+                        accumulate_kernel(Jr, res[row:row + 6], 6, 18, k, D, U, B, T, g, gt)
+                row += 6
+            if i == last:
+                break
+            dt = t[i + 1] - t[i]
+            if want_jac or (want_q and k < K - 1):
+                jacobian_kernel(x, n[i], theta, mass, r, eps, scale, A, G)
+                transition_kernel(A, G, Qc[i], dt, F, Qs)
+                first = i == node_idx[k]  # Phi = I and Qacc = 0 so far: skip the products
+                Phi = F.copy() if first else F @ Phi
+                if want_q:  # the process noise accumulated since the node (paper Eq. prior)
+                    if first:
+                        Qacc[:] = Qs
+                    else:
+                        predict_covariance_kernel(Qacc, F, Qs)
+            rk4_linear_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps,
+                                   x_next)
+            x[:] = x_next
+        if k < K - 1:
+            if want_q:
+                Q_out[k] = Qacc[0:12, 0:12]
+            difference_kernel(nodes[k + 1], x, d)
+            res[row:row + 12] = W[k] @ d
+            if want_jac:
+                WPhi = W[k] @ np.ascontiguousarray(Phi[0:12, :])
+                Jr[:, 0:18] = -WPhi
+                Jr[:, 18:30] = W[k]
+                if mode == MODE_COO:
+                    e = _write_coo(Jr, 12, 30, row, k, th_col, rows, cols, vals, e)
+                else:
+                    accumulate_kernel(Jr, res[row:row + 12], 12, 30, k, D, U, B, T, g, gt)
+            row += 12
+    return row, e

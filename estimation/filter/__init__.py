@@ -1,0 +1,3 @@
+"""filter."""
+
+__all__: list[str] = []

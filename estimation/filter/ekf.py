@@ -1,0 +1,326 @@
+"""filter.ekf."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+from mavsysid.estimation.flight import FlightData, step_process_noise
+from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
+from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.covariance import (
+    pose_residual_kernel,
+    predict_covariance_kernel,
+    update_covariance_kernel,
+)
+from mavsysid.vehicle.dynamics import STATE_DIM, rk4_linear_step_kernel
+from mavsysid.vehicle.linearization import (
+    ERROR_DIM,
+    MEAS_DIM,
+    ErrorStateModel,
+    jacobian_kernel,
+    transition_kernel,
+)
+from mavsysid.vehicle.rotation import (
+    exp_kernel,
+    multiply_kernel,
+    quat_log,
+    quat_multiply,
+    quat_to_matrix,
+)
+
+from mavsysid.errors import JobFailedError, LogFormatError
+
+__all__ = ["FILTER_DIM", "FilterOverflow", "FilterRun", "ParameterEKF"]
+
+
+#: Length of the nominal filter state x = [p, v_B, q, ω, θ].
+FILTER_DIM = STATE_DIM + 6
+
+
+@dataclass(frozen=True)
+class FilterRun:
+    """A whole flight filtered: the history, and the full state at every sample.
+
+    Attributes
+    ----------
+    history : EstimationHistory
+    states : ndarray, shape (N, 13)
+        Filtered model states after each update.
+    estimate : ParameterEstimate
+        Final θ and its covariance, SI.
+    log_likelihood : float
+        Log-likelihood of all innovations, Σ log N(y_k; 0, S_k).
+    """
+
+    history: EstimationHistory
+    states: np.ndarray
+    estimate: ParameterEstimate
+    log_likelihood: float
+
+
+@numba.njit(cache=True)
+def _predict_kernel(x, P, n0, n1, w0, w1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
+    """Paper Eq. prior: x ← f-integrated, P ← F P Fᵀ + Q (F, Q at the step's start).
+
+    The effects' wrench w0, w1 (6,) is a known input: it shifts the mean and does not
+    enter F (its state derivatives are second order for the small effects it models).
+    """
+    theta = x[13:19]
+    jacobian_kernel(x[:13], n0, theta, mass, r, eps, scale, A, G)
+    transition_kernel(A, G, Qc, dt, F, Q)
+    state = np.empty(13)
+    rk4_linear_step_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
+    x[:13] = state
+    predict_covariance_kernel(P, F, Q)
+
+
+@numba.njit(cache=True)
+def _update_kernel(x, P, z, R, scale, y, S, SI, K):
+    """Measurement update with z = [p, q]; returns the NIS yᵀ S⁻¹ y.
+
+    The covariance takes the shared Joseph-form step (paper Eq. posterior); the
+    correction is applied multiplicatively to the attitude and the error state reset.
+    """
+    pose_residual_kernel(z, x, y)
+    update_covariance_kernel(P, R, S, SI, K)
+    dx = K @ y
+    # Multiplicative attitude correction and additive everything else.
+    x[0:6] += dx[0:6]
+    q = multiply_kernel(x[6:10], exp_kernel(dx[6:9]))
+    x[6:10] = q / np.sqrt(np.sum(q * q))
+    x[10:13] += dx[9:12]
+    x[13:19] += scale * dx[12:18]
+    # Error-state reset: the new attitude error is measured from the corrected nominal.
+    n = P.shape[0]
+    Gam = np.eye(n)
+    d = dx[6:9]
+    Gam[6, 7], Gam[6, 8] = 0.5 * d[2], -0.5 * d[1]
+    Gam[7, 6], Gam[7, 8] = -0.5 * d[2], 0.5 * d[0]
+    Gam[8, 6], Gam[8, 7] = 0.5 * d[1], -0.5 * d[0]
+    P[:] = Gam @ P @ Gam.T
+    P[:] = 0.5 * (P + P.T)
+    return y @ SI @ y
+
+
+@numba.njit(cache=True)
+def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
+                   out_x, out_sigma, out_innov, out_nis):
+    """Filter samples 1..N-1 (sample 0 initialised x, P); histories into the out arrays.
+
+    w (N, 6) is the effects' extra body force and torque at every sample (zeros: none);
+    Qc (N, 6, 6) the process-noise density of each step (from sample k − 1 to k).
+
+    Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k).
+    """
+    log_likelihood = 0.0
+    A = np.empty((ERROR_DIM, ERROR_DIM))
+    G = np.empty((ERROR_DIM, 6))
+    F = np.empty((ERROR_DIM, ERROR_DIM))
+    Q = np.empty((ERROR_DIM, ERROR_DIM))
+    y = np.empty(6)
+    S = np.empty((6, 6))
+    SI = np.empty((6, 6))
+    K = np.empty((ERROR_DIM, 6))
+    out_x[0] = x
+    for j in range(6):
+        out_sigma[0, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
+    out_innov[0] = 0.0
+    out_nis[0] = np.nan
+    for k in range(1, t.shape[0]):
+        _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], t[k] - t[k - 1], mass, r, eps,
+                        scale, Qc[k - 1], A, G, F, Q)
+        # A diverged state overflows: the update would invert a NaN S, or normalise the
+        # attitude to zero and divide by it next step. Stop; the caller refuses the run.
+        if not (np.isfinite(np.sum(x)) and np.isfinite(np.trace(P))):
+            x[:] = np.nan
+            return np.nan
+        out_nis[k] = _update_kernel(x, P, z[k], R, scale, y, S, SI, K)
+        if not (np.isfinite(out_nis[k]) and abs(np.sum(x[6:10] * x[6:10]) - 1.0) < 1e-6):
+            x[:] = np.nan
+            return np.nan
+        log_det = 2.0 * np.sum(np.log(np.diag(np.linalg.cholesky(S))))
+        log_likelihood -= 0.5 * (out_nis[k] + log_det + 6.0 * np.log(2.0 * np.pi))
+        out_innov[k] = y
+        out_x[k] = x
+        for j in range(6):
+            out_sigma[k, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
+    return log_likelihood
+
+
+class ParameterEKF(ExtendedKalmanFilter):
+    """EKF over the state [p, v_B, q, ω] augmented with θ, driven by logged rotor speeds.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        Mass, rotor geometry and process-noise densities (``[noise]``).
+    prior : ParameterEstimate
+        Prior θ (SI) and its covariance; its values also set the θ error units.
+    measurement_sigma : tuple of 2 float
+        Position σ (m) and attitude σ (rad) of the pose measurements.
+    """
+
+    def __init__(
+        self, config: VehicleConfig, prior: ParameterEstimate,
+        measurement_sigma: tuple[float, float],
+    ) -> None:
+        super().__init__(dim_x=ERROR_DIM, dim_z=MEAS_DIM)
+        scale = np.abs(prior.value)
+        self.model = ErrorStateModel.for_vehicle(config, np.where(scale > 0.0, scale, 1.0))
+        self.prior = prior
+        self._kernel_args = self.model.kernel_args()
+        self._Qc = self.model.process_noise_density()
+        sp, sa = measurement_sigma
+        self.R = np.diag([sp**2] * 3 + [sa**2] * 3)
+        self.x = np.concatenate([np.zeros(STATE_DIM), prior.value])
+        self.x[6] = 1.0
+        s = self.model.theta_scale
+        self.P = np.zeros((ERROR_DIM, ERROR_DIM))
+        self.P[12:, 12:] = prior.covariance / np.outer(s, s)
+        self.K = np.zeros((ERROR_DIM, MEAS_DIM))
+        self.y = np.zeros(MEAS_DIM)
+        self._G = np.zeros((ERROR_DIM, 6))
+        self._A = np.zeros((ERROR_DIM, ERROR_DIM))
+
+    # -- filterpy API -----------------------------------------------------------------
+
+    def initialize(
+        self, position: np.ndarray, quaternion: np.ndarray, velocity_body: np.ndarray,
+        body_rates: np.ndarray, state_sigma: tuple[float, float, float, float],
+    ) -> None:
+        """Set the model state and its σ (position m, velocity m/s, attitude rad, rate rad/s)."""
+        self.x[0:3] = position
+        self.x[3:6] = velocity_body
+        self.x[6:10] = quaternion / np.linalg.norm(quaternion)
+        self.x[10:13] = body_rates
+        for i, sigma in enumerate(state_sigma):
+            self.P[3 * i:3 * i + 3, 3 * i:3 * i + 3] = np.eye(3) * sigma**2
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+
+    def predict(
+        self, u: np.ndarray, dt: float, u_next: np.ndarray | None = None,
+        wrench: np.ndarray | None = None, wrench_next: np.ndarray | None = None,
+    ) -> None:
+        """Propagate over ``dt`` s with rotor speeds ``u`` (k,) (linear to ``u_next``).
+
+        ``wrench`` (6,): extra body force (N) and torque (N·m) of known model effects at
+        the step's start (linear to ``wrench_next``); zero by default.
+        """
+        u = np.ascontiguousarray(u, dtype=float)
+        u1 = u if u_next is None else np.ascontiguousarray(u_next, dtype=float)
+        w0 = np.zeros(6) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
+        w1 = w0 if wrench_next is None else np.ascontiguousarray(wrench_next, dtype=float)
+        mass, r, eps, scale = self._kernel_args
+        _predict_kernel(self.x, self.P, u, u1, w0, w1, float(dt), mass, r, eps, scale,
+                        self._Qc, self._A, self._G, self.F, self.Q)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    def update(self, z: np.ndarray, R: np.ndarray | None = None) -> None:  # type: ignore[override]
+        """Correct with a pose z = [x, y, z, qw, qx, qy, qz] (m, unit quaternion)."""
+        R = self.R if R is None else np.asarray(R, dtype=float)
+        self.S = np.empty((MEAS_DIM, MEAS_DIM))
+        self.SI = np.empty((MEAS_DIM, MEAS_DIM))
+        _update_kernel(self.x, self.P, np.ascontiguousarray(z, dtype=float), R,
+                       self._kernel_args[3], self.y, self.S, self.SI, self.K)
+        self.z = np.asarray(z, dtype=float).copy()
+        self._log_likelihood = None
+        self._likelihood = None
+        self._mahalanobis = None
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+
+    # -- results ----------------------------------------------------------------------
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Current θ estimate, SI, shape (6,)."""
+        return self.x[STATE_DIM:].copy()
+
+    @property
+    def theta_covariance(self) -> np.ndarray:
+        """Current θ covariance, SI, shape (6, 6)."""
+        return self.model.parameter_covariance_si(self.P)
+
+    def start_segment(self, flight: FlightData, i: int,
+                      state_sigma: tuple[float, float, float, float]) -> None:
+        """Restart the model state from samples ``i``, ``i + 1`` of ``flight`` (finite
+        differences), with σ ``state_sigma``; θ and its covariance kept, the states'
+        cross-covariance with θ dropped. The difference spans ≥ half the median step."""
+        t = flight.t
+        step = 0.5 * float(np.median(np.diff(t[i:i + 64])))
+        j = min(max(int(np.searchsorted(t, t[i] + step)), i + 1), t.size - 1)
+        dt0 = t[j] - t[i]
+        q0, q1 = flight.quaternion[i], flight.quaternion[j]
+        rates = quat_log(quat_multiply(q0 * [1, -1, -1, -1], q1)) / dt0
+        v_world = (flight.position[j] - flight.position[i]) / dt0
+        v_body = quat_to_matrix(q0).T @ v_world
+        self.P[:12, :] = 0.0
+        self.P[:, :12] = 0.0
+        self.initialize(flight.position[i], q0, v_body, rates, state_sigma)
+
+    def run(
+        self, flight: FlightData, state_sigma: tuple[float, float, float, float],
+        wrench: np.ndarray | None = None,
+    ) -> FilterRun:
+        """Filter a whole flight: initialise from its first samples, then predict/update.
+
+        The initial velocity and body rates come from finite differences of the first two
+        poses; ``state_sigma`` gives their initial σ (position, velocity, attitude, rate).
+        A flight of several segments (``flight.segment_starts``) restarts the states at
+        each segment's start and carries θ and its covariance across the gap.
+        ``wrench`` (N, 6): extra body force (N) and torque (N·m) of known model effects at
+        every sample (`mavsysid.estimation.filter.likelihood.ModelTerms`); zeros by default.
+        ``flight`` is in the model's terms (effects' pose and rotor-speed channels applied).
+        """
+        t = np.ascontiguousarray(flight.t, dtype=float)
+        if t.size < 2 or not np.all(np.diff(t) > 0.0):
+            # Readers drop repeated stamps; a zero step would divide by zero in `start_segment`.
+            raise LogFormatError(f"{flight.source}: the sample times must increase strictly")
+        self.start_segment(flight, 0, state_sigma)
+        z = np.ascontiguousarray(np.hstack([flight.position, flight.quaternion]))
+        n = np.ascontiguousarray(flight.rotor_speeds, dtype=float)
+        N = t.size
+        out_x = np.empty((N, FILTER_DIM))
+        out_sigma = np.empty((N, 6))
+        out_innov = np.full((N, MEAS_DIM), np.nan)  # NaN: not reached (`FilterOverflow`)
+        out_nis = np.empty(N)
+        mass, r, eps, scale = self._kernel_args
+        w = np.zeros((N, 6)) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
+        if w.shape != (N, 6):
+            raise ValueError(f"wrench of shape ({N}, 6) expected, got {w.shape}")
+        # Each step's process noise: the configured density plus the wrench error that
+        # interpolating slow rotor-speed inputs leaves (`mavsysid.estimation.flight`).
+        Qc = step_process_noise(self._Qc, t, n, flight.inputs, self.prior.value, r, eps)
+        try:
+            log_likelihood = 0.0
+            for i, (a, b) in enumerate(flight.segment_bounds):
+                if i:  # after a gap: the vehicle states restart, θ and its σ carry on
+                    self.start_segment(flight, a, state_sigma)
+                log_likelihood += _filter_kernel(
+                    t[a:b], z[a:b], n[a:b], w[a:b], self.x, self.P, mass, r, eps, scale,
+                    Qc[a:b], self.R, out_x[a:b], out_sigma[a:b], out_innov[a:b], out_nis[a:b])
+        except (ZeroDivisionError, np.linalg.LinAlgError) as error:
+            # A model that cannot follow the log (wrong vehicle or rotor order) drives the
+            # state to overflow; the compiled kernel then fails on a division or on S.
+            raise FilterOverflow(flight, out_innov) from error
+        if not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.P))):
+            raise FilterOverflow(flight, out_innov)
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        history = EstimationHistory(
+            t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],
+            quaternion=out_x[:, 6:10], innovation=out_innov, nis=out_nis,
+        )
+        return FilterRun(history, out_x[:, :STATE_DIM],
+                         ParameterEstimate(self.theta, self.theta_covariance), log_likelihood)
+
+
+class FilterOverflow(JobFailedError):
+    """The filter's state overflowed; ``innovation`` (n, 6): the innovations before it."""
+
+    def __init__(self, flight: FlightData, innovation: np.ndarray) -> None:
+        super().__init__(f"{flight.source}: the parameter filter diverged (the model cannot "
+                         "follow this log's motion with these rotor speeds); check --vehicle, "
+                         "its rotor order and the log's motor outputs")
+        self.innovation = innovation[np.all(np.isfinite(innovation), axis=1)]

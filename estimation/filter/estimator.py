@@ -1,0 +1,358 @@
+"""filter.estimator."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from mavsysid.estimation.batch.refine import refine
+from mavsysid.estimation.equation_error_fit import EquationErrorFit, fit_equation_error
+from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.filter.guard import guarded_filter
+from mavsysid.estimation.filter.likelihood import (
+    NOISE_SCALE_LIMITS,
+    EffectFit,
+    ModelTerms,
+    fit_effect_parameters,
+    fit_noise_scale,
+)
+from mavsysid.estimation.flight import MIN_DURATION, FlightData
+from mavsysid.estimation.progress import report_stage
+from mavsysid.estimation.report.text import convergence_time
+from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
+from mavsysid.estimation.robust import disagreement_widening, widened
+from mavsysid.estimation.signals import pose_sigma
+from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
+from mavsysid.vehicle.linearization import initial_state_sigma
+from mavsysid.vehicle.model_effects import ModelEffect
+
+from mavsysid.errors import InputError, JobFailedError
+
+__all__ = ["EstimatorSettings", "estimate_parameters", "estimate_with_effects",
+           "flight_initial_state_sigma", "prior_from_config"]
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """Choices of the estimation pipeline.
+
+    Attributes
+    ----------
+    prior_relative_sigma : float
+        σ of the prior on each parameter, relative to the config's nominal value.
+    refine : bool
+        Run the noise fit and the batch MAP refinement after the filter.
+    autopilot_position_sigma, autopilot_attitude_sigma : float
+        Measurement σ (m, rad) used when the pose comes from the autopilot's own
+        estimator (filtered and lagged), instead of the config's motion-capture σ.
+    c_D_scale : float
+        Prior σ and units of c_D when the config's nominal c_D is 0, s/m.
+    fit_effects : bool
+        Fit the parameters of the config's model effects jointly with θ (else hold them
+        at the config's values); used by `estimate_parameters`.
+    guard : bool
+        Fit θ by equation error (`mavsysid.estimation.equation_error_fit`), restart a
+        diverged filter from it and refuse a final θ it contradicts
+        (`mavsysid.estimation.filter.guard`).
+    start_from_equation_error : bool
+        Start the filter at the equation-error θ (with the prior's covariance) rather than
+        at the prior; the MAP prior stays the vehicle file's either way.
+    restart_diverged : bool
+        Restart a diverged filter from the equation-error θ (else refuse at once: used when
+        the force and torque balance answers and the filter only checks it).
+    """
+
+    prior_relative_sigma: float = 0.5
+    refine: bool = True
+    autopilot_position_sigma: float = 0.05
+    autopilot_attitude_sigma: float = math.radians(1.0)
+    c_D_scale: float = 0.01
+    fit_effects: bool = True
+    guard: bool = True
+    start_from_equation_error: bool = False
+    restart_diverged: bool = True
+
+
+def prior_from_config(config: VehicleConfig, settings: EstimatorSettings) -> ParameterEstimate:
+    """The prior: the config's nominal θ with σ = relative σ × |θ| (c_D: a floor if 0)."""
+    if not settings.prior_relative_sigma > 0.0:
+        raise InputError(f"prior relative σ {settings.prior_relative_sigma:g}: expected > 0")
+    value = config.theta.copy()
+    sigma = settings.prior_relative_sigma * np.abs(value)
+    if value[1] == 0.0:
+        sigma[1] = settings.c_D_scale
+    return ParameterEstimate(value, np.diag(sigma**2))
+
+
+def _measurement_sigma(flight: FlightData, config: VehicleConfig,
+                       settings: EstimatorSettings) -> tuple[tuple[float, float], str | None]:
+    """The σ assumed for the pose source, raised to the log's measured noise if larger."""
+    if flight.pose_source == "autopilot":
+        assumed = settings.autopilot_position_sigma, settings.autopilot_attitude_sigma
+    else:
+        assumed = config.noise.position_sigma, config.noise.attitude_sigma
+    return pose_sigma(flight, assumed)
+
+
+def flight_initial_state_sigma(
+    flight: FlightData, sigma: tuple[float, float]
+) -> tuple[float, float, float, float]:
+    """σ of the filter's initial state for this flight, at its first sample interval.
+
+    Parameters
+    ----------
+    flight : FlightData
+        The flight; its first two sample times set the interval, s.
+    sigma : tuple of 2 float
+        Measurement σ of position (m) and attitude (rad).
+
+    Returns
+    -------
+    tuple of 4 float
+        σ of position (m), velocity (m/s), attitude (rad) and body rates (rad/s);
+        see `mavsysid.vehicle.linearization.initial_state_sigma`.
+    """
+    return initial_state_sigma(sigma[0], sigma[1], float(flight.t[1] - flight.t[0]))
+
+
+def _check_inputs(flight: FlightData, config: VehicleConfig,
+                  effects: Sequence[ModelEffect]) -> tuple[ModelEffect, ...]:
+    if flight.duration < MIN_DURATION:
+        raise InputError(f"{flight.source}: {flight.duration:.2f} s of data; the estimator "
+                         f"needs at least {MIN_DURATION:g} s")
+    if flight.rotor_count != config.rotor_count:
+        raise InputError(f"{flight.source}: {flight.rotor_count} rotor-speed columns, but "
+                         f"vehicle {config.name} has {config.rotor_count} rotors")
+    effects = tuple(effects)
+    for effect in effects:
+        if not isinstance(effect, ModelEffect):
+            raise InputError(f"model effect {effect!r}: expected a mavsysid.vehicle.model_effects "
+                             "ModelEffect")
+    names = [e.name for e in effects]
+    if len(set(names)) < len(names):
+        raise InputError(f"model effects {', '.join(names)}: each effect at most once")
+    return effects
+
+
+def _effect_note(fit: EffectFit) -> str:
+    parts = []
+    for fe in fit.effects:
+        values = ", ".join(f"{p.name} = {v:.4g} ± {s:.2g} {p.unit}" for p, v, s in
+                           zip(fe.effect.parameters, fe.value, fe.sigma, strict=True))
+        parts.append(f"{fe.name} ({values})")
+    return (f"model effects fitted jointly with θ by maximum likelihood: {'; '.join(parts)} "
+            f"[{fit.evaluations} filter passes]; θ's σ includes their uncertainty")
+
+
+def _with_increment(estimate: ParameterEstimate | None, increment: np.ndarray | None
+                    ) -> ParameterEstimate | None:
+    if estimate is None or increment is None:
+        return estimate
+    return ParameterEstimate(estimate.value, estimate.covariance + increment)
+
+
+def estimate_parameters(
+    flight: FlightData, config: VehicleConfig, settings: EstimatorSettings | None = None
+) -> EstimationResult:
+    """Estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a flight, with the config's effects.
+
+    Parameters
+    ----------
+    flight : FlightData
+        Pose and rotor speeds (from `mavsysid.estimation.readers.load_flight`).
+    config : VehicleConfig
+        The vehicle: known mass and geometry, nominal θ as the prior, noise, and its model
+        effects (``config.effects``; fitted unless ``settings.fit_effects`` is off).
+    settings : EstimatorSettings, optional
+
+    Returns
+    -------
+    EstimationResult
+    """
+    settings = settings or EstimatorSettings()
+    return estimate_with_effects(flight, config, config.effects,
+                                 settings, fit_effects=settings.fit_effects)
+
+
+def estimate_with_effects(
+    flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
+    settings: EstimatorSettings | None = None, fit_effects: bool = True,
+) -> EstimationResult:
+    """Estimate θ under the given model effects, fitting their parameters jointly.
+
+    Parameters
+    ----------
+    flight : FlightData
+        Pose and rotor speeds as logged.
+    config : VehicleConfig
+        Known mass and geometry, nominal θ as the prior, noise. Its own ``effects`` are
+        *not* added: ``effects`` is the complete list.
+    effects : sequence of ModelEffect
+        The effects the model includes, each at most once; their values are the start of
+        the fit (or the values used when ``fit_effects`` is False). Empty: the paper's
+        model, identical to the estimator without effects.
+    settings : EstimatorSettings, optional
+        ``settings.fit_effects`` is ignored here in favour of ``fit_effects``.
+    fit_effects : bool
+        Estimate the effects' parameters (maximum likelihood, `mavsysid.estimation.filter.likelihood`);
+        False holds them at the given values.
+
+    Returns
+    -------
+    EstimationResult
+        ``effects`` holds each effect with its (fitted) values and σ; θ's covariances
+        include the effects' uncertainty when fitted.
+    """
+    settings = settings or EstimatorSettings()
+    effects = _check_inputs(flight, config, effects)
+    prior = prior_from_config(config, settings)
+    sigma, sigma_note = _measurement_sigma(flight, config, settings)
+    state_sigma = flight_initial_state_sigma(flight, sigma)
+    notes = list(flight.warnings) + ([sigma_note] if sigma_note else [])
+    ee = _equation_error(flight, config, prior, notes) if settings.guard else None
+    start = prior
+    if ee is not None and settings.start_from_equation_error:
+        start = ParameterEstimate(ee.estimate.value, prior.covariance)
+        notes.append("filter started at the equation-error θ")
+
+    fit = None
+    used = tuple(FittedEffect(e, np.full(len(e.parameters), np.nan), False) for e in effects)
+    if fit_effects and any(e.parameters for e in effects):
+        report_stage("fitting the model effects' parameters")
+        fit = fit_effect_parameters(flight, config, effects, start, sigma, state_sigma)
+        used = fit.effects
+        effects = tuple(fe.effect for fe in fit.effects)
+        notes.append(_effect_note(fit))
+    elif effects:
+        notes.append("model effects held at the given values: "
+                     + "; ".join(repr(e) for e in effects))
+    report_stage(f"filtering {len(flight)} samples")
+    terms, run, start, sigma = guarded_filter(flight, effects, config, (prior, start), sigma,
+                                              state_sigma, ee, notes, settings.restart_diverged)
+    state_sigma = flight_initial_state_sigma(flight, sigma)
+    log_likelihood, refined = run.log_likelihood, None
+    if settings.refine:
+        refined, log_likelihood = _refine(terms, fit, config, (prior, start), sigma,
+                                          state_sigma, notes)
+    increment = None if fit is None else fit.theta_covariance_increment()
+    filtered, refined = (_with_increment(e, increment) for e in (run.estimate, refined))
+    widening = None
+    if ee is not None and not effects:
+        filtered, refined, widening = _widen_by_disagreement(filtered, refined, ee.estimate,
+                                                             notes)
+    truth = flight.true_theta
+    final = refined if refined is not None else filtered
+    history = run.history
+    conv = convergence_time(history.t - history.t[0], history.theta,
+                            truth if truth is not None else final.value)
+    notes.extend(_closing_notes(flight, sigma, final))
+    return EstimationResult(
+        prior=prior, filtered=filtered, refined=refined, history=history,
+        convergence_time=conv, true_theta=truth, measurement_sigma=sigma,
+        pose_source=flight.pose_source, notes=tuple(notes), effects=used,
+        log_likelihood=log_likelihood,
+        equation_error=None if ee is None or effects else ee.estimate,
+        mismatch_widening=widening,
+    )
+
+
+def _widen_by_disagreement(
+    filtered: ParameterEstimate, refined: ParameterEstimate | None, ee: ParameterEstimate,
+    notes: list[str],
+) -> tuple[ParameterEstimate, ParameterEstimate | None, np.ndarray]:
+    """The final θ's σ widened where the equation-error θ disagrees (model mismatch)."""
+    final = refined if refined is not None else filtered
+    factor = disagreement_widening(final.value, final.sigma, ee.value, ee.sigma)
+    if np.all(factor == 1.0):
+        return filtered, refined, factor
+    wide = ", ".join(f"{n} ×{f:.3g}" for n, f in zip(PARAMETER_NAMES, factor, strict=True)
+                     if f > 1.0)
+    notes.append(f"σ widened where the equation-error θ disagrees beyond both σ ({wide}): the "
+                 "physics differ from the model; --auto-effects or mavsysid diagnose names "
+                 "what it misses")
+    final = ParameterEstimate(final.value, widened(final.covariance, factor))
+    return (filtered, final, factor) if refined is not None else (final, None, factor)
+
+
+def _equation_error(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
+                    notes: list[str]) -> EquationErrorFit | None:
+    """The equation-error fit, or None (with a note) on a flight too short for it."""
+    try:
+        return fit_equation_error(flight, config, prior)
+    except JobFailedError as error:
+        notes.append(f"no equation-error check: {error}")
+        return None
+
+
+def _refine(
+    terms: ModelTerms, fit: EffectFit | None, config: VehicleConfig,
+    priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
+    state_sigma: tuple[float, float, float, float], notes: list[str],
+) -> tuple[ParameterEstimate, float]:
+    """Step 2: the process-noise level (the effect fit's, or fitted now) and the batch MAP.
+
+    ``priors`` is (the MAP prior, the filter's start). Appends its notes to ``notes``;
+    returns the refined θ and the log-likelihood of the filter run at the fitted noise
+    level. A noise level at the upper edge of its search range is refused
+    (`JobFailedError`).
+    """
+    prior, start_prior = priors
+    if fit is not None:
+        noise_cfg, scale, at_bound = fit.config, fit.noise_scale, fit.noise_at_bound
+        # The effect fit searches `NOISE_SCALE_BOUNDS`, which straddle 1.
+        at_upper = at_bound and scale > 1.0
+        start, terms_r = fit.run, fit.terms
+    else:
+        report_stage("fitting the process noise")
+        nf = fit_noise_scale(terms.flight, config, start_prior, sigma, state_sigma,
+                             wrench=terms.wrench)
+        noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
+            nf.run, terms
+        at_upper = nf.at_upper_bound
+    nz = noise_cfg.noise
+    if at_upper:
+        # At the upper edge the filter needs more unmodelled force than any range allows:
+        # the model does not fit. (At the lower edge it fits better than configured.)
+        raise JobFailedError(
+            f"{terms.flight.source}: the process-noise fit ended at the edge of its range "
+            f"({scale:.3g} × the configured densities, at most {NOISE_SCALE_LIMITS[1]:g}); "
+            "the model does not describe this log's forces")
+    notes.append(
+        f"process noise fitted to the flight: {scale:.3g} × the configured densities "
+        f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"
+        + ("; at the edge of the search range" if at_bound else ""))
+    report_stage("batch refinement")
+    flight, states, wrench = terms_r.flight, start.states, terms_r.wrench
+    if len(flight.segment_starts) > 1:
+        # The batch's states form one chain of shooting nodes: it must not bridge a gap.
+        i = flight.longest_segment()
+        a, b = flight.segment_bounds[i]
+        flight, states = flight.segment(i), states[a:b]
+        wrench = None if wrench is None else wrench[a:b]
+        notes.append(f"batch refinement on the longest segment only (t = {flight.t[0]:.3f} "
+                     f"to {flight.t[-1]:.3f} s, {i + 1} of "
+                     f"{len(terms_r.flight.segment_starts)}); the filter used all segments")
+    batch = refine(flight, states, start.estimate,
+                   ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma, wrench=wrench)
+    notes.append(f"batch refinement: {batch.iterations} iterations, cost "
+                 f"{batch.cost_initial:.4g} → {batch.cost_final:.4g}")
+    return batch.estimate, start.log_likelihood
+
+
+def _closing_notes(flight: FlightData, sigma: tuple[float, float],
+                   final: ParameterEstimate) -> list[str]:
+    """Notes on the truth's source, an autopilot pose and weakly identified parameters."""
+    notes = []
+    if flight.true_theta is not None:
+        notes.append("true parameters from the simulated flight's meta.json (not used by the "
+                     "estimator)")
+    if flight.pose_source == "autopilot":
+        notes.append("pose from the autopilot's own estimator (filtered and lagged): measurement "
+                     f"σ {1000 * sigma[0]:.0f} mm, {math.degrees(sigma[1]):.1f}° assumed")
+    weak = [n for n, s in zip(PARAMETER_NAMES, final.relative_sigma, strict=True) if s > 0.2]
+    if weak:
+        notes.append(f"poorly identified (σ > 20 %): {', '.join(weak)}; the flight did not "
+                     "excite them enough")
+    return notes

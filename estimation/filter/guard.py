@@ -1,0 +1,324 @@
+"""filter.guard."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from mavsysid.estimation.checks import implausibility, vanishing_floor, vanishing_parameters
+from mavsysid.estimation.equation_error_fit import EquationErrorFit
+from mavsysid.estimation.filter.ekf import FilterOverflow, FilterRun
+from mavsysid.estimation.filter.likelihood import ModelTerms, reference_terms
+from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation.signals import NOISE_TOLERANCE
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
+from mavsysid.vehicle.linearization import MEAS_DIM, initial_state_sigma
+from mavsysid.vehicle.model_effects import ModelEffect
+from scipy.stats import chi2
+
+from mavsysid.errors import JobFailedError
+
+__all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "CORRELATED_RHO", "DECORRELATION_PASSES",
+           "DIVERGED_NIS", "MAX_RESTARTS", "NIS_FACTOR", "NIS_WINDOW", "OVERFLOW_SHARE",
+           "UNDETERMINED_RELATIVE", "check_agreement", "correlated_noise_sigma",
+           "decorrelated_attempt", "disagreements", "divergence", "failure_phrase",
+           "filter_attempt", "guarded_filter", "nis_level"]
+
+
+#: Window of the NIS mean, s.
+NIS_WINDOW = 1.0
+
+#: Windowed mean NIS beyond this multiple of its 99.9 % χ² bound is a diverged filter.
+NIS_FACTOR = 20.0
+
+#: Lag-one autocorrelation of the innovations above which the pose noise counts as
+#: correlated (a consistent filter's innovations are white, ρ ≈ 0; a few samples'
+#: smoothing gives ≈ 0.8), and the largest one believed.
+CORRELATED_RHO = 0.9
+_RHO_MAX = 0.999
+
+#: How `divergence` starts the phrase of a run whose innovations grew beyond the bound.
+DIVERGED_NIS = "mean normalised innovation squared"
+
+#: Agreement rule of the cross-check: sigmas and relative tolerance per parameter.
+AGREEMENT_SIGMAS = 3.0
+AGREEMENT_TOLERANCE = np.array([0.05, 0.15, 0.05, 0.05, 0.05, 0.05])
+
+#: A disagreement of this fraction of the value leaves the parameter undetermined (the
+#: σ that holds it is half the value: `mavsysid.estimation.checks`'s "the log does
+#: not determine it"), and the estimate is refused.
+UNDETERMINED_RELATIVE = 0.5
+
+
+def nis_level(t: np.ndarray, nis: np.ndarray) -> tuple[float, float]:
+    """Median windowed mean NIS over the flight's second half, and its 99.9 % χ² bound.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s.
+    nis : ndarray, shape (N,)
+        The filter's NIS per sample (the first is not an innovation).
+
+    Returns
+    -------
+    level, bound : float
+        NaN level when the half is shorter than one window; inf when not finite.
+    """
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    w = max(1, round(NIS_WINDOW / dt))
+    bound = float(chi2.ppf(0.999, MEAS_DIM * w)) / w
+    x = np.asarray(nis, float)[1:]
+    half = x[x.size // 2:]
+    if not np.all(np.isfinite(half)):
+        return float("inf"), bound
+    if half.size < w:
+        return float("nan"), bound
+    return float(np.median(np.convolve(half, np.ones(w) / w, mode="valid"))), bound
+
+
+def correlated_noise_sigma(innovation: np.ndarray) -> tuple[float, float]:
+    """Position and attitude σ of a pose whose noise is correlated in time; NaN: white.
+
+    An on-board estimator's pose error drifts over a fraction of a second, yet the filter
+    weighs every 500 Hz sample as independent: it becomes overconfident long before θ is
+    determined, fits inertia to the drift and can lock there (or overflow). For AR(1)
+    noise of σ s and lag-one correlation ρ a mean over N samples has the variance of N
+    (1 − ρ) / (1 + ρ) independent ones, so the white σ that carries the same information
+    is s √((1 + ρ) / (1 − ρ)). s is the RMS of the innovations over the three position
+    (attitude) channels, ρ the median of their lag-one autocorrelations (at most
+    `_RHO_MAX`). Both are NaN (no change) unless one group's ρ exceeds `CORRELATED_RHO`:
+    noise smoothed over a few samples (ρ ≈ 0.8) is left to the white σ.
+
+    Parameters
+    ----------
+    innovation : ndarray, shape (N, 6)
+        The filter's innovations [δp (m), δφ (rad)]; the first row is not one.
+
+    Returns
+    -------
+    tuple of 2 float
+        σ of position (m) and attitude (rad), or NaN.
+    """
+    y = np.asarray(innovation, float)[1:]
+    y = y[np.all(np.isfinite(y), axis=1)]
+    if y.shape[0] < 3:
+        return float("nan"), float("nan")
+    y = y - y.mean(axis=0)
+    power = np.sum(y * y, axis=0)
+    rho = np.sum(y[1:] * y[:-1], axis=0) / np.where(power > 0.0, power, 1.0)
+    groups = (slice(0, 3), slice(3, 6))
+    r = np.clip([np.median(rho[g]) for g in groups], 0.0, _RHO_MAX)
+    if not np.max(r) > CORRELATED_RHO:
+        return float("nan"), float("nan")
+    rms = [float(np.sqrt(np.mean(power[g]) / y.shape[0])) for g in groups]
+    out = [s * float(np.sqrt((1.0 + c) / (1.0 - c))) for s, c in zip(rms, r, strict=True)]
+    return out[0], out[1]
+
+
+def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
+               prior: ParameterEstimate, may_vanish: np.ndarray | None = None,
+               floor: np.ndarray | None = None) -> str | None:
+    """Why a filter run counts as diverged, as one phrase; None when it did not.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s.
+    nis : ndarray, shape (N,)
+        The filter's NIS per sample.
+    theta : ParameterEstimate
+        The filter's final θ.
+    prior : ParameterEstimate
+        The prior (the vehicle file's θ and σ).
+    may_vanish : ndarray of bool, shape (6,), optional
+        θ entries the model lets be ≈ 0 (`mavsysid.estimation.checks.vanishing_parameters`).
+    floor : ndarray, shape (6,), optional
+        Their least possible values (`mavsysid.estimation.checks.vanishing_floor`).
+    """
+    reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish,
+                            floor)
+    if reason is not None:
+        return reason
+    level, bound = nis_level(t, nis)
+    if level > NIS_FACTOR * bound:
+        return (f"{DIVERGED_NIS} {level:.3g} over {NIS_WINDOW:g} s "
+                f"windows, {level / bound:.3g}× its χ² bound {bound:.3g}")
+    return None
+
+
+def disagreements(final: ParameterEstimate, ee: ParameterEstimate) -> np.ndarray:
+    """Which parameters the two estimates disagree on (the rule above), bool (6,).
+
+    Parameters
+    ----------
+    final, ee : ParameterEstimate
+        The estimator's θ (σ before any widening) and the equation-error θ, SI.
+    """
+    delta = np.abs(final.value - ee.value)
+    spread = np.sqrt(final.sigma**2 + ee.sigma**2)
+    return (delta > AGREEMENT_SIGMAS * spread) & (delta > AGREEMENT_TOLERANCE * np.abs(ee.value))
+
+
+def check_agreement(source: str, final: ParameterEstimate, ee: ParameterEstimate) -> None:
+    """Refuse (`JobFailedError`, one line) a final θ the equation-error fit leaves undetermined.
+
+    A parameter on which the two disagree (`disagreements`) by at least
+    `UNDETERMINED_RELATIVE` of the final value is refused; a smaller disagreement is a
+    model mismatch the estimator reports with a widened σ.
+
+    Parameters
+    ----------
+    source : str
+        The log, named first.
+    final, ee : ParameterEstimate
+        The estimator's θ (σ before any widening) and the equation-error θ, SI.
+    """
+    delta = final.value - ee.value
+    spread = np.sqrt(final.sigma**2 + ee.sigma**2)
+    bad = disagreements(final, ee) & (np.abs(delta) >= UNDETERMINED_RELATIVE
+                                      * np.abs(final.value))
+    for i in np.flatnonzero(bad):
+        name, unit = PARAMETER_NAMES[i], PARAMETER_UNITS[PARAMETER_NAMES[i]]
+        raise JobFailedError(
+            f"{source}: the estimate {name} = {final.value[i]:.4g} ± {final.sigma[i]:.2g} "
+            f"{unit} contradicts the log's force and torque balance ({name} = "
+            f"{ee.value[i]:.4g} ± {ee.sigma[i]:.2g} {unit}, {abs(delta[i]) / spread[i]:.1f} σ "
+            "apart), so far that the log does not determine it; the model does not fit this "
+            "log as the filter assumed (mavsysid diagnose names what it misses)")
+
+
+#: Filter passes that may raise the measurement σ for correlated pose noise.
+DECORRELATION_PASSES = 3
+
+#: Share of an overflowed run's innovations (the first ones) that measure the pose noise.
+OVERFLOW_SHARE = 0.75
+
+#: Restarts of a diverged filter from the equation-error θ before the estimate is refused.
+MAX_RESTARTS = 2
+
+
+def failure_phrase(reason: str | None) -> str:
+    """What a failed run did: diverged (innovations, overflow) or ended at an impossible θ.
+
+    Parameters
+    ----------
+    reason : str or None
+        `mavsysid.estimation.filter.guard.divergence`'s phrase, or "the state overflowed".
+    """
+    if reason is None or reason.startswith((DIVERGED_NIS, "the state overflowed")):
+        return f"diverged ({reason})"
+    return f"ended at a θ that is not physical ({reason})"
+
+
+def filter_attempt(
+    flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
+    start: ParameterEstimate, prior: ParameterEstimate, sigma: tuple[float, float],
+) -> tuple[ModelTerms | None, FilterRun | None, str | None]:
+    """One filter run: terms, run and why it diverged (None: it did not).
+
+    An entry of θ that ``effects`` let vanish (c_D with ``rotor_drag_linear``) may be ≈ 0,
+    or as low as physics allows beside them (`mavsysid.estimation.checks`).
+    """
+    terms, run, reason, _ = _attempt(flight, effects, config, start, prior, sigma)
+    return terms, run, reason
+
+
+def _attempt(
+    flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
+    start: ParameterEstimate, prior: ParameterEstimate, sigma: tuple[float, float],
+) -> tuple[ModelTerms | None, FilterRun | None, str | None, np.ndarray]:
+    """`filter_attempt` and the run's innovations (N, 6); of an overflowed run, those
+    of its first `OVERFLOW_SHARE` of samples (its last ones are the blow-up)."""
+    state_sigma = initial_state_sigma(sigma[0], sigma[1], float(flight.t[1] - flight.t[0]))
+    try:
+        terms, run = reference_terms(flight, effects, config, start, sigma, state_sigma)
+    except FilterOverflow as error:
+        innovation = error.innovation[:int(OVERFLOW_SHARE * error.innovation.shape[0])]
+        return None, None, "the state overflowed", innovation
+    except JobFailedError:
+        return None, None, "the state overflowed", np.empty((0, MEAS_DIM))
+    may_vanish = vanishing_parameters(e.name for e in effects)
+    floor = vanishing_floor(effects, float(run.estimate.value[0]),
+                            config.limits.rotor_speed_max)
+    return terms, run, divergence(run.history.t, run.history.nis, run.estimate, prior,
+                                  may_vanish, floor), run.history.innovation
+
+
+def decorrelated_attempt(
+    flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
+    start: ParameterEstimate, prior: ParameterEstimate, sigma: tuple[float, float],
+    notes: list[str],
+) -> tuple[ModelTerms | None, FilterRun | None, str | None, tuple[float, float]]:
+    """`filter_attempt`, rerun with σ widened while its innovations are correlated.
+
+    A pose whose noise drifts (an on-board estimator's) makes the innovations correlated;
+    the filter at white-noise σ is overconfident and fits θ to the drift. Each pass
+    raises σ to `mavsysid.estimation.filter.guard.correlated_noise_sigma` of the last run's
+    innovations (an overflowed run's too) when that is clearly larger (a filter at too
+    small a σ follows the drift and sees only part of it, hence up to
+    `DECORRELATION_PASSES` passes). Returns also the σ of the returned run.
+    """
+    terms, run, reason, innovation = _attempt(flight, effects, config, start, prior, sigma)
+    for _ in range(DECORRELATION_PASSES):
+        target = correlated_noise_sigma(innovation)
+        wider = tuple(t if t > NOISE_TOLERANCE * s else s
+                      for t, s in zip(target, sigma, strict=True))
+        if wider == sigma:
+            break
+        sigma = wider  # type: ignore[assignment]
+        notes.append(f"the filter's innovations are correlated in time (pose noise that "
+                     f"drifts): measurement σ raised to {1000 * sigma[0]:.2g} mm, "
+                     f"{math.degrees(sigma[1]):.2g}°, the white σ of equal information")
+        terms, run, reason, innovation = _attempt(flight, effects, config, start, prior,
+                                                  sigma)
+    return terms, run, reason, sigma
+
+
+def guarded_filter(
+    flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
+    priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
+    state_sigma: tuple[float, float, float, float], ee: EquationErrorFit | None,
+    notes: list[str], restart: bool = True,
+) -> tuple[ModelTerms, FilterRun, ParameterEstimate, tuple[float, float]]:
+    """Step 1 with the divergence guard (`mavsysid.estimation.filter.guard`).
+
+    Filter from ``start``; if it diverged, restart from the equation-error θ with the
+    prior's covariance and the measurement σ widened to the innovations' level (at most
+    `MAX_RESTARTS` times, while a restart has something new to try); refuse if it still
+    diverges, unless widening σ for correlated pose noise (`decorrelated_attempt`, from
+    the equation-error θ) ends the divergence. ``priors`` is (the prior, the filter's
+    start). Returns the terms, the run, and the start and measurement σ the run used.
+    ``restart`` False refuses at the first failure (another estimate answers instead).
+    """
+    prior, start = priors
+    if ee is None:
+        terms, run = reference_terms(flight, effects, config, start, sigma, state_sigma)
+        return terms, run, start, sigma
+    terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
+    if reason is not None and not restart:
+        raise JobFailedError(f"{flight.source}: the parameter filter {failure_phrase(reason)}")
+    from_ee = ParameterEstimate(ee.estimate.value, prior.covariance)
+    for _ in range(MAX_RESTARTS):
+        if reason is None:
+            break
+        level = nis_level(run.history.t, run.history.nis)[0] if run is not None else np.nan
+        widen = float(np.sqrt(level / MEAS_DIM)) if np.isfinite(level) else 1.0
+        widen = max(widen, 1.0)
+        if start is from_ee and widen == 1.0:
+            break  # the same run again would diverge again
+        start, sigma = from_ee, (sigma[0] * widen, sigma[1] * widen)
+        notes.append(f"the filter {failure_phrase(reason)}; restarted from the equation-error θ "
+                     f"with the measurement σ × {widen:.3g} (the innovations' level): "
+                     f"{1000 * sigma[0]:.2g} mm, {math.degrees(sigma[1]):.2g}°")
+        terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
+    if reason is not None:  # last resort: pose noise that drifts (an on-board estimator's)
+        start = from_ee
+        terms, run, reason, sigma = decorrelated_attempt(flight, effects, config, start,
+                                                         prior, sigma, notes)
+    if reason is not None or terms is None or run is None:
+        raise JobFailedError(" ".join(
+            f"{flight.source}: the parameter filter {failure_phrase(reason)}, also when restarted "
+            "from the equation-error θ; the model cannot follow this log".split()))
+    return terms, run, start, sigma

@@ -1,0 +1,286 @@
+"""flight."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from mavsysid.vehicle.mav_model import rotor_wrench
+
+__all__ = ["MIN_DURATION", "POSE_SOURCES", "SMOOTH_PERIOD", "FlightData", "InputSamples",
+           "step_process_noise", "wrench_noise_density"]
+
+
+#: Input series sampled at least this often (median step, s) are interpolated linearly:
+#: there the curvature term h² n̈ / 8 is below an ESC's rpm resolution and noise, which the
+#: second differences would amplify instead of correcting.
+SMOOTH_PERIOD = 0.1
+
+
+def _curvature_terms(t: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """d_i = h_i² n̈_i at each sample, shape (M, k), rad/s; zero at the two ends."""
+    d = np.zeros_like(n)
+    if t.shape[0] < 3:
+        return d
+    h = np.diff(t)
+    slope = np.diff(n, axis=0) / h[:, None]
+    span = 0.5 * (h[:-1] + h[1:])
+    curvature = np.diff(slope, axis=0) / span[:, None]
+    d[1:-1] = curvature * (span**2)[:, None]
+    # Across a gap the samples are too far apart to say anything about the curvature.
+    wide = np.maximum(h[:-1], h[1:]) > 2.0 * np.median(h)
+    d[1:-1][wide] = 0.0
+    return d
+
+
+def _locate(ts: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Interval j (between samples j, j + 1) of each time, and the fraction s ∈ [0, 1]."""
+    j = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, ts.shape[0] - 2)
+    s = np.clip((t - ts[j]) / (ts[j + 1] - ts[j]), 0.0, 1.0)
+    return j, s
+
+
+@dataclass(frozen=True)
+class InputSamples:
+    """The rotor-speed samples as logged, before interpolation to the pose times.
+
+    Attributes
+    ----------
+    series : tuple of (ndarray (M,), ndarray (M, m))
+        Each input series' strictly increasing times, s (the flight's clock), and its
+        rotor speeds, rad/s; columns concatenated in order are rotors 1..k.
+    """
+
+    series: tuple[tuple[np.ndarray, np.ndarray], ...]
+
+    def interpolate(self, t: np.ndarray) -> np.ndarray:
+        """Rotor speeds at times ``t`` (N,), rad/s, shape (N, k): linear, curvature-corrected.
+
+        Between samples j and j + 1 the straight line minus ½ s (1 − s) d(s), d = h² n̈
+        interpolated linearly between the samples' second differences: this removes the
+        leading interpolation error above, which is systematic (a straight line cuts the
+        peaks of every oscillation, so an estimate from it is biased, not only noisy).
+        At the samples themselves it is the sample; outside their span, the end sample.
+        Series sampled at least every `SMOOTH_PERIOD` s are interpolated linearly.
+        """
+        t = np.asarray(t, dtype=float)
+        columns = []
+        for ts, vs in self.series:
+            if ts.shape[0] < 2:
+                columns.append(np.repeat(vs[:1], t.shape[0], axis=0))
+                continue
+            j, s = _locate(ts, t)
+            line = vs[j] + s[:, None] * (vs[j + 1] - vs[j])
+            if np.median(np.diff(ts)) < SMOOTH_PERIOD:
+                columns.append(line)
+                continue
+            d = _curvature_terms(ts, vs)
+            bend = d[j] + s[:, None] * (d[j + 1] - d[j])
+            columns.append(line - 0.5 * (s * (1.0 - s))[:, None] * bend)
+        return np.column_stack(columns)
+
+    def density(self, t: np.ndarray) -> np.ndarray:
+        """Spectral density of the interpolation error at times ``t``.
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times the rotor speeds were interpolated to, s.
+
+        Returns
+        -------
+        ndarray, shape (N, k, k)
+            S (see the module docstring), (rad/s)²·s; block diagonal across series
+            (series are sampled independently).
+        """
+        t = np.asarray(t, dtype=float)
+        k = sum(v.shape[1] for _, v in self.series)
+        out = np.zeros((t.shape[0], k, k))
+        col = 0
+        for ts, vs in self.series:
+            m = vs.shape[1]
+            if ts.shape[0] >= 2:
+                d = _curvature_terms(ts, vs)
+                outer = d[:, :, None] * d[:, None, :]
+                # Interval j: between samples j and j + 1.
+                C = outer[:-1] + outer[1:]
+                S = np.diff(ts)[:, None, None] * C / 144.0
+                j, s = _locate(ts, t)
+                # At a sample itself the rotor speed is measured, not interpolated.
+                inside = (s > 1e-9) & (s < 1.0 - 1e-9)
+                out[:, col:col + m, col:col + m] = S[j] * inside[:, None, None]
+            col += m
+        return out
+
+
+def wrench_noise_density(n: np.ndarray, density: np.ndarray, theta: np.ndarray,
+                         r: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """The rotor-speed error density as body force and torque noise density.
+
+    Parameters
+    ----------
+    n : ndarray, shape (N, k)
+        Rotor speeds, rad/s, where the Jacobian is taken.
+    density : ndarray, shape (N, k, k)
+        Rotor-speed error density S, (rad/s)²·s (`InputSamples.density`).
+    theta : ndarray, shape (6,)
+        θ, SI, for the Jacobian (the prior's: the density is an uncertainty, the
+        nominal θ is close enough for its size).
+    r : ndarray, shape (k, 3)
+        Rotor positions, m, body frame.
+    eps : ndarray, shape (k,)
+        Spin directions, ±1.
+
+    Returns
+    -------
+    ndarray, shape (N, 6, 6)
+        J S Jᵀ with J = ∂[F_B, M_B]/∂n (at hover velocity and rates, zero: the drag
+        terms' share is second order), in N²·s and N²·m²·s, the units of the filter's
+        process-noise density.
+    """
+    n = np.asarray(n, dtype=float)
+    zeros = np.zeros((n.shape[0], 3))
+    force, torque = rotor_wrench(n, theta, r, eps, zeros, zeros)
+    base = np.column_stack([force, torque])
+    J = np.empty((n.shape[0], 6, n.shape[1]))
+    for i in range(n.shape[1]):
+        step = 1e-3 * np.maximum(np.abs(n[:, i]), 1.0)
+        moved = n.copy()
+        moved[:, i] += step
+        f, m = rotor_wrench(moved, theta, r, eps, zeros, zeros)
+        J[:, :, i] = (np.column_stack([f, m]) - base) / step[:, None]
+    return J @ density @ J.transpose(0, 2, 1)
+
+
+def step_process_noise(Qc: np.ndarray, t: np.ndarray, n: np.ndarray,
+                       inputs: InputSamples | None, theta: np.ndarray, r: np.ndarray,
+                       eps: np.ndarray) -> np.ndarray:
+    """The process-noise density of each filter step: configured plus input error.
+
+    Parameters
+    ----------
+    Qc : ndarray, shape (6, 6)
+        The configured force and moment noise density, N²·s and N²·m²·s.
+    t : ndarray, shape (N,)
+        The flight's sample times, s.
+    n : ndarray, shape (N, k)
+        The rotor speeds at ``t``, rad/s.
+    inputs : InputSamples or None
+        The rotor-speed samples as logged; None adds nothing.
+    theta, r, eps
+        As for `wrench_noise_density`.
+
+    Returns
+    -------
+    ndarray, shape (N, 6, 6)
+        Row i is the density of the step from sample i to i + 1 (the last row unused).
+    """
+    out = np.repeat(np.asarray(Qc, dtype=float)[None], np.shape(t)[0], axis=0)
+    if inputs is not None:
+        out += wrench_noise_density(n, inputs.density(t), theta, r, eps)
+    return out
+
+
+#: Shortest flight worth estimating from, s: the log checks and the estimator both refuse
+#: less.
+MIN_DURATION = 2.0
+
+#: Where the pose came from: raw motion capture, or the autopilot's own (filtered,
+#: lagged) estimator, which calls for a larger measurement noise.
+POSE_SOURCES = ("motion_capture", "autopilot")
+
+
+@dataclass(frozen=True)
+class FlightData:
+    """Samples of one flight, N of them.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Time, s, strictly increasing.
+    position : ndarray, shape (N, 3)
+        Measured position, m, world ENU.
+    quaternion : ndarray, shape (N, 4)
+        Measured attitude, unit ``[w, x, y, z]``, body FLU → world ENU.
+    rotor_speeds : ndarray, shape (N, k)
+        Actual rotor speeds, rad/s, in the vehicle config's rotor order.
+    source : str
+        The file it was read from (with ``+ pose FILE`` when merged).
+    pose_source : {"motion_capture", "autopilot"}
+        Origin of the pose measurements.
+    truth : dict or None
+        The ``truth`` block of a simulated flight's meta.json (true parameters under
+        ``"parameters"``), if any. Never used by estimation, only for reporting errors.
+    warnings : tuple of str
+        Problems found and repaired while reading (NaN rows dropped, …), one line each.
+    segment_starts : tuple of int
+        Index of the first sample of each contiguous segment, increasing, starting with 0:
+        a gap too long to bridge separates two segments (see
+        `mavsysid.estimation.readers.samples`). One segment, ``(0,)``, by default.
+    inputs : InputSamples or None
+        The rotor-speed samples as logged, before interpolation to ``t``: the filter adds
+        the interpolation error as process noise (`mavsysid.estimation.flight`).
+        None: the rotor speeds are exact at ``t`` (as in a pose log).
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    rotor_speeds: np.ndarray
+    source: str
+    pose_source: Literal["motion_capture", "autopilot"] = "motion_capture"
+    truth: dict | None = None
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+    segment_starts: tuple[int, ...] = (0,)
+    inputs: InputSamples | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def duration(self) -> float:
+        """Time span of the samples, s."""
+        return float(self.t[-1] - self.t[0]) if len(self) else 0.0
+
+    @property
+    def rotor_count(self) -> int:
+        """k, the number of rotor-speed columns."""
+        return int(self.rotor_speeds.shape[1])
+
+    @property
+    def true_theta(self) -> np.ndarray | None:
+        """True θ (6,) when the flight was simulated, else None."""
+        if not self.truth or "parameters" not in self.truth:
+            return None
+        p = self.truth["parameters"]
+        return np.array([p["c_T"], p["c_D"], p["c_M"], p["j_x"], p["j_y"], p["j_z"]], float)
+
+    @property
+    def segment_bounds(self) -> list[tuple[int, int]]:
+        """``(start, stop)`` sample indices of each segment (``stop`` exclusive)."""
+        ends = (*self.segment_starts[1:], len(self))
+        return list(zip(self.segment_starts, ends, strict=True))
+
+    def segment(self, index: int) -> FlightData:
+        """Segment ``index`` alone, as a one-segment flight."""
+        start, stop = self.segment_bounds[index]
+        return FlightData(self.t[start:stop], self.position[start:stop],
+                          self.quaternion[start:stop], self.rotor_speeds[start:stop],
+                          self.source, self.pose_source, self.truth, self.warnings,
+                          inputs=self.inputs)
+
+    def longest_segment(self) -> int:
+        """Index of the segment spanning the most time (the first of equals)."""
+        spans = [self.t[stop - 1] - self.t[start] for start, stop in self.segment_bounds]
+        return int(np.argmax(spans))
+
+    def time_slice(self, t0: float, t1: float) -> FlightData:
+        """The samples with t0 ≤ t ≤ t1 (segments kept where they start inside)."""
+        keep = (self.t >= t0) & (self.t <= t1)
+        # One contiguous time range: a segment start cut off lies before t0 or after t1.
+        index = np.cumsum(keep) - 1
+        starts = sorted({0, *(int(index[s]) for s in self.segment_starts if keep[s])})
+        return FlightData(self.t[keep], self.position[keep], self.quaternion[keep],
+                          self.rotor_speeds[keep], self.source, self.pose_source,
+                          self.truth, self.warnings, tuple(starts), inputs=self.inputs)

@@ -1,0 +1,424 @@
+"""report.text."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import os
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.formats.flight_dir import write_json_atomic
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
+
+__all__ = ["CONVERGENCE_TOLERANCE", "HISTORY_COLUMNS", "convergence_time", "format_table",
+           "history_frame", "result_to_json", "software_version", "updated_vehicle",
+           "write_estimate_json", "write_history_csv"]
+
+
+#: Relative band that counts as converged (the paper's "within 5 %").
+CONVERGENCE_TOLERANCE = 0.05
+
+_POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
+
+
+def convergence_time(
+    t: np.ndarray,
+    theta: np.ndarray,
+    reference: np.ndarray,
+    tolerance: float = CONVERGENCE_TOLERANCE,
+) -> np.ndarray:
+    """When each parameter's estimate settles within a relative band around a reference.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s, increasing.
+    theta : ndarray, shape (N, P)
+        Estimates over time (P = 6 for θ), SI.
+    reference : ndarray, shape (P,)
+        Values to converge to (the truth, or the final estimate), SI.
+    tolerance : float, optional
+        Half-width of the band relative to ``|reference|`` (0.05 = 5 %).
+
+    Returns
+    -------
+    ndarray, shape (P,)
+        Per parameter, the first t_i such that ``|theta[k, j] - reference[j]| <=
+        tolerance * |reference[j]|`` for every k ≥ i, s; NaN when the last sample is
+        outside the band (or there are no samples). A NaN estimate counts as outside.
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    theta = np.asarray(theta, dtype=float)
+    reference = np.asarray(reference, dtype=float).reshape(-1)
+    if theta.ndim != 2 or theta.shape != (t.size, reference.size):
+        raise ValueError(
+            f"convergence_time: theta of shape ({t.size}, {reference.size}) to match t "
+            f"and reference, got {theta.shape}"
+        )
+    out = np.full(reference.size, np.nan)
+    if t.size == 0:
+        return out
+    inside = np.abs(theta - reference) <= tolerance * np.abs(reference)
+    # A reversed running AND marks the samples from which the estimate never leaves again.
+    stays = np.logical_and.accumulate(inside[::-1], axis=0)[::-1]
+    settled = stays[-1]
+    out[settled] = t[np.argmax(stays[:, settled], axis=0)]
+    return out
+
+
+def software_version() -> str:
+    """The installed mavsysid version, ``"0+unknown"`` when run from an uninstalled tree."""
+    try:
+        return importlib.metadata.version("mavsysid")
+    except importlib.metadata.PackageNotFoundError:
+        return "0+unknown"
+
+
+# --- the table on stdout ---------------------------------------------------------------
+
+
+def _fmt(value: float, spec: str, missing: str = "n/a") -> str:
+    """`value` formatted with `spec`, or `missing` when it is NaN or infinite."""
+    return format(value, spec) if math.isfinite(value) else missing
+
+
+def _relative(difference: float, reference: float) -> float:
+    """difference / |reference|, NaN when the reference is 0 (a simulated c_D = 0, say)."""
+    return difference / abs(reference) if reference != 0.0 else math.nan
+
+
+def _percent(fraction: float) -> str:
+    """A relative quantity as a percentage with two decimals, "<0.01" below that."""
+    percent = 100.0 * fraction
+    # Two decimals read well in a column; tiny values must not print as a bare 0.00.
+    return "<0.01" if 0.0 <= percent < 0.005 else _fmt(percent, ".2f")
+
+
+def _rows(header: list[str], rows: list[list[str]], left: int = 1) -> list[str]:
+    """Fixed-width lines: the first `left` columns left-aligned, the rest right-aligned."""
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+
+    def line(cells: list[str]) -> str:
+        parts = [c.ljust(w) if i < left else c.rjust(w)
+                 for i, (c, w) in enumerate(zip(cells, widths, strict=True))]
+        return "  ".join(parts).rstrip()
+
+    return [line(header), *(line(r) for r in rows)]
+
+
+def _header(result: EstimationResult, config: VehicleConfig, log_name: str) -> list[str]:
+    """Where the numbers come from: log, vehicle, pose source and assumed noise."""
+    position_sigma, attitude_sigma = result.measurement_sigma
+    source = _POSE_SOURCE_LABELS.get(result.pose_source, result.pose_source)
+    lines = [
+        f"Parameter estimate from {log_name}",
+        f"  vehicle      {config.name} (mass {config.mass:.4g} kg, {config.rotor_count} rotors)",
+        f"  pose source  {source}; measurement σ assumed {position_sigma * 1e3:.2f} mm, "
+        f"{math.degrees(attitude_sigma):.3f}°",
+    ]
+    if result.pose_source == "autopilot":
+        lines += [
+            "               The pose comes from the autopilot's own estimator (filtered and",
+            "               lagged), so a larger measurement noise was assumed and the",
+            "               results are less certain than with motion capture.",
+        ]
+    return lines
+
+
+def _main_block(result: EstimationResult) -> list[str]:
+    """One row per parameter: prior, final estimate, σ, convergence (and truth)."""
+    final = result.final
+    truth = result.true_theta
+    header = ["parameter", "unit", "prior", "estimate", "σ", "σ/|θ| %", "converged s"]
+    if truth is not None:
+        header += ["true", "error %"]
+    if result.status:
+        header += ["status", "from"]
+    rows = []
+    for j, name in enumerate(PARAMETER_NAMES):
+        value = float(final.value[j])
+        row = [
+            name,
+            PARAMETER_UNITS[name],
+            _fmt(float(result.prior.value[j]), ".3e"),
+            _fmt(value, ".3e"),
+            _fmt(float(final.sigma[j]), ".2e"),
+            _percent(_relative(float(final.sigma[j]), value)),
+            _fmt(float(result.convergence_time[j]), ".2f", missing="—"),
+        ]
+        if truth is not None:
+            true_value = float(truth[j])
+            row += [_fmt(true_value, ".3e"),
+                    _fmt(100.0 * _relative(value - true_value, true_value), "+.2f")]
+        if result.status:
+            row += [result.status[j], result.answer_source[j]]
+        rows.append(row)
+    which = "batch refinement" if result.refined is not None else "filter"
+    if result.status:
+        which = ("per parameter (from: the filter and batch refinement, the force and "
+                 "torque balance, or the prior)")
+    target = "the truth" if truth is not None else "its own final value"
+    return [
+        *_rows(header, rows, left=2),
+        f"estimate: {which}; σ: its standard deviation; converged: first time after which",
+        f"the filter estimate stays within {100 * CONVERGENCE_TOLERANCE:g} % of {target} "
+        "(— never).",
+    ]
+
+
+def _effects_block(result: EstimationResult) -> list[str]:
+    """One row per effect parameter: value, σ and 95 % interval (or "given")."""
+    header = ["effect", "parameter", "unit", "value", "σ", "95 % interval"]
+    rows = []
+    for fe in result.effects:
+        lo, hi = fe.ci95
+        for j, p in enumerate(fe.effect.parameters):
+            interval = (f"[{_fmt(float(lo[j]), '.4g')}, {_fmt(float(hi[j]), '.4g')}]"
+                        if fe.fitted else "given")
+            rows.append([fe.name, p.name, p.unit, _fmt(float(fe.value[j]), ".4g"),
+                         _fmt(float(fe.sigma[j]), ".2g", missing="—"), interval])
+    return ["Model effects", *_rows(header, rows, left=3)]
+
+
+def _refined_block(filtered: ParameterEstimate, refined: ParameterEstimate) -> list[str]:
+    """Filter and refined estimates side by side, value and σ."""
+    header = ["parameter", "filter", "σ", "refined", "σ"]
+    rows = [[name, _fmt(float(filtered.value[j]), ".3e"), _fmt(float(filtered.sigma[j]), ".2e"),
+             _fmt(float(refined.value[j]), ".3e"), _fmt(float(refined.sigma[j]), ".2e")]
+            for j, name in enumerate(PARAMETER_NAMES)]
+    return ["Filter vs batch refinement", *_rows(header, rows)]
+
+
+def _pooled(rmse: np.ndarray) -> float:
+    """RMSE pooled over the axes that have one; NaN if none."""
+    live = rmse[np.isfinite(rmse)]
+    return float(np.sqrt(np.mean(live**2))) if live.size else float("nan")
+
+
+def _balance_block(balance: Any) -> list[str]:
+    """The force and torque balance: its choices and the held-out check."""
+    c = balance.choices
+    band = ("none" if c.roll_pitch is None
+            else f"{c.roll_pitch.low:.3g}–{c.roll_pitch.high:.3g} Hz")
+    lines = ["Force and torque balance",
+             f"  smoothing window {1000 * c.window:.0f} ms; roll/pitch band {band}; "
+             f"pose lags the rotor speeds by {1000 * c.delay:+.1f} ± "
+             f"{_fmt(1000 * balance.delay_sigma, '.1f')} ms"]
+    h = balance.holdout
+    if h is None:
+        lines.append("  held-out check: none (the flight is too short to hold a part out)")
+        return lines
+    lines += [
+        f"  held-out check (fitted before t = {h.start:.2f} s, predicting the rest, "
+        f"{h.rows} rows):",
+        f"    force RMSE {_fmt(_pooled(h.rmse[:3]), '.3g')} m/s², "
+        f"{_fmt(h.force_ratio, '.2f')} × the prior model's; angular acceleration RMSE "
+        f"{_fmt(_pooled(h.rmse[3:]), '.3g')} rad/s², {_fmt(h.torque_ratio, '.2f')} × the "
+        "prior model's",
+        "    (below 1: the estimate predicts unseen data better than the prior)"]
+    return lines
+
+
+def format_table(result: EstimationResult, config: VehicleConfig, log_name: str) -> str:
+    """The human-readable report printed by ``mavsysid estimate``.
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The estimate to report.
+    config : VehicleConfig
+        The vehicle it was estimated for (name, mass).
+    log_name : str
+        How to name the log (usually its path as given by the user).
+
+    Returns
+    -------
+    str
+        Fixed-width text ending in a newline: header lines, one row per parameter,
+        the model effects with their parameters when there are any, the filter-vs-refined
+        comparison when the result was refined, the result's notes
+        and a reminder that mass and rotor geometry are taken as known.
+    """
+    lines = [*_header(result, config, log_name), "", *_main_block(result)]
+    if result.effects:
+        lines += ["", *_effects_block(result)]
+    if result.refined is not None:
+        lines += ["", *_refined_block(result.filtered, result.refined)]
+    if result.balance is not None:
+        lines += ["", *_balance_block(result.balance)]
+    lines.append("")
+    lines += [f"note: {note}" for note in result.notes]
+    lines += [
+        f"Mass ({config.mass:.4g} kg) and rotor geometry are taken as known: a wrong mass "
+        "scales c_T, c_M and J",
+        "together and cannot be detected from pose and rotor speeds.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+# --- estimate.json ---------------------------------------------------------------------
+
+
+def _number(value: float) -> float | None:
+    """A JSON number, or None for NaN and infinity (JSON has neither)."""
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _block(
+    estimate: ParameterEstimate, convergence: np.ndarray | None, truth: np.ndarray | None
+) -> dict[str, dict[str, float | str | None]]:
+    """One estimate as ``{name: {"value", "unit", "sigma", "relative_sigma", ...}}``."""
+    out: dict[str, dict[str, float | str | None]] = {}
+    for j, name in enumerate(PARAMETER_NAMES):
+        value, sigma = float(estimate.value[j]), float(estimate.sigma[j])
+        entry: dict[str, float | str | None] = {
+            "value": _number(value),
+            "unit": PARAMETER_UNITS[name],
+            "sigma": _number(sigma),
+            "relative_sigma": _number(_relative(sigma, value)),
+            "convergence_time_s": None if convergence is None else _number(convergence[j]),
+        }
+        if truth is not None:
+            true_value = float(truth[j])
+            entry["true_value"] = _number(true_value)
+            entry["error_relative"] = _number(_relative(value - true_value, true_value))
+        out[name] = entry
+    return out
+
+
+def result_to_json(
+    result: EstimationResult, config: VehicleConfig, log_path: str | Path
+) -> dict[str, Any]:
+    """The ``estimate.json`` document (docs/architecture.md, "User-facing contract").
+
+    Parameters
+    ----------
+    result : EstimationResult
+        The estimate to write.
+    config : VehicleConfig
+        The vehicle it was estimated for.
+    log_path : str or Path
+        The log it was estimated from, stored as given.
+
+    Returns
+    -------
+    dict
+        JSON-ready (no NaN; absent quantities are None). Keys: ``effects``, a list of
+        ``{"name", "fitted", "parameters": {p: {"value", "sigma", "ci95", "unit"}}}`` in
+        the model's order (σ and ``ci95`` None for values given, not fitted; empty for the
+        paper's model), ``log_likelihood`` (the filter's innovation log-likelihood, see
+        `EstimationResult.log_likelihood`), ``parameters`` (the final
+        estimate: refined if present, else the filter's), ``filter``, ``refined`` (or
+        None) and ``prior``, each ``{name: {"value", "unit", "sigma", "relative_sigma",
+        "convergence_time_s"}}`` (``unit`` from `PARAMETER_UNITS`, the unit of value and
+        σ) plus ``"true_value"`` and ``"error_relative"`` (signed,
+        (value − true)/|true|) when the truth is known. ``convergence_time_s`` (s) is the
+        filter's (see `EstimationResult.convergence_time`): given in ``parameters`` and
+        ``filter``, None there for a parameter that never settled, and always None in
+        ``refined`` and ``prior``, which have no time history. Also ``covariance`` (final, 6×6, SI),
+        ``parameter_names``, ``log``, ``vehicle``, ``pose_source``,
+        ``measurement_sigma`` (``position_m``, ``attitude_rad``), ``notes`` and
+        ``software`` (``name``, ``version``). With the per-parameter answer
+        (`mavsysid.estimation.answer`), each entry of ``parameters`` adds
+        ``status`` ("determined", "not determined by this flight", "at the bound") and
+        ``source`` ("filter", "balance", "prior"); ``balance`` is the force and torque
+        balance (`WrenchBalanceResult.as_dict`) or None, ``holdout`` its held-out check
+        (RMSE per axis and ratios to the prior model) or None, ``mismatch`` the parameters
+        where the filter and the balance disagree, and ``filter_refusal`` why the filter
+        could not answer (then ``filter`` is None).
+    """
+    truth = result.true_theta
+    position_sigma, attitude_sigma = result.measurement_sigma
+    convergence = result.convergence_time
+    parameters = _block(result.final, convergence, truth)
+    for j, name in enumerate(PARAMETER_NAMES):
+        if result.status:
+            parameters[name]["status"] = result.status[j]
+            parameters[name]["source"] = result.answer_source[j]
+    balance = result.balance
+    return {
+        "parameters": parameters,
+        "effects": [fe.as_dict() for fe in result.effects],
+        "log_likelihood": _number(result.log_likelihood),
+        "filter": None if result.filter_refusal is not None
+        else _block(result.filtered, convergence, truth),
+        "filter_refusal": result.filter_refusal,
+        "balance": None if balance is None else balance.as_dict(),
+        "holdout": None if balance is None or balance.holdout is None
+        else balance.holdout.as_dict(),
+        "mismatch": list(result.mismatch),
+        "refined": None if result.refined is None else _block(result.refined, None, truth),
+        "prior": _block(result.prior, None, truth),
+        "covariance": [[_number(c) for c in row] for row in result.final.covariance],
+        "parameter_names": list(PARAMETER_NAMES),
+        "log": str(log_path),
+        "vehicle": config.name,
+        "pose_source": result.pose_source,
+        "measurement_sigma": {"position_m": _number(position_sigma),
+                              "attitude_rad": _number(attitude_sigma)},
+        "notes": list(result.notes),
+        "software": {"name": "mavsysid", "version": software_version()},
+    }
+
+
+def write_estimate_json(
+    path: str | Path, result: EstimationResult, config: VehicleConfig, log_path: str | Path
+) -> None:
+    """Write `result_to_json` to `path` atomically, creating its directory.
+
+    A reader sees the previous file or the complete new one, never a partial write.
+    """
+    write_json_atomic(path, result_to_json(result, config, log_path))
+
+
+def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleConfig:
+    """`config` with the final estimate as its nominal θ and the result's effects.
+
+    The effects (with their fitted values) replace the config's ``[effects.NAME]`` tables,
+    so `estimate` and `sim` use them from then on (save with `save_vehicle`).
+    """
+    updated = config.with_parameters(np.asarray(result.final.value, dtype=float))
+    return replace(updated, effects=tuple(fe.effect for fe in result.effects))
+
+
+#: Columns of the history CSV, in order.
+HISTORY_COLUMNS: tuple[str, ...] = (
+    "t", *(c for name in PARAMETER_NAMES for c in (name, f"{name}_sigma")), "nis")
+
+
+def history_frame(history: EstimationHistory) -> pd.DataFrame:
+    """The filter's θ and σ over time as a table with `HISTORY_COLUMNS` (N rows)."""
+    columns: dict[str, object] = {"t": history.t}
+    for j, name in enumerate(PARAMETER_NAMES):
+        columns[name] = history.theta[:, j]
+        columns[f"{name}_sigma"] = history.theta_sigma[:, j]
+    columns["nis"] = history.nis
+    return pd.DataFrame(columns, columns=list(HISTORY_COLUMNS))
+
+
+def write_history_csv(path: str | Path, history: EstimationHistory) -> None:
+    """Write `history_frame` as CSV, atomically (a reader never sees half a file).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file; its directory is created.
+    history : EstimationHistory
+        The filter over time (`mavsysid.estimation.results.EstimationResult.history`).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="") as f:
+            history_frame(history).to_csv(f, index=False, float_format="%.17g")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
