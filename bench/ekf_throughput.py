@@ -20,9 +20,9 @@ from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     estimate_parameters,
     flight_initial_state_sigma,
-    prior_from_config,
 )
 from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.results import prior_from_config
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.vehicle.config import load_vehicle

@@ -25,11 +25,11 @@ from mavsysid.estimation.filter.ekf import ParameterEKF
 from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
-    prior_from_config,
 )
 from mavsysid.estimation.filter.likelihood import fit_noise_scale
 from mavsysid.estimation.progress import stage_listener
 from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation.results import prior_from_config
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.pipeline.estimate import run_estimate

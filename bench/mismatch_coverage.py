@@ -6,7 +6,7 @@ catalogue physics from `mavsysid.vehicle.model_effects`), draw the prior ±50 % 
 scoring truth (seeded, as `bench/estimate_accuracy.py` does), run
 `mavsysid.estimation.filter.estimator.estimate_parameters` (what ``mavsysid estimate`` runs) and
 score its final (refined) θ after the checks `mavsysid estimate` applies
-(`mavsysid.pipeline.estimate.check_result`; a refusal counts as not covering).
+(`mavsysid.estimation.check_result`; a refusal counts as not covering).
 Prints per truth and parameter the median |relative error| and the share of flights
 whose 95 % interval (θ ± 1.96 σ) covers the truth.
 
@@ -22,7 +22,7 @@ Truths (magnitudes of ``bench/diagnose_accuracy.py`` ``CASES``):
   The estimate is scored against the nominal θ, i.e. c_D's hover equivalent.
 
 ``--answer`` scores what ``mavsysid estimate`` prints: its per-parameter answer
-(`mavsysid.pipeline.estimate.estimate_flight`: the force and torque balance checked by the
+(`mavsysid.estimation.estimate`: the force and torque balance checked by the
 filter, `mavsysid.estimation.answer`), whose coverage is counted over the
 parameters it marks determined (a parameter not determined keeps the prior, which covers
 the truth by construction); the table then also gives the share determined.
@@ -55,7 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.results import Z95, EstimationResult
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
-from mavsysid.pipeline.estimate import check_result, estimate_flight
+from mavsysid.estimation import check_result, estimate
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
@@ -120,7 +120,7 @@ def run(truth: str, seed: int, root: str, mode: str = "filter"
     everything = np.ones(6, bool)
     try:
         if mode == "answer":
-            result = estimate_flight(flight, prior).result
+            result = estimate(flight, prior)
             determined = np.array([s == "determined" for s in result.status])
             return config.theta, result.final.value, result.final.sigma, determined
         result = (estimate_with_named_effects(flight, prior)[0] if mode == "reestimate"

@@ -17,7 +17,7 @@ from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
-from mavsysid.pipeline.estimate import check_result
+from mavsysid.estimation import check_result
 from mavsysid.vehicle.config import VehicleConfig
 
 from bench.mismatch_coverage import scored

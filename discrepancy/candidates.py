@@ -16,20 +16,21 @@ evaluated on a grid of values, each giving a new residual.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.discrepancy.residuals import ResidualProblem
-from mavsysid.estimation.equation_error_fit import theta_jacobian
 from mavsysid.vehicle.model_effects import EFFECTS, ModelEffect
 
 __all__ = [
     "PROFILE_GRIDS",
+    "THETA_STEP",
     "Candidate",
     "candidate_library",
     "effect_columns",
     "theta_columns",
+    "theta_jacobian",
 ]
 
 #: Search grids of the profile candidates (SI), physically plausible ranges.
@@ -122,4 +123,31 @@ def effect_columns(problem: ResidualProblem, candidate: Candidate,
         v[j] += p.scale
         effect = cls(**dict(zip(cls.parameter_names(), map(float, v), strict=True)))
         cols[..., j] = -(problem.residual([*fixed, effect]) - r0) / p.scale
+    return cols
+
+
+#: Relative step of the θ finite differences.
+THETA_STEP = 1e-3
+
+
+def theta_jacobian(residual: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
+                   r0: np.ndarray) -> np.ndarray:
+    """∂r/∂θ as regressors A (N, 6, 6): r(θ) ≈ r(θ̂) − A Δθ, Δθ in SI.
+
+    Parameters
+    ----------
+    residual : callable
+        θ (6,) → residual (N, 6).
+    theta : ndarray, shape (6,)
+        θ̂, SI.
+    r0 : ndarray, shape (N, 6)
+        ``residual(theta)``.
+    """
+    theta = np.asarray(theta, float)
+    cols = np.empty(r0.shape + (6,))
+    for j in range(6):
+        step = THETA_STEP * (abs(theta[j]) if theta[j] != 0.0 else 1e-3)
+        shifted = theta.copy()
+        shifted[j] += step
+        cols[..., j] = -(residual(shifted) - r0) / step
     return cols

@@ -40,14 +40,14 @@ from mavsysid.discrepancy.selection import (
     Tie,
     forward_select,
 )
-from mavsysid.estimation.checks import (
+from mavsysid.estimation import (
+    FlightData,
     check_plausible,
     implausibility,
+    report_stage,
     vanishing_floor,
     vanishing_parameters,
 )
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.progress import report_stage
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
@@ -424,8 +424,8 @@ def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
                refine: bool = False) -> Any:
     """Step 3 with the estimator: θ and ``effects``' parameters estimated jointly.
 
-    Runs `mavsysid.estimation.filter.estimator.estimate_with_effects` (the EKF, and the batch refinement
-    if ``refine``) with ``effects`` as the model's complete list (a diagnosis'
+    Runs `mavsysid.estimation.estimate_with_effects` (the EKF, and the batch refinement if
+    ``refine``) with ``effects`` as the model's complete list (a diagnosis'
     ``augmented_effects``, or only the known ones for the comparison); their values
     are the start of the fit.
 
@@ -434,7 +434,10 @@ def reestimate(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
     EstimationResult
         (`mavsysid.estimation.results`; imported lazily, as the estimator loads compiled kernels.)
     """
-    from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_with_effects
+    from mavsysid.estimation import (
+        EstimatorSettings,
+        estimate_with_effects,
+    )
 
     return estimate_with_effects(flight, config, tuple(effects),
                                  EstimatorSettings(refine=refine), fit_effects=True)

@@ -10,9 +10,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from mavsysid.estimation.filter.guard import NIS_FACTOR, nis_level
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.progress import report_stage
+from mavsysid.estimation import (
+    NIS_FACTOR,
+    FlightData,
+    nis_level,
+    report_stage,
+)
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 
@@ -25,7 +28,7 @@ def filter_nis(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
                grid: np.ndarray) -> np.ndarray:
     """The parameter EKF's NIS with ``effects`` in the model at their values, on ``grid``.
 
-    The estimator's effect channels (`mavsysid.estimation.filter.estimator.estimate_with_effects`, held
+    The estimator's effect channels (`mavsysid.estimation.estimate_with_effects`, held
     values, filter only) carry every catalogue effect, wrenches included. The filter runs
     on the logged samples (it needs no uniform rate); each grid sample of a resampled
     flight takes the NIS of the logged sample nearest to it. The estimator's guard (its
@@ -45,7 +48,10 @@ def filter_nis(flight: FlightData, config: VehicleConfig, effects: Sequence[Mode
     grid : ndarray, shape (M,)
         Times at which the NIS is wanted, s (``flight.t`` itself: every sample).
     """
-    from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_with_effects
+    from mavsysid.estimation import (
+        EstimatorSettings,
+        estimate_with_effects,
+    )
 
     result = estimate_with_effects(flight, config, tuple(effects),
                                    EstimatorSettings(refine=False, guard=False),

@@ -23,8 +23,10 @@ import rerun as rr
 import rerun.blueprint as rrb
 from mavsysid.discrepancy.diagnosis import Diagnosis
 from mavsysid.discrepancy.residuals import AXIS_NAMES
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.report.recording import ROTOR_COLORS
+from mavsysid.estimation import (
+    ROTOR_COLORS,
+    FlightData,
+)
 from mavsysid.formats.rerun_file import atomic_recording
 
 __all__ = ["log_diagnosis", "recording_id_for", "write_diagnosis_rrd"]

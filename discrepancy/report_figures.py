@@ -19,8 +19,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from mavsysid.discrepancy.diagnosis import Diagnosis
 from mavsysid.discrepancy.residuals import AXIS_NAMES, AXIS_UNITS
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.report.figures import (
+from mavsysid.estimation import (
+    FlightData,
     ReportTable,
     compare_wrench,
     flight_lines,

@@ -30,8 +30,11 @@ import itertools
 from dataclasses import dataclass, replace
 
 import numpy as np
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.signals import MAX_JITTER, uniform_step
+from mavsysid.estimation import (
+    MAX_JITTER,
+    FlightData,
+    uniform_step,
+)
 from mavsysid.vehicle.rotation import continuous_sign, interpolate_quaternions
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import binary_dilation

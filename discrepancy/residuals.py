@@ -26,17 +26,15 @@ from functools import cached_property
 
 import numpy as np
 from mavsysid.discrepancy.resample import Resampling
-from mavsysid.estimation.balance.rows import (
-    consistent_accelerations,
-    model_accelerations,
-)
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.signals import (
+from mavsysid.estimation import (
     AXIS_NAMES,
     AXIS_UNITS,
+    FlightData,
     SmoothedPose,
     SmootherSettings,
     acceleration_kernel,
+    consistent_accelerations,
+    model_accelerations,
     noise_gain,
     smooth_pose,
     uniform_step,

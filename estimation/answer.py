@@ -3,10 +3,25 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-from mavsysid.estimation.filter.guard import AGREEMENT_TOLERANCE
+from mavsysid.estimation.balance.fit import fit_wrench_balance
+from mavsysid.estimation.checks import (
+    check_kinematics,
+    check_plausible,
+    rescale_wrong_rotor,
+    vanishing_floor,
+    vanishing_parameters,
+)
+from mavsysid.estimation.filter.estimator import (
+    EstimatorSettings,
+    estimate_parameters,
+)
+from mavsysid.estimation.filter.guard import AGREEMENT_TOLERANCE, check_agreement
+from mavsysid.estimation.flight import MIN_DURATION, FlightData
+from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.results import (
     AT_BOUND,
     DETERMINED,
@@ -17,14 +32,22 @@ from mavsysid.estimation.results import (
     EstimationResult,
     ParameterEstimate,
     WrenchBalanceResult,
+    prior_from_config,
 )
-from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
+from mavsysid.estimation.robust import widened
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "answer_parameters", "balance_only_result",
-           "with_answer"]
+__all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "FilterEstimator", "answer_parameters",
+           "balance_only_result", "check_result", "estimate", "with_answer"]
+
+#: What estimates θ with the filter and batch from a read flight, given the balance's θ
+#: as the equation-error reference (None: it computes its own): `estimate_parameters`, or
+#: a caller's (e.g. with the effects a diagnosis names, `mavsysid.pipeline.auto_effects`).
+FilterEstimator = Callable[[FlightData, VehicleConfig, EstimatorSettings | None,
+                            ParameterEstimate | None], EstimationResult]
 
 
 #: Filter and balance disagree beyond this many σ of their difference (and the relative
@@ -213,3 +236,177 @@ def with_answer(result: EstimationResult, estimate: ParameterEstimate,
     return replace(result, answer=estimate, status=status, answer_source=source,
                    mismatch=mismatch, balance=balance, filter_refusal=filter_refusal,
                    notes=result.notes + notes)
+
+
+def estimate(flight: FlightData, config: VehicleConfig,
+             settings: EstimatorSettings | None = None,
+             filter_estimate: FilterEstimator | None = None) -> EstimationResult:
+    """θ of a flight, answered per parameter (module docstring): what ``estimate`` prints.
+
+    The force and torque balance (`mavsysid.estimation.balance.fit.fit_wrench_balance`)
+    and the filter with its batch refinement (`estimate_parameters`) both run; the
+    balance's θ is the filter's equation-error reference (restart point, agreement check).
+    Where the balance determines something, the answer is formed per parameter
+    (`answer_parameters`): a filter that cannot follow the flight, or whose θ `check_result`
+    refuses, leaves the balance's answer, with the reason in the notes. A flight is refused
+    only when neither determines a parameter. A rotor channel that reads a constant share
+    of its speed is rescaled first (`mavsysid.estimation.checks.rescale_wrong_rotor`).
+
+    Parameters
+    ----------
+    flight : FlightData
+        The flight as read (`mavsysid.estimation.readers.load_flight`).
+    config : VehicleConfig
+        The vehicle: known mass and geometry, and the prior.
+    settings : EstimatorSettings, optional
+    filter_estimate : FilterEstimator, optional
+        Estimates θ with the filter (default `estimate_parameters`, the vehicle config's
+        model).
+
+    Returns
+    -------
+    EstimationResult
+        With the balance's answer it carries ``status``, ``answer_source``, ``balance``
+        (and its held-out check), ``mismatch`` and, when the filter could not answer,
+        ``filter_refusal``; ``final`` is the answer.
+
+    Raises
+    ------
+    JobFailedError
+        Neither the balance nor the filter determines a parameter: the balance determines
+        nothing (or could not run) and the filter's θ is physically impossible, far
+        outside the prior, contradicted by the balance, or the filter diverged; one line
+        naming the log and both reasons.
+    InputError
+        The logged motion contradicts the logged tilt: a wrong clock or position unit
+        (`mavsysid.estimation.checks.check_kinematics`).
+    """
+    check_kinematics(flight)
+    settings = settings or EstimatorSettings()
+    prior = prior_from_config(config, settings)
+    if flight.rotor_count == config.rotor_count:
+        flight, _ = rescale_wrong_rotor(flight, config)
+    balance, balance_refusal = _balance(flight, config, prior)
+    reference = None if balance is None else balance.with_prior(prior)
+    if balance is not None and balance_refusal is None:
+        report_stage("the force and torque balance answered; checking it with the filter")
+        settings = replace(settings, restart_diverged=False)
+    try:
+        result = (filter_estimate or estimate_parameters)(flight, config, settings, reference)
+        check_result(flight.source, result, config.limits.rotor_speed_max)
+    except JobFailedError as error:
+        reason = str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
+        if balance_refusal is None and balance is None:
+            raise
+        if balance_refusal is not None:
+            raise JobFailedError(
+                f"{flight.source}: this flight determines no parameter: {balance_refusal}; "
+                f"and {reason}") from error
+        assert balance is not None
+        return _answered(None, reason, balance, config, flight, prior)
+    if balance_refusal is not None:
+        return replace(result, notes=result.notes + (
+            f"no force and torque balance check: {balance_refusal}",))
+    if balance is None:
+        return result
+    return _answered(result, None, balance, config, flight, prior)
+
+
+def _balance(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
+             ) -> tuple[WrenchBalanceResult | None, str | None]:
+    """The force and torque balance, and why it gives no answer (None: it answers).
+
+    A balance that runs but determines nothing is returned with its reason: its θ is still
+    the filter's equation-error reference.
+    """
+    if flight.rotor_count != config.rotor_count or flight.duration < MIN_DURATION:
+        return None, None  # the filter says what is wrong with the input
+    report_stage("fitting the force and torque balance")
+    try:
+        balance = fit_wrench_balance(flight, config, prior)
+    except JobFailedError as error:
+        return None, str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
+    except np.linalg.LinAlgError:
+        return None, "the force and torque balance is numerically singular on this flight"
+    if not balance.determined.any():
+        return balance, ("the force and torque balance determines no parameter of θ (every "
+                         f"σ above {100 * MAX_RELATIVE_SIGMA:g} % of its value)")
+    return balance, None
+
+
+def _answered(result: EstimationResult | None, filter_refusal: str | None,
+              balance: WrenchBalanceResult, config: VehicleConfig, flight: FlightData,
+              prior: ParameterEstimate) -> EstimationResult:
+    """The per-parameter answer (`answer_parameters`) and its notes."""
+    estimate, status, source, mismatch = answer_parameters(result, balance, prior)
+    notes = list(balance.notes)
+    if result is None:
+        notes.append(f"the filter and batch could not follow this flight ({filter_refusal}); "
+                     "the answer is the force and torque balance's")
+        result = balance_only_result(
+            balance, prior, (config.noise.position_sigma, config.noise.attitude_sigma),
+            flight.pose_source, flight.true_theta, tuple(flight.warnings))
+    if mismatch:
+        notes.append("the filter and the force and torque balance disagree on "
+                     + "; ".join(mismatch) + ": the balance answers for them (where it "
+                     "determines them; not determined where it does not); the model "
+                     "misses something (mavsysid diagnose names what)")
+    for label, why in ((NOT_DETERMINED, "the prior's value and σ are kept"),
+                       (AT_BOUND, f"the data put it within {BOUND_SIGMAS:g} σ of 0")):
+        names = [n for n, s in zip(PARAMETER_NAMES, status, strict=True) if s == label]
+        if names:
+            notes.append(f"{', '.join(names)}: {label}; {why}")
+    notes.extend(_triangle_note(estimate, status))
+    return with_answer(result, estimate, status, source, mismatch, balance, filter_refusal,
+                       tuple(notes))
+
+
+def _triangle_note(estimate: ParameterEstimate, status: tuple[str, ...]) -> list[str]:
+    """A kept prior inertia that breaks the triangle inequality with determined ones."""
+    j = estimate.value[3:6]
+    known = [s == DETERMINED for s in status[3:6]]
+    names = PARAMETER_NAMES[3:6]
+    out = []
+    for k in range(3):
+        others = [i for i in range(3) if i != k]
+        if not known[k] and all(known[i] for i in others) and j[k] > j[others[0]] + j[others[1]]:
+            out.append(f"the prior {names[k]} = {j[k]:.3g} kg·m² exceeds "
+                       f"{names[others[0]]} + {names[others[1]]} = "
+                       f"{j[others[0]] + j[others[1]]:.3g} kg·m² (determined): the rigid-body "
+                       f"bound a vehicle file should respect")
+    return out
+
+
+def check_result(source: str, result: EstimationResult,
+                 rotor_speed_max: float | None = None) -> None:
+    """Refuse, in one line naming ``source``, a filter result `estimate` would not print.
+
+    The final θ must be physically possible and near the prior
+    (`mavsysid.estimation.checks.check_plausible`), and, for the paper's model, agree with
+    the flight's force and torque balance (`mavsysid.estimation.filter.guard.check_agreement`,
+    judged on the σ before the disagreement widened it).
+
+    Parameters
+    ----------
+    source : str
+        The log, as named in the message.
+    result : EstimationResult
+        The estimate to check.
+    rotor_speed_max : float, optional
+        Top rotor speed, rad/s: with a linear rotor drag in the model, c_D may go as low as
+        keeps the rotor drag a drag up to it (`mavsysid.estimation.checks.vanishing_floor`).
+
+    Raises
+    ------
+    JobFailedError
+    """
+    final = result.final
+    effects = [e.effect for e in result.effects]
+    floor = (None if rotor_speed_max is None else
+             vanishing_floor(effects, float(final.value[0]), rotor_speed_max))
+    check_plausible(source, final.value, final.sigma, result.prior.value, result.prior.sigma,
+                    may_vanish=vanishing_parameters(e.name for e in effects), floor=floor)
+    if result.equation_error is not None:
+        unwidened = final if result.mismatch_widening is None else ParameterEstimate(
+            final.value, widened(final.covariance, 1.0 / result.mismatch_widening))
+        check_agreement(source, unwidened, result.equation_error)

@@ -5,17 +5,19 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable, Sequence
-from itertools import pairwise
 
 import numpy as np
 from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.report.figures import SMOOTHING_WINDOW
+from mavsysid.estimation.signals import (
+    SmootherSettings,
+    UniformSegment,
+    smooth_pose,
+    uniform_segments,
+)
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK, triangle_violation
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.model_effects import ModelEffect
-from mavsysid.vehicle.rotation import continuous_sign, quat_to_matrix
-from scipy.signal import savgol_filter
 
 from mavsysid.errors import JobFailedError
 
@@ -233,29 +235,22 @@ TIME_SCALE_FACTOR = 1.6
 #: to be judged: a hovering flight says nothing about its clock this way.
 MIN_TILT_ACCELERATION = 0.3
 
-_POLYORDER = 3
+#: Savitzky–Golay window of the tilt check, s: motion-capture noise differentiated twice
+#: stays well below the tilt's acceleration, manoeuvres of a few Hz pass.
+TILT_WINDOW = 0.3
 
 
-def _segment_terms(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Measured a_h, tilt-predicted a_h and v_h on a uniform grid, each shape (M, 2)."""
-    dt = float(np.median(np.diff(t)))
-    window = max(_POLYORDER + 2, round(SMOOTHING_WINDOW / dt))
-    window += 1 - window % 2
-    grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
-    if grid.size < 3 * window:
+def _segment_terms(segment: UniformSegment) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Measured a_h, tilt-predicted a_h and v_h of one uniform segment, each shape (M, 2)."""
+    settings = SmootherSettings(window=TILT_WINDOW, polyorder=3)
+    window = settings.samples(segment.dt)
+    if len(segment) < 3 * window:
         return None
-    q = continuous_sign(quaternion)
-    p = np.column_stack([np.interp(grid, t, position[:, i]) for i in range(3)])
-    qg = np.column_stack([np.interp(grid, t, q[:, i]) for i in range(4)])
-    qg /= np.linalg.norm(qg, axis=1)[:, None]
-    b = quat_to_matrix(qg)[:, :, 2]
-    a = savgol_filter(p, window, _POLYORDER, deriv=2, delta=dt, axis=0)
-    v = savgol_filter(p, window, _POLYORDER, deriv=1, delta=dt, axis=0)
-    b = savgol_filter(b, window, _POLYORDER, axis=0)
+    pose = smooth_pose(segment.t, segment.position, segment.quaternion, settings)
+    a, v, b = pose.acceleration, pose.velocity, pose.rotation()[:, :, 2]
     upright = b[:, 2] > 0.3  # beyond ~70° of tilt the ratio b_h / b_z means nothing
     predicted = (a[:, 2:3] + GRAVITY) * b[:, :2] / np.where(upright, b[:, 2], 1.0)[:, None]
-    cut = slice(window // 2, grid.size - window // 2)  # the filter's edges are extrapolated
+    cut = slice(window // 2, len(segment) - window // 2)  # the smoother's edges are one-sided
     keep = upright[cut]
     return a[cut, :2][keep], predicted[cut][keep], v[cut, :2][keep]
 
@@ -268,11 +263,7 @@ def tilt_gain(flight: FlightData) -> float | None:
     float or None
         None when the flight does not tilt enough to determine it (or is too short).
     """
-    t = np.asarray(flight.t, float)
-    bounds = [*flight.segment_starts, t.size]
-    parts = [_segment_terms(t[i:j], np.asarray(flight.position[i:j], float),
-                            np.asarray(flight.quaternion[i:j], float))
-             for i, j in pairwise(bounds) if j - i > 2]
+    parts = [_segment_terms(s) for s in uniform_segments(flight, 0.0)]
     parts = [x for x in parts if x is not None and x[0].shape[0] > 0]
     if not parts:
         return None

@@ -4,19 +4,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from mavsysid.estimation.signals import AXIS_NAMES, Band
-from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS
+from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
+
+from mavsysid.errors import InputError
 
 __all__ = [
     "AT_BOUND",
     "COMBINATION_NAMES",
+    "C_D_PRIOR_SIGMA",
     "DETERMINED",
     "MAX_RELATIVE_SIGMA",
     "NOT_DETERMINED",
+    "PRIOR_RELATIVE_SIGMA",
     "SIGMA_PARTS",
     "DataTheta",
     "EstimationHistory",
@@ -25,12 +29,26 @@ __all__ = [
     "FittedEffect",
     "HoldoutCheck",
     "ParameterEstimate",
+    "PriorChoices",
     "WrenchBalanceResult",
     "parameter_status",
+    "prior_from_config",
 ]
 
 #: Two-sided 95 % quantile of the standard normal.
 Z95 = 1.959963984540054
+
+#: σ of the prior on each parameter relative to the vehicle file's value (the tool's default).
+PRIOR_RELATIVE_SIGMA = 0.5
+#: σ of c_D's prior where the vehicle file's c_D is 0, s/m.
+C_D_PRIOR_SIGMA = 0.01
+
+
+class PriorChoices(Protocol):
+    """How wide the prior is (`mavsysid.estimation.filter.estimator.EstimatorSettings`)."""
+
+    prior_relative_sigma: float
+    c_D_scale: float
 
 
 @dataclass(frozen=True)
@@ -342,7 +360,13 @@ class HoldoutCheck:
             return self.rmse / self.prior_rmse
 
     def group_ratio(self, axes: slice) -> float:
-        """RMSE pooled over ``axes`` (one unit), fitted model / prior; NaN if none live."""
+        """RMSE pooled over ``axes`` (one unit), fitted model / prior; NaN if none live.
+
+        Parameters
+        ----------
+        axes : slice
+            Axes of `AXIS_NAMES` in one unit (the forces, or the angular accelerations).
+        """
         model, prior = self.rmse[axes], self.prior_rmse[axes]
         live = np.isfinite(model) & np.isfinite(prior)
         if not live.any() or not np.any(prior[live] > 0):
@@ -425,6 +449,27 @@ class WrenchBalanceResult:
         """Per parameter: "determined" or "not determined"."""
         return tuple("determined" if d else "not determined" for d in self.determined)
 
+    def with_prior(self, prior: ParameterEstimate) -> ParameterEstimate:
+        """The data's θ combined with ``prior`` by inverse variance, per parameter (SI).
+
+        The equation-error θ as the filter takes it (restart point, agreement check): the
+        data's value where it is precise, pulled to the prior where it is not; a parameter
+        without a data value keeps the prior's. Diagonal covariance.
+
+        Parameters
+        ----------
+        prior : ParameterEstimate
+            The prior θ and covariance, SI.
+        """
+        value = np.asarray(self.data.value, float)
+        with np.errstate(over="ignore", invalid="ignore"):
+            sigma = np.sqrt(np.sum(self.sigma_parts**2, axis=0))
+        has = np.isfinite(value) & np.isfinite(sigma) & (sigma > 0.0)
+        w_data = np.where(has, 1.0 / np.where(has, sigma, 1.0) ** 2, 0.0)
+        w_prior = 1.0 / prior.sigma**2
+        mean = (w_data * np.where(has, value, 0.0) + w_prior * prior.value) / (w_data + w_prior)
+        return ParameterEstimate(mean, np.diag(1.0 / (w_data + w_prior)))
+
     @property
     def combination_determined(self) -> np.ndarray:
         """Which combinations (`COMBINATION_NAMES`) the flight determines, by the same rule."""
@@ -478,3 +523,34 @@ NOT_DETERMINED = "not determined by this flight"
 
 
 AT_BOUND = "at the bound"
+
+
+def prior_from_config(config: VehicleConfig, settings: PriorChoices | None = None
+                      ) -> ParameterEstimate:
+    """The prior: the config's nominal θ with σ = relative σ × |θ| (c_D: a floor if 0).
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        The vehicle file: its θ is the prior's value.
+    settings : PriorChoices, optional
+        The relative σ and c_D's σ where its value is 0 (default `PRIOR_RELATIVE_SIGMA`,
+        `C_D_PRIOR_SIGMA`).
+
+    Raises
+    ------
+    InputError
+        A relative σ that is not positive.
+    """
+    relative = PRIOR_RELATIVE_SIGMA if settings is None else settings.prior_relative_sigma
+    c_d_sigma = C_D_PRIOR_SIGMA if settings is None else settings.c_D_scale
+    if not relative > 0.0:
+        raise InputError(f"prior relative σ {relative:g}: expected > 0")
+    value = config.theta.copy()
+    sigma = relative * np.abs(value)
+    if value[1] == 0.0:
+        sigma[1] = c_d_sigma
+    return ParameterEstimate(value, np.diag(sigma**2))
+
+
+

@@ -26,7 +26,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mavsysid.estimation.report.text import CONVERGENCE_TOLERANCE, convergence_time
+from mavsysid.estimation import (
+    CONVERGENCE_TOLERANCE,
+    convergence_time,
+)
 from mavsysid.experiments.experiment import ExperimentSpec, run_experiment
 from mavsysid.formats.flight_dir import write_json_atomic
 from mavsysid.vehicle.config import PARAMETER_NAMES

@@ -28,10 +28,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mavsysid.estimation.filter.ekf import ParameterEKF
-from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.report.text import convergence_time
-from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation import (
+    ParameterEKF,
+    ParameterEstimate,
+    convergence_time,
+    load_flight,
+)
 from mavsysid.experiments.data_efficiency import seconds_to_relative_sigma
 from mavsysid.flight.offline.simulator import SimulationResult, SimulationSettings, Simulator
 from mavsysid.planner.baseline import plan_random

@@ -6,7 +6,7 @@ A plan robust to the prior (docs/evaluation.md):
    belief, so that the planner's chance-constrained rotor check keeps it gentle (in the box
    inset by the rotor clearance, so that its end is a valid start: `opening_settings`);
 2. fly it (here in the offline simulator, `mavsysid.flight.offline.simulator`) and estimate
-   θ̂ and its covariance Σ as ``mavsysid estimate`` does (`checked_estimate`, the same
+   θ̂ and its covariance Σ as ``mavsysid estimate`` does (`mavsysid.estimation.estimate`, the same
    pipeline a ``stream --replan-budget`` run uses: robust start, filter, batch
    refinement, σ aware of residual whiteness, and the checks that refuse);
    when ``estimate`` refuses it (the model cannot follow the opening: a diverged filter,
@@ -28,10 +28,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation import (
+    ParameterEstimate,
+    estimate,
+    load_flight,
+)
 from mavsysid.flight.offline.simulator import Simulator
-from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.replanned_stream import (
     belief_after_opening,
     prior_estimate,
@@ -67,8 +69,8 @@ class ReplannedFlight:
     opening, rest : PlanResult
         The two plans.
     posterior : ParameterEstimate
-        θ̂ and Σ (SI) estimated from the opening (`checked_estimate`), or the prior belief
-        when that estimate was refused.
+        θ̂ and Σ (SI) estimated from the opening (`mavsysid.estimation.estimate`), or the
+        prior belief when that estimate was refused.
     rest_config : VehicleConfig
         The prior vehicle with θ̂: the model the rest was planned with.
     rest_settings : PlannerSettings
@@ -180,7 +182,7 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     simulator.run(opening.trajectory, directory)
     # The estimate the stream's continuation would use (pipeline.replanned_stream).
     posterior, refusal = belief_after_opening(
-        lambda: checked_estimate(load_flight(directory / "pose.csv", prior), prior),
+        lambda: estimate(load_flight(directory / "pose.csv", prior), prior).final,
         prior_estimate(prior, settings))
     later = rest_settings(settings, posterior, opening.trajectory)
     config = prior.with_parameters(posterior.value)

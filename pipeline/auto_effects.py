@@ -29,13 +29,14 @@ from pathlib import Path
 import numpy as np
 from mavsysid.discrepancy.diagnosis import Diagnosis, DiagnosisSettings, diagnose_flight
 from mavsysid.discrepancy.selection import FittedEffect
-from mavsysid.estimation.filter.estimator import (
+from mavsysid.estimation import (
+    EstimationResult,
     EstimatorSettings,
+    FlightData,
+    ParameterEstimate,
     estimate_parameters,
     estimate_with_effects,
 )
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.results import EstimationResult
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
@@ -78,6 +79,7 @@ def _diagnose(flight: FlightData, config: VehicleConfig, theta: np.ndarray,
 def estimate_with_named_effects(
     flight: FlightData, config: VehicleConfig, settings: EstimatorSettings | None = None,
     diagnosis_settings: DiagnosisSettings | None = None,
+    reference: ParameterEstimate | None = None,
 ) -> tuple[EstimationResult, tuple[ModelEffect, ...]]:
     """Estimate θ, name the effects the flight shows, and estimate θ again with them.
 
@@ -94,6 +96,8 @@ def estimate_with_named_effects(
         regression's start).
     diagnosis_settings : DiagnosisSettings, optional
         Of the diagnosis (candidates, held-out fraction …).
+    reference : ParameterEstimate, optional
+        The equation-error θ of both estimates (`mavsysid.estimation.estimate_parameters`).
 
     Returns
     -------
@@ -112,7 +116,8 @@ def estimate_with_named_effects(
     settings = settings or EstimatorSettings()
     known = tuple(config.effects)
     try:
-        first: EstimationResult | None = estimate_parameters(flight, config, settings)
+        first: EstimationResult | None = estimate_parameters(flight, config, settings,
+                                                            reference)
         refusal = None
     except JobFailedError as error:
         first, refusal = None, error
@@ -131,7 +136,7 @@ def estimate_with_named_effects(
         return replace(first, notes=(*first.notes, note)), ()
     named = tuple(f.effect for f in diagnosis.effects)
     result = estimate_with_effects(flight, config, diagnosis.augmented_effects, settings,
-                                   fit_effects=True)
+                                   fit_effects=True, reference=reference)
     start = ("the first estimate" if first is not None else
              f"the vehicle config's θ (the first estimate was refused: {refusal})")
     note = (f"the diagnosis (from {start}) named "
@@ -140,10 +145,10 @@ def estimate_with_named_effects(
     return replace(result, notes=(*result.notes, note)), named
 
 
-def _estimate(flight: FlightData, config: VehicleConfig,
-              settings: EstimatorSettings | None) -> EstimationResult:
-    """`estimate_with_named_effects`' result alone (an `Estimator` of `run_estimate`)."""
-    return estimate_with_named_effects(flight, config, settings)[0]
+def _estimate(flight: FlightData, config: VehicleConfig, settings: EstimatorSettings | None,
+              reference: ParameterEstimate | None) -> EstimationResult:
+    """`estimate_with_named_effects`' result alone (a `FilterEstimator` of `run_estimate`)."""
+    return estimate_with_named_effects(flight, config, settings, reference=reference)[0]
 
 
 def run_estimate_with_named_effects(
@@ -172,4 +177,4 @@ def run_estimate_with_named_effects(
         The window of the log to use, s on its clock.
     """
     return run_estimate(log, vehicle, pose, time_offset, settings, start=start, end=end,
-                        estimate=_estimate)
+                        filter_estimate=_estimate)

@@ -17,8 +17,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from mavsysid.estimation.filter.estimator import EstimatorSettings
-from mavsysid.estimation.report.text import write_estimate_json
+from mavsysid.estimation import (
+    EstimatorSettings,
+    write_estimate_json,
+)
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.pipeline.plan import autopilot_limits, run_plan

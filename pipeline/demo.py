@@ -29,9 +29,13 @@ from pathlib import Path
 import numpy as np
 from mavsysid.discrepancy.diagnosis import Diagnosis, diagnose_flight
 from mavsysid.discrepancy.report import write_diagnosis_json
-from mavsysid.estimation.filter.estimator import EstimatorSettings, estimate_parameters
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.results import EstimationResult, ParameterEstimate
+from mavsysid.estimation import (
+    EstimationResult,
+    EstimatorSettings,
+    FlightData,
+    ParameterEstimate,
+    estimate_parameters,
+)
 from mavsysid.formats.flight_dir import new_flight_dir, write_json_atomic
 from mavsysid.pipeline.demo_flight import (
     fly_over_mavlink,
@@ -208,7 +212,9 @@ def write_demo_rrd(path: Path, result: DemoResult) -> None:
     """
     import rerun as rr
     from mavsysid.discrepancy.recording import log_diagnosis
-    from mavsysid.estimation.report.recording import log_estimation
+    from mavsysid.estimation import (
+        log_estimation,
+    )
     from mavsysid.formats.rerun_file import atomic_recording
     from mavsysid.planner.recording import log_plan
 

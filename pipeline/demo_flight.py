@@ -19,8 +19,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.readers import load_flight
+from mavsysid.estimation import (
+    FlightData,
+    load_flight,
+)
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
 from mavsysid.formats.flight_dir import read_meta

@@ -32,15 +32,15 @@ from mavsysid.discrepancy.diagnosis import (
     diagnose_flight,
     reestimate,
 )
-from mavsysid.estimation.checks import (
+from mavsysid.estimation import (
+    FlightData,
     check_kinematics,
     check_plausible,
+    load_flight,
+    report_stage,
     vanishing_floor,
     vanishing_parameters,
 )
-from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.progress import report_stage
-from mavsysid.estimation.readers import load_flight
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values
 
@@ -114,7 +114,9 @@ def balance_start(flight: FlightData, config: VehicleConfig,
         if found.filter_followed:
             return None, None  # the estimate's θ followed the flight: refit from it
         return found, None
-    from mavsysid.estimation.balance.fit import fit_wrench_balance  # loads the estimator
+    from mavsysid.estimation import (
+        fit_wrench_balance,
+    )
 
     report_stage("fitting the force and torque balance")
     try:

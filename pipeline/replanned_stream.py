@@ -8,7 +8,7 @@ opening's end:
 
 1. estimates θ̂ and its covariance Σ from the pose recorded so far (the pipeline of
    ``mavsysid estimate``: `load_flight` from the opening's first setpoint on, then
-   `mavsysid.pipeline.estimate.checked_estimate`), on a snapshot of the complete rows of
+   `mavsysid.estimation.estimate`), on a snapshot of the complete rows of
    ``pose.csv``; when its rotor speeds are zero throughout (no ESC telemetry, e.g.
    ArduCopter SITL with ``SIM_ESC_TELEM 0``), on a snapshot of the flight's ``flight.tlog``
    instead, whose reader turns SERVO_OUTPUT_RAW into rotor speeds through the vehicle's
@@ -43,14 +43,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mavsysid.estimation.filter.estimator import EstimatorSettings
-from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation import (
+    EstimatorSettings,
+    ParameterEstimate,
+    estimate,
+    load_flight,
+)
 from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextSegment
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import read_trajectory
-from mavsysid.pipeline.estimate import checked_estimate
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
 from mavsysid.planner.plan_request import rotor_clearance
 from mavsysid.planner.robust_plan import plan_most_confident
@@ -268,7 +270,7 @@ def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> Parame
         log = opening_log(so_far, Path(tmp))
         flight = load_flight(log, so_far.config, start=so_far.window_start)
         source = so_far.pose if log.suffix == ".csv" else Path(so_far.directory) / log.name
-        return checked_estimate(flight, so_far.config, settings, source=str(source))
+        return estimate(replace(flight, source=str(source)), so_far.config, settings).final
 
 
 def replanning_continuation(settings: ReplanSettings,

@@ -27,7 +27,6 @@ from mavsysid.estimation.balance.theta import (
     widened_sigma,
 )
 from mavsysid.estimation.checks import check_rotor_balance
-from mavsysid.estimation.filter.estimator import EstimatorSettings, prior_from_config
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import (
     MAX_RELATIVE_SIGMA,
@@ -37,6 +36,7 @@ from mavsysid.estimation.results import (
     ParameterEstimate,
     WrenchBalanceResult,
     parameter_status,
+    prior_from_config,
 )
 from mavsysid.estimation.signals import Band, UniformSegment, uniform_segments
 from mavsysid.vehicle.config import VehicleConfig
@@ -284,23 +284,20 @@ def fit_wrench_balance(flight: FlightData, config: VehicleConfig,
     Returns
     -------
     WrenchBalanceResult
+        Possibly determining no parameter (``determined`` all False; no held-out check
+        then): its data θ is still the equation-error reference of the filter.
 
     Raises
     ------
     JobFailedError
-        No usable stretch, rotor speeds that contradict the vehicle's balance
-        (`mavsysid.estimation.checks`), or the flight determines no parameter (one
-        line).
+        No usable stretch, or rotor speeds that contradict the vehicle's balance
+        (`mavsysid.estimation.checks.check_rotor_balance`); one line.
     """
     settings = settings or WrenchBalanceSettings()
-    prior = prior or prior_from_config(config, EstimatorSettings())
+    prior = prior or prior_from_config(config)
     check_rotor_balance(flight, config)
     result, _ = _answer(flight, config, prior, settings)
-    if not result.determined.any():
-        raise JobFailedError(f"{flight.source}: the force and torque balance determines no "
-                             "parameter of θ (every σ above "
-                             f"{100 * settings.max_relative_sigma:g} % of its value)")
-    holdout = _holdout(flight, config, prior, settings)
+    holdout = _holdout(flight, config, prior, settings) if result.determined.any() else None
     return WrenchBalanceResult(result.estimate, result.determined, result.data,
                                result.sigma_parts, result.combination_sigma, prior,
                                result.choices, result.delay_sigma, holdout, result.rows,

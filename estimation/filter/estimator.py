@@ -7,8 +7,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from mavsysid.estimation.balance.fit import WrenchBalanceSettings, fit_wrench_balance
 from mavsysid.estimation.batch.refine import refine
-from mavsysid.estimation.equation_error_fit import EquationErrorFit, fit_equation_error
 from mavsysid.estimation.filter.ekf import ParameterEKF
 from mavsysid.estimation.filter.guard import guarded_filter
 from mavsysid.estimation.filter.likelihood import (
@@ -21,7 +21,14 @@ from mavsysid.estimation.filter.likelihood import (
 from mavsysid.estimation.flight import MIN_DURATION, FlightData
 from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.report.text import convergence_time
-from mavsysid.estimation.results import EstimationResult, FittedEffect, ParameterEstimate
+from mavsysid.estimation.results import (
+    C_D_PRIOR_SIGMA,
+    PRIOR_RELATIVE_SIGMA,
+    EstimationResult,
+    FittedEffect,
+    ParameterEstimate,
+    prior_from_config,
+)
 from mavsysid.estimation.robust import disagreement_widening, widened
 from mavsysid.estimation.signals import pose_sigma
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
@@ -31,7 +38,7 @@ from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.errors import InputError, JobFailedError
 
 __all__ = ["EstimatorSettings", "estimate_parameters", "estimate_with_effects",
-           "flight_initial_state_sigma", "prior_from_config"]
+           "flight_initial_state_sigma"]
 
 
 @dataclass(frozen=True)
@@ -53,8 +60,9 @@ class EstimatorSettings:
         Fit the parameters of the config's model effects jointly with θ (else hold them
         at the config's values); used by `estimate_parameters`.
     guard : bool
-        Fit θ by equation error (`mavsysid.estimation.equation_error_fit`), restart a
-        diverged filter from it and refuse a final θ it contradicts
+        Check the filter against the equation-error θ, the force and torque balance's
+        (`mavsysid.estimation.balance.fit`): restart a diverged filter from it, widen σ
+        where it disagrees and refuse a final θ it contradicts
         (`mavsysid.estimation.filter.guard`).
     start_from_equation_error : bool
         Start the filter at the equation-error θ (with the prior's covariance) rather than
@@ -64,26 +72,15 @@ class EstimatorSettings:
         the force and torque balance answers and the filter only checks it).
     """
 
-    prior_relative_sigma: float = 0.5
+    prior_relative_sigma: float = PRIOR_RELATIVE_SIGMA
     refine: bool = True
     autopilot_position_sigma: float = 0.05
     autopilot_attitude_sigma: float = math.radians(1.0)
-    c_D_scale: float = 0.01
+    c_D_scale: float = C_D_PRIOR_SIGMA
     fit_effects: bool = True
     guard: bool = True
     start_from_equation_error: bool = False
     restart_diverged: bool = True
-
-
-def prior_from_config(config: VehicleConfig, settings: EstimatorSettings) -> ParameterEstimate:
-    """The prior: the config's nominal θ with σ = relative σ × |θ| (c_D: a floor if 0)."""
-    if not settings.prior_relative_sigma > 0.0:
-        raise InputError(f"prior relative σ {settings.prior_relative_sigma:g}: expected > 0")
-    value = config.theta.copy()
-    sigma = settings.prior_relative_sigma * np.abs(value)
-    if value[1] == 0.0:
-        sigma[1] = settings.c_D_scale
-    return ParameterEstimate(value, np.diag(sigma**2))
 
 
 def _measurement_sigma(flight: FlightData, config: VehicleConfig,
@@ -154,7 +151,8 @@ def _with_increment(estimate: ParameterEstimate | None, increment: np.ndarray | 
 
 
 def estimate_parameters(
-    flight: FlightData, config: VehicleConfig, settings: EstimatorSettings | None = None
+    flight: FlightData, config: VehicleConfig, settings: EstimatorSettings | None = None,
+    reference: ParameterEstimate | None = None,
 ) -> EstimationResult:
     """Estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a flight, with the config's effects.
 
@@ -166,6 +164,10 @@ def estimate_parameters(
         The vehicle: known mass and geometry, nominal θ as the prior, noise, and its model
         effects (``config.effects``; fitted unless ``settings.fit_effects`` is off).
     settings : EstimatorSettings, optional
+    reference : ParameterEstimate, optional
+        The equation-error θ (the balance's with the prior,
+        `mavsysid.estimation.results.WrenchBalanceResult.with_prior`); fitted here when
+        ``settings.guard`` asks for it and none is given.
 
     Returns
     -------
@@ -173,12 +175,14 @@ def estimate_parameters(
     """
     settings = settings or EstimatorSettings()
     return estimate_with_effects(flight, config, config.effects,
-                                 settings, fit_effects=settings.fit_effects)
+                                 settings, fit_effects=settings.fit_effects,
+                                 reference=reference)
 
 
 def estimate_with_effects(
     flight: FlightData, config: VehicleConfig, effects: Sequence[ModelEffect],
     settings: EstimatorSettings | None = None, fit_effects: bool = True,
+    reference: ParameterEstimate | None = None,
 ) -> EstimationResult:
     """Estimate θ under the given model effects, fitting their parameters jointly.
 
@@ -196,8 +200,10 @@ def estimate_with_effects(
     settings : EstimatorSettings, optional
         ``settings.fit_effects`` is ignored here in favour of ``fit_effects``.
     fit_effects : bool
-        Estimate the effects' parameters (maximum likelihood, `mavsysid.estimation.filter.likelihood`);
-        False holds them at the given values.
+        Estimate the effects' parameters (maximum likelihood,
+        `mavsysid.estimation.filter.likelihood`); False holds them at the given values.
+    reference : ParameterEstimate, optional
+        The equation-error θ, as for `estimate_parameters`.
 
     Returns
     -------
@@ -211,23 +217,17 @@ def estimate_with_effects(
     sigma, sigma_note = _measurement_sigma(flight, config, settings)
     state_sigma = flight_initial_state_sigma(flight, sigma)
     notes = list(flight.warnings) + ([sigma_note] if sigma_note else [])
-    ee = _equation_error(flight, config, prior, notes) if settings.guard else None
+    ee = None
+    if settings.guard:
+        ee = reference if reference is not None else _reference(flight, config, prior, notes)
     start = prior
     if ee is not None and settings.start_from_equation_error:
-        start = ParameterEstimate(ee.estimate.value, prior.covariance)
+        start = ParameterEstimate(ee.value, prior.covariance)
         notes.append("filter started at the equation-error θ")
 
-    fit = None
-    used = tuple(FittedEffect(e, np.full(len(e.parameters), np.nan), False) for e in effects)
-    if fit_effects and any(e.parameters for e in effects):
-        report_stage("fitting the model effects' parameters")
-        fit = fit_effect_parameters(flight, config, effects, start, sigma, state_sigma)
-        used = fit.effects
-        effects = tuple(fe.effect for fe in fit.effects)
-        notes.append(_effect_note(fit))
-    elif effects:
-        notes.append("model effects held at the given values: "
-                     + "; ".join(repr(e) for e in effects))
+    fit, used = _effects(flight, config, effects, fit_effects, start, sigma, state_sigma,
+                         notes)
+    effects = tuple(fe.effect for fe in used)
     report_stage(f"filtering {len(flight)} samples")
     terms, run, start, sigma = guarded_filter(flight, effects, config, (prior, start), sigma,
                                               state_sigma, ee, notes, settings.restart_diverged)
@@ -240,8 +240,7 @@ def estimate_with_effects(
     filtered, refined = (_with_increment(e, increment) for e in (run.estimate, refined))
     widening = None
     if ee is not None and not effects:
-        filtered, refined, widening = _widen_by_disagreement(filtered, refined, ee.estimate,
-                                                             notes)
+        filtered, refined, widening = _widen_by_disagreement(filtered, refined, ee, notes)
     truth = flight.true_theta
     final = refined if refined is not None else filtered
     history = run.history
@@ -253,9 +252,27 @@ def estimate_with_effects(
         convergence_time=conv, true_theta=truth, measurement_sigma=sigma,
         pose_source=flight.pose_source, notes=tuple(notes), effects=used,
         log_likelihood=log_likelihood,
-        equation_error=None if ee is None or effects else ee.estimate,
+        equation_error=None if ee is None or effects else ee,
         mismatch_widening=widening,
     )
+
+
+def _effects(
+    flight: FlightData, config: VehicleConfig, effects: tuple[ModelEffect, ...], fit: bool,
+    start: ParameterEstimate, sigma: tuple[float, float],
+    state_sigma: tuple[float, float, float, float], notes: list[str],
+) -> tuple[EffectFit | None, tuple[FittedEffect, ...]]:
+    """Step 0: the effects' parameters fitted jointly with θ, or held (with a note)."""
+    if fit and any(e.parameters for e in effects):
+        report_stage("fitting the model effects' parameters")
+        result = fit_effect_parameters(flight, config, effects, start, sigma, state_sigma)
+        notes.append(_effect_note(result))
+        return result, result.effects
+    if effects:
+        notes.append("model effects held at the given values: "
+                     + "; ".join(repr(e) for e in effects))
+    return None, tuple(FittedEffect(e, np.full(len(e.parameters), np.nan), False)
+                       for e in effects)
 
 
 def _widen_by_disagreement(
@@ -276,14 +293,16 @@ def _widen_by_disagreement(
     return (filtered, final, factor) if refined is not None else (final, None, factor)
 
 
-def _equation_error(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
-                    notes: list[str]) -> EquationErrorFit | None:
-    """The equation-error fit, or None (with a note) on a flight too short for it."""
+def _reference(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
+               notes: list[str]) -> ParameterEstimate | None:
+    """The equation-error θ (the balance's with the prior), or None with a note."""
     try:
-        return fit_equation_error(flight, config, prior)
-    except JobFailedError as error:
-        notes.append(f"no equation-error check: {error}")
+        balance = fit_wrench_balance(flight, config, prior,
+                                     WrenchBalanceSettings(holdout_fraction=0.0))
+    except (JobFailedError, np.linalg.LinAlgError) as error:
+        notes.append(f"no equation-error check: {str(error).splitlines()[0]}")
         return None
+    return balance.with_prior(prior)
 
 
 def _refine(

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 from mavsysid.estimation.checks import implausibility, vanishing_floor, vanishing_parameters
-from mavsysid.estimation.equation_error_fit import EquationErrorFit
 from mavsysid.estimation.filter.ekf import FilterOverflow, FilterRun
 from mavsysid.estimation.filter.likelihood import ModelTerms, reference_terms
 from mavsysid.estimation.flight import FlightData
@@ -279,7 +278,7 @@ def decorrelated_attempt(
 def guarded_filter(
     flight: FlightData, effects: tuple[ModelEffect, ...], config: VehicleConfig,
     priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
-    state_sigma: tuple[float, float, float, float], ee: EquationErrorFit | None,
+    state_sigma: tuple[float, float, float, float], ee: ParameterEstimate | None,
     notes: list[str], restart: bool = True,
 ) -> tuple[ModelTerms, FilterRun, ParameterEstimate, tuple[float, float]]:
     """Step 1 with the divergence guard (`mavsysid.estimation.filter.guard`).
@@ -299,7 +298,7 @@ def guarded_filter(
     terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
     if reason is not None and not restart:
         raise JobFailedError(f"{flight.source}: the parameter filter {failure_phrase(reason)}")
-    from_ee = ParameterEstimate(ee.estimate.value, prior.covariance)
+    from_ee = ParameterEstimate(ee.value, prior.covariance)
     for _ in range(MAX_RESTARTS):
         if reason is None:
             break

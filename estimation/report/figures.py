@@ -11,47 +11,38 @@ from pathlib import Path
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from mavsysid.estimation.balance.rows import FORCE_COEFFICIENTS, BalanceBuilder
+from mavsysid.estimation.balance.theta import coefficients_from_theta
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.report.text import write_history_csv
 from mavsysid.estimation.results import EstimationResult
-from mavsysid.estimation.signals import AXIS_NAMES
+from mavsysid.estimation.signals import AXIS_NAMES, uniform_segments
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
-from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.mav_model import rotor_wrench
-from mavsysid.vehicle.rotation import (
-    continuous_sign,
-    quat_conjugate,
-    quat_multiply,
-    quat_to_matrix,
-)
-from scipy.signal import savgol_filter
 from scipy.stats import chi2
 
 __all__ = ["DPI", "ESTIMATE_REPORT_FILES", "SMOOTHING_WINDOW", "ReportTable", "WrenchComparison",
            "compare_wrench", "estimate_table", "flight_lines", "holdout_table", "html_page",
            "plot_innovations", "plot_parameters", "plot_rotor_speeds", "plot_wrench",
-           "save_figure", "uniform_grid", "write_estimate_report", "write_index"]
+           "save_figure", "write_estimate_report", "write_index"]
 
 
-#: Savitzky–Golay window, s: wide enough that motion-capture noise differentiated twice
-#: stays well below the rotor forces, short enough to keep manoeuvres (a few Hz).
+#: Savitzky–Golay window of the comparison without a balance, s: motion-capture noise
+#: differentiated twice stays well below the rotor forces, manoeuvres of a few Hz pass.
 SMOOTHING_WINDOW = 0.3
-
-_POLYORDER = 3
 
 
 @dataclass(frozen=True)
 class WrenchComparison:
-    """Measured and model body wrench over the flight (M grid samples).
+    """Measured and model body wrench over the flight (M samples on uniform grids).
 
     Attributes
     ----------
     t : ndarray, shape (M,)
-        s, the log's clock (uniform grid, smoother edges dropped).
+        s, the log's clock (smoother edges dropped; a NaN row between segments).
     measured_force, model_force : ndarray, shape (M, 3)
         Body force, N.
     measured_torque, model_torque : ndarray, shape (M, 3)
-        Body torque, N·m.
+        Body torque, N·m, less the ω × J ω the model also predicts (J ω̇ on both sides).
     """
 
     t: np.ndarray
@@ -61,40 +52,26 @@ class WrenchComparison:
     model_torque: np.ndarray
 
 
-def uniform_grid(flight: FlightData
-                 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
-    """Grid times, step and position, quaternion, rotor speeds interpolated onto it."""
-    t = np.asarray(flight.t, float)
-    dt = float(np.median(np.diff(t)))
-    grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
-    q = continuous_sign(flight.quaternion)
-
-    def interp(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, float)
-        return np.column_stack([np.interp(grid, t, x[:, i]) for i in range(x.shape[1])])
-
-    return grid, dt, interp(flight.position), interp(q), interp(flight.rotor_speeds)
-
-
-def _window(dt: float, samples: int) -> int:
-    """Odd smoother length for step ``dt``, at most the number of samples."""
-    n = max(_POLYORDER + 2, round(SMOOTHING_WINDOW / dt))
-    n += 1 - n % 2
-    return min(n, samples - 1 + samples % 2)
-
-
-def compare_wrench(flight: FlightData, config: VehicleConfig, theta: np.ndarray
-                   ) -> WrenchComparison:
+def compare_wrench(flight: FlightData, config: VehicleConfig, theta: np.ndarray,
+                   window: float = SMOOTHING_WINDOW, delay: float = 0.0) -> WrenchComparison:
     """Measured and model body force and torque along a flight (module docstring).
+
+    Both sides are the force and torque balance's rows (`mavsysid.estimation.balance.rows`:
+    the pose smoothed and differentiated, the model through the same smoother) at the
+    paper's model with θ, without band-pass, in the body frame and in N and N·m.
 
     Parameters
     ----------
     flight : FlightData
-        Pose and rotor speeds (any sampling; put on a uniform grid here).
+        Pose and rotor speeds (any sampling; put on uniform grids here).
     config : VehicleConfig
         Mass and rotor geometry.
     theta : ndarray, shape (6,)
         θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI (usually the final estimate).
+    window : float
+        Savitzky–Golay window, s (the balance's, when it ran).
+    delay : float
+        s by which the pose lags the rotor speeds (the balance's offset).
 
     Returns
     -------
@@ -102,30 +79,24 @@ def compare_wrench(flight: FlightData, config: VehicleConfig, theta: np.ndarray
         Empty arrays when the flight is too short for the smoother.
     """
     theta = np.asarray(theta, float)
-    t, dt, p, q, n = uniform_grid(flight)
-    win = _window(dt, len(t))
-    if win < _POLYORDER + 2:
+    b = coefficients_from_theta(theta)
+    split = len(FORCE_COEFFICIENTS)
+    parts = []
+    for segment in uniform_segments(flight, 4.0 * window):
+        rows = BalanceBuilder(segment, config, window).rows(delay, float(theta[1]),
+                                                             magnitude=False)
+        if len(rows):
+            j = theta[3:6]
+            parts.append(np.hstack([
+                rows.t[:, None], config.mass * rows.force,
+                config.mass * rows.force_columns @ b[:split], j * rows.torque,
+                j * (rows.torque_columns @ b[split:])]))
+            parts.append(np.full((1, 13), np.nan))
+    if not parts:
         empty = np.empty((0, 3))
         return WrenchComparison(np.empty(0), empty, empty, empty, empty)
-
-    def smooth(x: np.ndarray, deriv: int = 0) -> np.ndarray:
-        return savgol_filter(x, win, _POLYORDER, deriv=deriv, delta=dt, axis=0)
-
-    q_s = smooth(q)
-    q_s /= np.linalg.norm(q_s, axis=1, keepdims=True)
-    rot_t = np.swapaxes(quat_to_matrix(q_s), -1, -2)
-    # q̇ = ½ q ⊗ [0, ω]  ⇒  [0, ω] = 2 q̄ ⊗ q̇ (body rates).
-    w = 2.0 * quat_multiply(quat_conjugate(q_s), smooth(q, 1))[:, 1:]
-    w_dot = smooth(w, 1)
-    v_b = np.einsum("nij,nj->ni", rot_t, smooth(p, 1))
-    specific = np.einsum("nij,nj->ni", rot_t, smooth(p, 2) + np.array([0.0, 0.0, GRAVITY]))
-    inertia = theta[3:6]
-    measured_torque = inertia * w_dot + np.cross(w, inertia * w)
-    force, torque = rotor_wrench(n, theta, config.rotor_positions, config.rotor_directions,
-                                 v_b, w)
-    keep = slice(win // 2, len(t) - win // 2)
-    return WrenchComparison(t[keep], config.mass * specific[keep], smooth(force)[keep],
-                            measured_torque[keep], smooth(torque)[keep])
+    x = np.vstack(parts[:-1])
+    return WrenchComparison(x[:, 0], x[:, 1:4], x[:, 4:7], x[:, 7:10], x[:, 10:13])
 
 
 #: Resolution of the written PNGs, dots per inch (a 10-inch-wide figure is 1000 px).
@@ -411,7 +382,10 @@ def write_estimate_report(directory: str | Path, result: EstimationResult,
     plot_parameters(result, directory / "parameters.png")
     plot_innovations(result, directory / "innovations.png")
     plot_rotor_speeds(flight, directory / "rotor_speeds.png")
-    plot_wrench(compare_wrench(flight, config, result.final.value), directory / "wrench.png")
+    choices = None if result.balance is None else result.balance.choices
+    fit = {} if choices is None else {"window": choices.window, "delay": choices.delay}
+    plot_wrench(compare_wrench(flight, config, result.final.value, **fit),
+                directory / "wrench.png")
     write_history_csv(directory / "history.csv", result.history)
     position_sigma, attitude_sigma = result.measurement_sigma
     lines = [

@@ -20,7 +20,12 @@ from mavsysid.discrepancy.report import (
     format_reestimate,
     write_diagnosis_json,
 )
-from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
+from mavsysid.estimation import (
+    StageLog,
+    progress_wanted,
+    report_stage,
+    stage_listener,
+)
 from mavsysid.pipeline.diagnose import reestimate_comparison, run_diagnose
 from mavsysid.vehicle.config import save_vehicle
 

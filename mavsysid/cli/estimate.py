@@ -22,15 +22,18 @@ from pathlib import Path
 import numpy as np
 
 from mavsysid.cli.options import add_log_arguments, add_window_arguments
-from mavsysid.estimation.filter.estimator import EstimatorSettings
-from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
-from mavsysid.estimation.report.text import (
+from mavsysid.estimation import (
+    EstimatorSettings,
+    ParameterEstimate,
+    StageLog,
     format_table,
+    progress_wanted,
+    report_stage,
+    stage_listener,
     updated_vehicle,
     write_estimate_json,
     write_history_csv,
 )
-from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.pipeline.simulate import read_truth
@@ -121,7 +124,9 @@ def main(args: argparse.Namespace) -> int:
     if args.update_vehicle is not None:
         save_vehicle(updated_vehicle(run.config, run.result), args.update_vehicle)
     if args.rrd is not None:
-        from mavsysid.estimation.report.recording import write_estimation_rrd  # rerun loads slowly
+        from mavsysid.estimation import (
+            write_estimation_rrd,
+        )
 
         write_estimation_rrd(args.rrd, run.result, run.flight)
     if args.verbosity >= 0:
@@ -142,6 +147,8 @@ def _write_extras(args: argparse.Namespace, run: EstimateRun) -> None:
         write_history_csv(args.history, run.result.history)
     if args.report is not None:
         report_stage(f"writing the report into {args.report}")
-        from mavsysid.estimation.report.figures import write_estimate_report  # matplotlib: slow
+        from mavsysid.estimation import (
+            write_estimate_report,
+        )
 
         write_estimate_report(args.report, run.result, run.flight, run.config, str(args.log))

@@ -24,8 +24,10 @@ from mavsysid.cli.options import (
 )
 from mavsysid.cli.stream import format_summary as flight_summary
 from mavsysid.errors import InputError
-from mavsysid.estimation.filter.estimator import EstimatorSettings
-from mavsysid.estimation.report.text import format_table
+from mavsysid.estimation import (
+    EstimatorSettings,
+    format_table,
+)
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
 from mavsysid.pipeline.autopilot_experiment import ExperimentOutcome, run_autopilot_experiment

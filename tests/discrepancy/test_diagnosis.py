@@ -257,11 +257,11 @@ def test_motor_lag_filter_matches_its_recursion():
 
 def test_a_filter_that_cannot_follow_the_log_refuses_the_diagnosis(config, flights, monkeypatch):
     """A diverged EKF refuses the diagnosis (exit 3) instead of reporting no discrepancy."""
-    import mavsysid.estimation.filter.estimator as estimator
+    import mavsysid.estimation as estimation
 
     def diverges(*args, **kwargs):
         raise JobFailedError("x.csv: the parameter filter diverged")
 
-    monkeypatch.setattr(estimator, "estimate_with_effects", diverges)
+    monkeypatch.setattr(estimation, "estimate_with_effects", diverges)
     with pytest.raises(JobFailedError, match=r"x\.csv: the parameter filter diverged"):
         diagnose_flight(flights((), 0), config, _start_theta(config, 0), with_nis=True)

@@ -18,11 +18,10 @@ from mavsysid.estimation.filter.ekf import ParameterEKF
 from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
-    prior_from_config,
 )
 from mavsysid.estimation.filter.likelihood import scaled_noise
 from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation.results import ParameterEstimate, prior_from_config
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.formats.flight_dir import read_meta

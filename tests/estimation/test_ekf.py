@@ -11,8 +11,8 @@ from mavsysid.estimation.filter.ekf import ParameterEKF
 from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
-    prior_from_config,
 )
+from mavsysid.estimation.results import prior_from_config
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
 from scipy.stats import chi2

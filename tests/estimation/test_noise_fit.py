@@ -6,9 +6,9 @@ import numpy as np
 from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     flight_initial_state_sigma,
-    prior_from_config,
 )
 from mavsysid.estimation.filter.likelihood import fit_noise_scale
+from mavsysid.estimation.results import prior_from_config
 from mavsysid.flight.offline.effects import ProcessNoise
 from mavsysid.vehicle.config import load_vehicle
 

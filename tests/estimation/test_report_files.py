@@ -129,7 +129,8 @@ def test_measured_wrench_equals_the_model_on_a_consistent_flight(firefly):
     """A hover at the rotor speeds that hold it: measured and model force agree (m g)."""
     t = np.linspace(0.0, 4.0, 401)
     hover = np.sqrt(firefly.mass * 9.81 / (firefly.rotor_count * firefly.theta[0]))
-    flight = FlightData(t, np.tile([0.0, 0.0, 1.0], (t.size, 1)),
+    # A slow climb at constant speed: every pose fresh, no acceleration.
+    flight = FlightData(t, np.column_stack([np.zeros_like(t), np.zeros_like(t), 1.0 + 1e-3 * t]),
                         np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1)),
                         np.full((t.size, firefly.rotor_count), hover), "hover")
     c = compare_wrench(flight, firefly, firefly.theta)
@@ -143,7 +144,8 @@ def test_measured_wrench_sees_a_wrong_thrust_coefficient(firefly):
     """With c_T 10 % too high the model's thrust is 10 % above what the hover demands."""
     t = np.linspace(0.0, 4.0, 401)
     hover = np.sqrt(firefly.mass * 9.81 / (firefly.rotor_count * firefly.theta[0]))
-    flight = FlightData(t, np.tile([0.0, 0.0, 1.0], (t.size, 1)),
+    # A slow climb at constant speed: every pose fresh, no acceleration.
+    flight = FlightData(t, np.column_stack([np.zeros_like(t), np.zeros_like(t), 1.0 + 1e-3 * t]),
                         np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1)),
                         np.full((t.size, firefly.rotor_count), hover), "hover")
     theta = firefly.theta * np.array([1.1, 1, 1, 1, 1, 1])

@@ -15,7 +15,7 @@ from mavsysid.experiments.replanned_flight import (
     replan_flight,
 )
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.pipeline.estimate import checked_estimate
+from mavsysid.estimation import estimate
 from mavsysid.pipeline.replanned_stream import relative_covariance
 from mavsysid.planner.plan_request import check_request, rotor_clearance
 from mavsysid.planner.settings import PlannerSettings
@@ -113,6 +113,6 @@ def test_replanned_flight_starts_the_rest_from_the_opening_posterior(tmp_path):
     assert np.all(flight.posterior.sigma < 0.5 * prior.theta)
     # The posterior is what `estimate` (and a stream's continuation) reports on the opening.
     assert flight.refusal is None
-    again = checked_estimate(load_flight(tmp_path / "opening" / "pose.csv", prior), prior)
+    again = estimate(load_flight(tmp_path / "opening" / "pose.csv", prior), prior).final
     np.testing.assert_allclose(flight.posterior.value, again.value, rtol=1e-9)
     np.testing.assert_allclose(flight.posterior.covariance, again.covariance, rtol=1e-9)

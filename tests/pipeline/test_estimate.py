@@ -13,6 +13,7 @@ from mavsysid.estimation.report.text import result_to_json
 from mavsysid.estimation.results import Z95
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+import mavsysid.estimation.answer as answer
 from mavsysid.pipeline import estimate as estimate_job
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, vehicle_to_toml
 
@@ -31,15 +32,16 @@ def _stub_result(theta: np.ndarray) -> SimpleNamespace:
 
 @pytest.fixture
 def stub_estimation(monkeypatch: pytest.MonkeyPatch) -> Callable[[np.ndarray], None]:
-    """Replace reading and estimating in `estimate_job` by stubs returning a given θ."""
+    """Replace reading and the filter by stubs returning a given θ."""
 
     def use(theta: np.ndarray) -> None:
         monkeypatch.setattr(estimate_job, "load_flight",
                             lambda log, config, **kw: SimpleNamespace(
                                 source=str(log), rotor_count=0, duration=0.0))
-        monkeypatch.setattr(estimate_job, "check_kinematics", lambda flight: None)
-        monkeypatch.setattr(estimate_job, "estimate_parameters",
-                            lambda flight, config, settings=None: _stub_result(theta))
+        monkeypatch.setattr(answer, "check_kinematics", lambda flight: None)
+        monkeypatch.setattr(answer, "estimate_parameters",
+                            lambda flight, config, settings=None, reference=None:
+                            _stub_result(theta))
 
     return use
 
@@ -79,7 +81,7 @@ def simulated_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return directory / "pose.csv"
 
 
-def _filter_refuses(flight, config, settings=None):
+def _filter_refuses(flight, config, settings=None, reference=None):
     raise JobFailedError(f"{flight.source}: the parameter filter diverged (test)")
 
 
@@ -87,7 +89,7 @@ def test_balance_answers_when_the_filter_cannot_follow(simulated_log: Path) -> N
     """A filter that refuses is no refusal of the flight: the balance answers per parameter,
     with statuses, its held-out check, and the filter's refusal said in the notes and JSON."""
     run = estimate_job.run_estimate(simulated_log, simulated_log.parent / "prior.toml",
-                                    estimate=_filter_refuses)
+                                    filter_estimate=_filter_refuses)
     result = run.result
     assert result.filter_refusal is not None and "diverged (test)" in result.filter_refusal
     assert len(result.status) == 6 and "determined" in result.status
@@ -110,10 +112,10 @@ def test_a_flight_neither_estimate_answers_is_refused_in_one_line(
     def balance_refuses(flight, config, prior=None, settings=None):
         raise JobFailedError(f"{flight.source}: the force and torque balance determines nothing")
 
-    monkeypatch.setattr(estimate_job, "fit_wrench_balance", balance_refuses)
+    monkeypatch.setattr(answer, "fit_wrench_balance", balance_refuses)
     with pytest.raises(JobFailedError) as info:
         estimate_job.run_estimate(simulated_log, simulated_log.parent / "prior.toml",
-                                    estimate=_filter_refuses)
+                                    filter_estimate=_filter_refuses)
     message = str(info.value)
     assert "\n" not in message and "determines nothing" in message and "(test)" in message
 

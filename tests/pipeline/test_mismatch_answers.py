@@ -51,7 +51,7 @@ def test_vanishing_c_d_beside_linear_rotor_drag_is_an_answer(tmp_path):
 
 def test_a_filter_that_cannot_follow_either_model_costs_only_the_nis(monkeypatch, tmp_path):
     """With an effect named, a diverged EKF is a note (NIS missing), not a refusal."""
-    import mavsysid.estimation.filter.estimator as estimator
+    import mavsysid.estimation as estimation
 
     config = load_vehicle("firefly")
     flight = hidden_flight(config, tmp_path / "f",
@@ -61,7 +61,7 @@ def test_a_filter_that_cannot_follow_either_model_costs_only_the_nis(monkeypatch
     def diverges(*args, **kwargs):
         raise JobFailedError("x.csv: the parameter filter diverged")
 
-    monkeypatch.setattr(estimator, "estimate_with_effects", diverges)
+    monkeypatch.setattr(estimation, "estimate_with_effects", diverges)
     d = diagnose_flight(flight, config, config.theta * 1.05, with_nis=True)
     assert [f.effect.name for f in d.effects][:1] == ["body_drag"]
     assert d.gap.before.nis_mean is None and d.gap.after.nis_mean is None

@@ -1,4 +1,4 @@
-"""The equation-error fit (robust start, independent check) and the log's measured noise."""
+"""The signals of a flight: the smoother the diagnosis shares, and the log's measured noise."""
 
 from __future__ import annotations
 
@@ -7,15 +7,10 @@ import pytest
 from mavsysid.discrepancy import residuals
 from mavsysid.estimation import signals
 from mavsysid.estimation.balance import rows
-from mavsysid.estimation.equation_error_fit import fit_equation_error
-from mavsysid.estimation.filter.estimator import EstimatorSettings, prior_from_config
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.signals import NOISE_TOLERANCE, measured_pose_noise, pose_sigma
-from mavsysid.vehicle.config import load_vehicle
 from mavsysid.vehicle.rotation import quat_exp, quat_multiply
 from scipy.ndimage import uniform_filter1d
-
-from mavsysid.errors import JobFailedError
 
 
 def test_discrepancy_uses_the_estimation_law():
@@ -23,36 +18,6 @@ def test_discrepancy_uses_the_estimation_law():
     assert residuals.smooth_pose is signals.smooth_pose
     assert residuals.model_accelerations is rows.model_accelerations
     assert residuals.SmootherSettings is signals.SmootherSettings
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize(("seed", "factor"), [(1, 1.5), (2, 0.5), (3, 1.3)])
-def test_fit_recovers_theta_from_a_prior_far_off(simulate_flight, seed, factor):
-    """Prior 30–50 % off: c_T, j_x, j_y within 1 %, c_D 5 %, c_M/j_z ratio 2 %; truth ≤ 4 σ."""
-    cfg = load_vehicle("firefly")
-    flight = simulate_flight(cfg, seed, duration=20.0)
-    truth = np.asarray(flight.true_theta)
-    prior = prior_from_config(cfg.with_parameters(cfg.theta * factor), EstimatorSettings())
-    fit = fit_equation_error(flight, cfg, prior)
-    err = fit.estimate.value / truth - 1.0
-    assert np.all(np.abs(err[[0, 3, 4]]) < 0.01), err
-    assert abs(err[1]) < 0.05, err
-    ratio = (fit.estimate.value[2] / fit.estimate.value[5]) / (truth[2] / truth[5])
-    assert abs(ratio - 1.0) < 0.02, ratio
-    z = (fit.estimate.value - truth) / fit.estimate.sigma
-    assert np.all(np.abs(z[[0, 1, 3, 4]]) < 4.0), z
-    assert 0 < fit.effective_rows <= fit.rows
-
-
-def test_too_short_a_flight_is_a_one_line_refusal():
-    cfg = load_vehicle("firefly")
-    t = np.arange(50) * 0.01
-    flight = FlightData(t, np.zeros((50, 3)), np.tile([1.0, 0, 0, 0], (50, 1)),
-                        np.full((50, 6), 500.0), "short.csv")
-    prior = prior_from_config(cfg, EstimatorSettings())
-    with pytest.raises(JobFailedError, match=r"^short\.csv: .*equation-error") as info:
-        fit_equation_error(flight, cfg, prior)
-    assert "\n" not in str(info.value)
 
 
 def _pose(seed: int, sigma_p: float, sigma_a: float, n: int = 3000, dt: float = 0.01
