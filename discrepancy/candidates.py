@@ -33,14 +33,11 @@ __all__ = [
     "theta_jacobian",
 ]
 
-#: Search grids of the profile candidates (SI), physically plausible ranges.
+#: Search grids of the profile candidates (SI): each catalogue effect's `profile` range.
 PROFILE_GRIDS: dict[str, np.ndarray] = {
-    "motor_lag": np.arange(0.0, 0.1201, 0.006),
-    "pose_delay": np.arange(0.0, 0.0801, 0.005),
-    "ground_effect": np.arange(0.0, 0.2501, 0.0125),
-    # A lead of the logged speeds' own: negative values would be a motor lag.
-    "rotor_speed_lag": np.arange(0.0, 0.0601, 0.004),
-}
+    name: np.arange(*effect.profile) for name, effect in EFFECTS.items()
+    if effect.profile is not None}
+
 
 @dataclass(frozen=True)
 class Candidate:

@@ -46,7 +46,7 @@ from mavsysid.estimation.progress import (
     report_stage,
     stage_listener,
 )
-from mavsysid.estimation.readers import READERS, load_flight
+from mavsysid.estimation.readers import READERS, describe_log_kinds, load_flight
 from mavsysid.estimation.report.text import (
     CONVERGENCE_TOLERANCE,
     convergence_time,
@@ -95,7 +95,7 @@ __all__ = [
     "FittedEffect", "FlightData", "ParameterEKF", "ParameterEstimate", "SmoothedPose",
     "SmootherSettings", "StageLog", "WrenchBalanceResult", "WrenchBalanceSettings",
     "acceleration_kernel", "check_kinematics", "check_plausible", "check_result",
-    "consistent_accelerations", "convergence_time", "estimate", "estimate_parameters",
+    "consistent_accelerations", "convergence_time", "describe_log_kinds", "estimate", "estimate_parameters",
     "estimate_with_effects", "fit_wrench_balance", "format_table", "implausibility",
     "load_flight", "model_accelerations", "nis_level", "noise_gain", "prior_from_config",
     "progress_wanted", "report_progress", "report_stage", "result_to_json", "smooth_pose",

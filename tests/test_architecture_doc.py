@@ -73,3 +73,20 @@ def test_every_row_names_existing_modules() -> None:
                       if not ((folder / name).is_dir() if name.endswith("/")
                               else (folder / f"{name}.py").exists())]
     assert not stale, f"docs/architecture.md names modules that do not exist: {stale}"
+
+
+def test_effect_table_names_the_catalogue() -> None:
+    """The "Effect names" table has one row per catalogue effect, with its parameters."""
+    from mavsysid.vehicle.model_effects import EFFECTS
+
+    section = DOC.split("\n## Effect names", 1)[1].split("\n## ", 1)[0]
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("| `") and len(cells) >= 2:
+            rows[cells[0].strip("`")] = {n.strip() for group in re.findall(r"`([^`]+)`",
+                                                                            cells[1])
+                                         for n in group.split(",")}
+    assert list(rows) == list(EFFECTS)
+    for name, effect in EFFECTS.items():
+        assert rows[name] == set(effect.parameter_names()), name

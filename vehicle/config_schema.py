@@ -154,14 +154,8 @@ _TOP_LEVEL: dict[str, str] = {
 #: Parameters of effects that have a sign by their meaning, ``(effect, parameter) →
 #: "positive" | "nonnegative"``; the rest may be negative. Read by the effect fits too.
 EFFECT_PARAMETER_SIGNS: dict[tuple[str, str], str] = {
-    ("motor_lag", "tau"): "nonnegative",
-    ("ground_effect", "rotor_radius"): "positive",
-    ("body_drag", "k"): "nonnegative",
-    ("rotor_drag_linear", "k"): "nonnegative",
-    ("rotor_drag_linear", "k_z"): "nonnegative",
-    ("rotor_inertia", "J_r"): "nonnegative",
-    ("rotor_speed_lag", "tau"): "nonnegative",
-}
+    (effect.name, p.name): p.sign for effect in EFFECTS.values() for p in effect.parameters
+    if p.sign is not None}
 
 
 def _suggestion(key: str, section: str | None, index: int | None = None) -> str:

@@ -43,12 +43,16 @@ class EffectParameter:
     description : str
     scale : float
         A typical magnitude (same unit): the step of searches and the unit of scaled fits.
+    sign : {"positive", "nonnegative"} or None
+        The sign the parameter has by its meaning (a time constant, a drag); None: any.
+        Vehicle files are checked against it and the fits kept to it.
     """
 
     name: str
     unit: str
     description: str
     scale: float
+    sign: str | None = None
 
 
 @dataclass(frozen=True)
@@ -228,6 +232,10 @@ class ModelEffect:
     #: Whether the wrench acts on the velocity through the air: with a wind in the model
     #: (`air_velocity`), `total_wrench` evaluates it at the airspeed.
     airspeed: ClassVar[bool] = False
+    #: The diagnosis fits a one-parameter effect whose channel is not linear in it by a
+    #: profile search over ``numpy.arange(*profile)`` (start, stop, step; SI, a physically
+    #: plausible range); None: by regression columns.
+    profile: ClassVar[tuple[float, float, float] | None] = None
 
     def __init__(self, **values: float) -> None:
         known = {p.name for p in self.parameters}

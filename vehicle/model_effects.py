@@ -1,9 +1,10 @@
 """Named physical effects beyond the paper's model: one definition for truth and model.
 
-Each effect of docs/architecture.md's stable list (``body_drag``, ``rotor_drag_linear``,
-``motor_lag``, ``pose_delay``, ``marker_offset``, ``cog_offset``, ``wind``,
-``thrust_drift``, ``ground_effect``, ``rotor_inertia``, ``rotor_speed_lag``) is a
-`ModelEffect` subclass carrying its parameter values. An effect enters the model through
+Each effect of the catalogue (`EFFECTS`, docs/architecture.md's stable names) is a
+`ModelEffect` subclass carrying its parameter values, and everything else about it: its
+parameters with their units, scales and signs, the channels it enters by, and, for a
+one-parameter effect the diagnosis searches by profile, the search range. A new effect is
+a class here, its entry in `EFFECTS` and its row in docs/architecture.md's table. An effect enters the model through
 up to three channels:
 
 * ``wrench`` — an extra body-frame force and torque added to the paper's F_B and M_B,
@@ -67,7 +68,8 @@ class BodyDrag(ModelEffect):
     title = "body (parasitic) drag"
     description = ("the airframe's own drag, quadratic in speed and acting on every axis "
                    "(F = -k |v| v at the centre of gravity)")
-    parameters = (EffectParameter("k", "kg/m", "drag force per squared airspeed", 0.02),)
+    parameters = (EffectParameter("k", "kg/m", "drag force per squared airspeed", 0.02,
+                                  "nonnegative"),)
     channels = frozenset({"wrench"})
     airspeed = True
 
@@ -92,9 +94,9 @@ class RotorDragLinear(ModelEffect):
                    "and to the hub velocity: in plane (k) and along the rotor axis (k_z, "
                    "the induced inflow), F_i = -n_i diag(k, k, k_z) (v + w x r_i)")
     parameters = (EffectParameter("k", "N·s/(m·rad)", "in-plane drag force per rotor speed "
-                                  "and speed", 1e-4),
+                                  "and speed", 1e-4, "nonnegative"),
                   EffectParameter("k_z", "N·s/(m·rad)", "axial (inflow) force per rotor speed "
-                                  "and speed", 1e-4))
+                                  "and speed", 1e-4, "nonnegative"))
     channels = frozenset({"wrench"})
     airspeed = True
 
@@ -137,8 +139,9 @@ class MotorLag(ModelEffect):
     title = "motor time constant"
     description = ("the logged rotor speeds are commands; the motors follow them with a "
                    "first-order lag of time constant tau")
-    parameters = (EffectParameter("tau", "s", "motor time constant", 0.02),)
+    parameters = (EffectParameter("tau", "s", "motor time constant", 0.02, "nonnegative"),)
     channels = frozenset({"rotor_speeds"})
+    profile = (0.0, 0.1201, 0.006)
 
     def acting_rotor_speeds(self, t: np.ndarray, logged: np.ndarray) -> np.ndarray:
         tau = self.values[0]
@@ -176,6 +179,7 @@ class PoseDelay(ModelEffect):
                    "t - delay, relative to the rotor speeds")
     parameters = (EffectParameter("delay", "s", "measurement delay", 0.01),)
     channels = frozenset({"pose"})
+    profile = (0.0, 0.0801, 0.005)
 
     def measured_pose(self, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -300,8 +304,9 @@ class GroundEffect(ModelEffect):
     title = "ground effect"
     description = ("near the ground each rotor makes more thrust: T/T_inf = "
                    "1/(1 - (rho/4h)^2), rho the rotor radius, h the rotor's height")
-    parameters = (EffectParameter("rotor_radius", "m", "rotor radius ρ", 0.1),)
+    parameters = (EffectParameter("rotor_radius", "m", "rotor radius ρ", 0.1, "positive"),)
     channels = frozenset({"wrench"})
+    profile = (0.0, 0.2501, 0.0125)
 
     def gain(self, inputs: EffectInputs) -> np.ndarray:
         """Extra thrust fraction of every rotor, shape (N, k)."""
@@ -333,7 +338,7 @@ class RotorInertia(ModelEffect):
     description = ("each rotor's moment of inertia J_r: accelerating a rotor turns the body "
                    "the other way, a yaw torque -sum eps_i J_r dn_i/dt")
     parameters = (EffectParameter("J_r", "kg·m²", "moment of inertia of one rotor and its "
-                                  "motor bell about its axis", 1e-5),)
+                                  "motor bell about its axis", 1e-5, "nonnegative"),)
     channels = frozenset({"wrench"})
 
     def wrench(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
@@ -359,8 +364,10 @@ class RotorSpeedLag(ModelEffect):
     description = ("the measured rotor speeds lag the true ones with a first-order lag of "
                    "time constant tau: the speeds acting are n_logged + tau dn_logged/dt")
     parameters = (EffectParameter("tau", "s", "time constant of the speed measurement",
-                                  0.01),)
+                                  0.01, "nonnegative"),)
     channels = frozenset({"rotor_speeds"})
+    # A lead of the logged speeds' own: negative values would be a motor lag.
+    profile = (0.0, 0.0601, 0.004)
 
     def acting_rotor_speeds(self, t: np.ndarray, logged: np.ndarray) -> np.ndarray:
         tau = self.values[0]

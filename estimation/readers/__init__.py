@@ -36,7 +36,7 @@ from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import InputError
 
-__all__ = ["READERS", "TimeWindow", "load_flight"]
+__all__ = ["READERS", "TimeWindow", "describe_log_kinds", "load_flight"]
 
 #: The reader of each supported file extension (lower case).
 READERS: dict[str, Callable[[Path, VehicleConfig], LogStreams]] = {
@@ -45,6 +45,12 @@ READERS: dict[str, Callable[[Path, VehicleConfig], LogStreams]] = {
     ".ulg": partial(read_autopilot_log, read_ulog),
     ".bin": partial(read_autopilot_log, read_dataflash),
 }
+
+
+def describe_log_kinds() -> str:
+    """The logs `READERS` reads, in words for the help ("pose.csv, .tlog, .ulg or .bin")."""
+    names = ["pose.csv" if extension == ".csv" else extension for extension in READERS]
+    return ", ".join(names[:-1]) + " or " + names[-1]
 
 
 def _existing_file(path: str | Path, what: str) -> Path:

@@ -22,19 +22,29 @@ from mavsysid.discrepancy.report import (
 )
 from mavsysid.estimation import (
     StageLog,
+    describe_log_kinds,
     progress_wanted,
     report_stage,
     stage_listener,
 )
 from mavsysid.pipeline.diagnose import reestimate_comparison, run_diagnose
 from mavsysid.vehicle.config import save_vehicle
+from mavsysid.vehicle.model_effects import EFFECTS
 
-__all__ = ["add_arguments", "main"]
+__all__ = ["DESCRIPTION", "add_arguments", "main"]
+
+#: What ``mavsysid diagnose --help`` says the command does.
+DESCRIPTION = (
+    "Replay the identified model along the logged rotor speeds, compare it with the "
+    "accelerations of the smoothed pose, and report where they disagree; name the physical "
+    "effect(s) that explain the difference (forward selection on BIC over the catalogue: "
+    f"{', '.join(EFFECTS)}), fit them with confidence intervals, and show how much the gap "
+    "shrinks on held-out data (the end of the flight, --holdout).")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid diagnose``."""
-    add_log_arguments(parser)
+    add_log_arguments(parser, describe_log_kinds())
     add_window_arguments(parser)
     parser.add_argument("--estimate", type=Path, metavar="JSON",
                         help="estimate.json of this flight: the θ to replay (default: the "

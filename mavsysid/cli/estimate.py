@@ -26,6 +26,7 @@ from mavsysid.estimation import (
     EstimatorSettings,
     ParameterEstimate,
     StageLog,
+    describe_log_kinds,
     format_table,
     progress_wanted,
     report_stage,
@@ -39,7 +40,17 @@ from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.pipeline.simulate import read_truth
 from mavsysid.vehicle.config import PARAMETER_NAMES, save_vehicle
 
-__all__ = ["add_arguments", "format_truth", "main"]
+__all__ = ["DESCRIPTION", "add_arguments", "format_truth", "main"]
+
+#: What ``mavsysid estimate --help`` says the command does.
+DESCRIPTION = (
+    "Estimate the thrust, drag and moment coefficients and the inertia, with uncertainties, "
+    f"from a flight log ({describe_log_kinds()}), parameter by parameter. The force and "
+    "torque balance of the flight (its pose differentiated and its rotor speeds, band, "
+    "smoothing and rotor-to-pose delay chosen from the flight, Newey–West σ) answers; the "
+    "paper's parameter EKF with its batch refinement checks it and stands where it agrees "
+    "and is the more precise. What the flight does not determine keeps the vehicle file's "
+    "value and is said so; a flight neither determines anything of is refused.")
 
 #: ``--truth`` alone: the truth recorded next to the log (a `mavsysid simulate` flight).
 _OWN_TRUTH = "next to the log"
@@ -47,7 +58,7 @@ _OWN_TRUTH = "next to the log"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid estimate``."""
-    add_log_arguments(parser)
+    add_log_arguments(parser, describe_log_kinds())
     add_window_arguments(parser)
     parser.add_argument("--truth", nargs="?", const=_OWN_TRUTH, metavar="PATH",
                         help="compare with a simulator's true θ: its meta.json or the "

@@ -64,14 +64,12 @@ _COMMANDS = (
      "and meta.json into a new flight directory."),
     ("estimate", "mavsysid.cli.estimate", "estimate θ = [c_T, c_D, c_M, j_x, j_y, j_z] from a log",
      "Estimate the thrust, drag and moment coefficients and the inertia, with uncertainties, "
-     "from a flight log (pose.csv, .tlog, .ulg or .bin): a parameter EKF, then a "
-     "process-noise fit and a batch MAP refinement."),
+     "from a flight log, parameter by parameter."),
     ("diagnose", "mavsysid.cli.diagnose", "find, name and fit what the model still gets wrong",
      "Replay the identified model along the logged rotor speeds, compare it with the "
      "accelerations of the smoothed pose, and report where they disagree; name the "
-     "physical effect(s) that explain the difference (forward selection on BIC over a "
-     "catalogue of eleven), fit them with confidence intervals, and show how much the gap "
-     "shrinks on held-out data (the last 30 % of the flight)."),
+     "physical effect(s) that explain the difference, fit them with confidence intervals, "
+     "and show how much the gap shrinks on held-out data."),
     ("plan", "mavsysid.cli.plan", "plan a maximally informative calibration flight",
      "Plan a calibration flight that minimises the predicted parameter uncertainty "
      "(D-optimality) within a flight-time budget and a flight box, using the vehicle's "
@@ -153,6 +151,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                                    description=description)
         if command is None or command == name:
             module = importlib.import_module(module_name)
+            # A command whose description lists a registry (effects, log formats) says it.
+            subparser.description = getattr(module, "DESCRIPTION", description)
             module.add_arguments(subparser)
             subparser.set_defaults(run=module.main)
 

@@ -22,9 +22,16 @@ OUTPUT_OPTION = "--log-dir"
 DEFAULT_BOX = ",".join(f"{v:g}" for v in PlannerSettings.box)
 
 
-def add_log_arguments(parser: argparse.ArgumentParser) -> None:
-    """The flight log and the vehicle of the commands that read a log (estimate, diagnose)."""
-    parser.add_argument("log", type=Path, help="flight log: pose.csv, .tlog, .ulg or .bin")
+def add_log_arguments(parser: argparse.ArgumentParser, kinds: str) -> None:
+    """The flight log and the vehicle of the commands that read a log (estimate, diagnose).
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+    kinds : str
+        The logs the command reads, in words (`mavsysid.estimation.describe_log_kinds`).
+    """
+    parser.add_argument("log", type=Path, help=f"flight log: {kinds}")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
 
