@@ -52,10 +52,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from mavsysid.estimation import check_result, estimate
 from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.results import Z95, EstimationResult
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
-from mavsysid.estimation import check_result, estimate
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig, load_vehicle
 from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
 from mavsysid.vehicle.model_effects import ModelEffect, effect_from_values

@@ -13,11 +13,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation import check_result
 from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import Z95
 from mavsysid.pipeline.auto_effects import estimate_with_named_effects
-from mavsysid.estimation import check_result
 from mavsysid.vehicle.config import VehicleConfig
 
 from bench.mismatch_coverage import scored

@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from mavsysid.estimation import estimate
 from mavsysid.estimation.readers import load_flight
 from mavsysid.experiments.experiment import draw_prior
 from mavsysid.experiments.replanned_flight import (
@@ -15,7 +16,6 @@ from mavsysid.experiments.replanned_flight import (
     replan_flight,
 )
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-from mavsysid.estimation import estimate
 from mavsysid.pipeline.replanned_stream import relative_covariance
 from mavsysid.planner.plan_request import check_request, rotor_clearance
 from mavsysid.planner.settings import PlannerSettings

@@ -7,13 +7,13 @@ from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
 
+import mavsysid.estimation.answer as answer
 import numpy as np
 import pytest
 from mavsysid.estimation.report.text import result_to_json
 from mavsysid.estimation.results import Z95
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
-import mavsysid.estimation.answer as answer
 from mavsysid.pipeline import estimate as estimate_job
 from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle, vehicle_to_toml
 
