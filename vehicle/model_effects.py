@@ -4,8 +4,8 @@ Each effect of the catalogue (`EFFECTS`, docs/architecture.md's stable names) is
 `ModelEffect` subclass carrying its parameter values, and everything else about it: its
 parameters with their units, scales and signs, the channels it enters by, and, for a
 one-parameter effect the diagnosis searches by profile, the search range. A new effect is
-a class here, its entry in `EFFECTS` and its row in docs/architecture.md's table. An effect enters the model through
-up to three channels:
+a class here, its entry in `EFFECTS` and its row in docs/architecture.md's table. An effect
+enters the model through up to three channels:
 
 * ``wrench`` — an extra body-frame force and torque added to the paper's F_B and M_B,
   evaluated on arrays of N samples (`EffectInputs`);
