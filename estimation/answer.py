@@ -19,7 +19,7 @@ from mavsysid.estimation.filter.estimator import (
     EstimatorSettings,
     estimate_parameters,
 )
-from mavsysid.estimation.filter.guard import AGREEMENT_TOLERANCE, check_agreement
+from mavsysid.estimation.filter.guard import check_agreement
 from mavsysid.estimation.flight import MIN_DURATION, FlightData
 from mavsysid.estimation.progress import report_stage
 from mavsysid.estimation.results import (
@@ -33,10 +33,19 @@ from mavsysid.estimation.results import (
     ParameterEstimate,
     WrenchBalanceResult,
     prior_from_config,
+    quantity_status,
 )
 from mavsysid.estimation.robust import widened
-from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
+from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM
+from mavsysid.vehicle.parameters import (
+    C_D,
+    C_T,
+    INERTIA,
+    PAPER_THETA,
+    PARAMETER_NAMES,
+    EstimatedQuantity,
+)
 
 from mavsysid.errors import JobFailedError
 
@@ -55,19 +64,13 @@ FilterEstimator = Callable[[FlightData, VehicleConfig, EstimatorSettings | None,
 AGREEMENT_SIGMAS = Z95
 #: A data value within this many σ of 0 puts c_D at its bound.
 BOUND_SIGMAS = 2.0
-_C_D = PARAMETER_NAMES.index("c_D")
 
 
-def _filter_determines(estimate: ParameterEstimate) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return (estimate.value > 0.0) & (estimate.sigma <= MAX_RELATIVE_SIGMA * estimate.value)
-
-
-def _balance_data(balance: WrenchBalanceResult | None) -> tuple[np.ndarray, np.ndarray]:
-    """The balance's data value and σ per parameter; σ inf where it has none."""
-    n = len(PARAMETER_NAMES)
+def _balance_data(balance: WrenchBalanceResult | None, count: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The balance's data value and σ per quantity; σ inf where it has none."""
     if balance is None:
-        return np.full(n, np.nan), np.full(n, np.inf)
+        return np.full(count, np.nan), np.full(count, np.inf)
     value = np.asarray(balance.data.value, float)
     with np.errstate(over="ignore", invalid="ignore"):  # a σ part of 1e200: inf, not determined
         sigma = np.sqrt(np.sum(balance.sigma_parts**2, axis=0))
@@ -90,17 +93,47 @@ def _filter_stands(fv: float, fs: float, bv: float, bs: float, tolerance: float
 def _at_bound(b_val: np.ndarray, b_sig: np.ndarray, prior: ParameterEstimate) -> np.ndarray:
     """c_D whose data value (`_balance_data`) lies within `BOUND_SIGMAS` of 0, more tightly
     than the prior."""
-    out = np.zeros(len(PARAMETER_NAMES), bool)
-    v, s = float(b_val[_C_D]), float(b_sig[_C_D])
-    out[_C_D] = math.isfinite(s) and abs(v) <= BOUND_SIGMAS * s and s < float(prior.sigma[_C_D])
+    out = np.zeros(b_val.size, bool)
+    v, s = float(b_val[C_D]), float(b_sig[C_D])
+    out[C_D] = math.isfinite(s) and abs(v) <= BOUND_SIGMAS * s and s < float(prior.sigma[C_D])
     return out
+
+
+def _sources(f_est: ParameterEstimate | None, balance: WrenchBalanceResult | None,
+             prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...]
+             ) -> tuple[np.ndarray, list[str]]:
+    """Per quantity, the estimate that answers ("filter", "balance", "prior"), and the
+    disagreements in words (module docstring)."""
+    n = len(quantities)
+    f_det = (np.zeros(n, bool) if f_est is None
+             else quantity_status(f_est.value, f_est.sigma, prior.sigma))
+    b_det = np.zeros(n, bool) if balance is None else np.asarray(balance.determined, bool)
+    b_val, b_sig = _balance_data(balance, n)
+    source = np.full(n, "prior", dtype=object)
+    mismatch = []
+    for j, quantity in enumerate(quantities):
+        if f_det[j] and math.isfinite(b_sig[j]):
+            assert f_est is not None
+            fv, fs = float(f_est.value[j]), float(f_est.sigma[j])
+            bv, bs = float(b_val[j]), float(b_sig[j])
+            stands, apart = _filter_stands(fv, fs, bv, bs, quantity.tolerance)
+            source[j] = "filter" if stands else "balance" if b_det[j] else "prior"
+            if apart is not None:
+                mismatch.append(
+                    f"{quantity.name}: filter {fv:.4g} ± {fs:.2g}, balance {bv:.4g} ± "
+                    f"{bs:.2g} {quantity.unit} ({apart:.1f} σ apart)")
+        elif f_det[j]:
+            source[j] = "filter"
+        elif b_det[j]:
+            source[j] = "balance"
+    return source, mismatch
 
 
 def answer_parameters(
     filter_result: EstimationResult | None, balance: WrenchBalanceResult | None,
-    prior: ParameterEstimate,
+    prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...] = PAPER_THETA,
 ) -> tuple[ParameterEstimate, tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
-    """θ per parameter from the filter's result and the balance (module docstring).
+    """Each quantity from the filter's result and the balance (module docstring).
 
     Parameters
     ----------
@@ -109,18 +142,20 @@ def answer_parameters(
     balance : WrenchBalanceResult or None
         The force and torque balance (None: it determined nothing or could not run).
     prior : ParameterEstimate
-        The prior θ and σ (SI).
+        The prior of the quantities (SI).
+    quantities : tuple of EstimatedQuantity
+        θ and the nuisance quantities (`VehicleConfig.quantities`), in the estimates' order.
 
     Returns
     -------
     estimate : ParameterEstimate
-        θ and its covariance, SI.
-    status : tuple of 6 str
-        `DETERMINED`, `NOT_DETERMINED` or `AT_BOUND` per parameter.
-    source : tuple of 6 str
-        "filter", "balance" or "prior" per parameter.
+        The quantities and their covariance, SI.
+    status : tuple of str
+        `DETERMINED`, `NOT_DETERMINED` or `AT_BOUND` per quantity.
+    source : tuple of str
+        "filter", "balance" or "prior" per quantity.
     mismatch : tuple of str
-        One phrase per parameter where the filter and the balance disagree.
+        One phrase per quantity where the filter and the balance disagree.
 
     Raises
     ------
@@ -129,28 +164,9 @@ def answer_parameters(
     """
     if filter_result is None and balance is None:
         raise JobFailedError("no estimate to answer from")
-    n = len(PARAMETER_NAMES)
     f_est = None if filter_result is None else filter_result.final
-    f_det = np.zeros(n, bool) if f_est is None else _filter_determines(f_est)
-    b_det = np.zeros(n, bool) if balance is None else np.asarray(balance.determined, bool)
-    source = np.full(n, "prior", dtype=object)
-    mismatch = []
-    b_val, b_sig = _balance_data(balance)
-    for j, name in enumerate(PARAMETER_NAMES):
-        if f_det[j] and math.isfinite(b_sig[j]):
-            assert f_est is not None
-            fv, fs = float(f_est.value[j]), float(f_est.sigma[j])
-            bv, bs = float(b_val[j]), float(b_sig[j])
-            stands, apart = _filter_stands(fv, fs, bv, bs, float(AGREEMENT_TOLERANCE[j]))
-            source[j] = "filter" if stands else "balance" if b_det[j] else "prior"
-            if apart is not None:
-                mismatch.append(
-                    f"{name}: filter {fv:.4g} ± {fs:.2g}, balance {bv:.4g} ± {bs:.2g} "
-                    f"{PARAMETER_UNITS[name]} ({apart:.1f} σ apart)")
-        elif f_det[j]:
-            source[j] = "filter"
-        elif b_det[j]:
-            source[j] = "balance"
+    source, mismatch = _sources(f_est, balance, prior, quantities)
+    b_val, b_sig = _balance_data(balance, len(quantities))
     bound = _at_bound(b_val, b_sig, prior) & (source == "prior")
     value = prior.value.astype(float).copy()
     cov = np.diag(prior.sigma**2)
@@ -167,8 +183,8 @@ def answer_parameters(
         cov[j, :] = cov[:, j] = 0.0
         cov[j, j] = float(b_sig[j]) ** 2
         status[j], source[j] = AT_BOUND, "balance"
-    return (ParameterEstimate(value, cov), tuple(status), tuple(str(s) for s in source),
-            tuple(mismatch))
+    return (ParameterEstimate(value, cov, prior.names), tuple(status),
+            tuple(str(s) for s in source), tuple(mismatch))
 
 
 def _empty_history() -> EstimationHistory:
@@ -338,7 +354,8 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
               balance: WrenchBalanceResult, config: VehicleConfig, flight: FlightData,
               prior: ParameterEstimate) -> EstimationResult:
     """The per-parameter answer (`answer_parameters`) and its notes."""
-    estimate, status, source, mismatch = answer_parameters(result, balance, prior)
+    estimate, status, source, mismatch = answer_parameters(result, balance, prior,
+                                                           config.quantities)
     notes = list(balance.notes)
     if result is None:
         notes.append(f"the filter and batch could not follow this flight ({filter_refusal}); "
@@ -353,7 +370,7 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
                      "misses something (mavsysid diagnose names what)")
     for label, why in ((NOT_DETERMINED, "the prior's value and σ are kept"),
                        (AT_BOUND, f"the data put it within {BOUND_SIGMAS:g} σ of 0")):
-        names = [n for n, s in zip(PARAMETER_NAMES, status, strict=True) if s == label]
+        names = [n for n, s in zip(estimate.names, status, strict=True) if s == label]
         if names:
             notes.append(f"{', '.join(names)}: {label}; {why}")
     notes.extend(_triangle_note(estimate, status))
@@ -363,9 +380,9 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
 
 def _triangle_note(estimate: ParameterEstimate, status: tuple[str, ...]) -> list[str]:
     """A kept prior inertia that breaks the triangle inequality with determined ones."""
-    j = estimate.value[3:6]
-    known = [s == DETERMINED for s in status[3:6]]
-    names = PARAMETER_NAMES[3:6]
+    j = estimate.value[INERTIA]
+    known = [s == DETERMINED for s in status[INERTIA]]
+    names = PARAMETER_NAMES[INERTIA]
     out = []
     for k in range(3):
         others = [i for i in range(3) if i != k]
@@ -400,13 +417,15 @@ def check_result(source: str, result: EstimationResult,
     ------
     JobFailedError
     """
-    final = result.final
+    final, prior = result.final.theta, result.prior.theta
     effects = [e.effect for e in result.effects]
     floor = (None if rotor_speed_max is None else
-             vanishing_floor(effects, float(final.value[0]), rotor_speed_max))
-    check_plausible(source, final.value, final.sigma, result.prior.value, result.prior.sigma,
+             vanishing_floor(effects, float(final.value[C_T]), rotor_speed_max))
+    check_plausible(source, final.value, final.sigma, prior.value, prior.sigma,
                     may_vanish=vanishing_parameters(e.name for e in effects), floor=floor)
+    final = result.final
     if result.equation_error is not None:
         unwidened = final if result.mismatch_widening is None else ParameterEstimate(
-            final.value, widened(final.covariance, 1.0 / result.mismatch_widening))
+            final.value, widened(final.covariance, 1.0 / result.mismatch_widening),
+            final.names)
         check_agreement(source, unwidened, result.equation_error)

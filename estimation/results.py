@@ -10,6 +10,7 @@ import numpy as np
 from mavsysid.estimation.signals import AXIS_NAMES, Band
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
+from mavsysid.vehicle.parameters import C_D, quantity_names
 
 from mavsysid.errors import InputError
 
@@ -33,6 +34,7 @@ __all__ = [
     "WrenchBalanceResult",
     "parameter_status",
     "prior_from_config",
+    "quantity_status",
 ]
 
 #: Two-sided 95 % quantile of the standard normal.
@@ -53,36 +55,56 @@ class PriorChoices(Protocol):
 
 @dataclass(frozen=True)
 class ParameterEstimate:
-    """θ with its uncertainty, in SI units (order of `PARAMETER_NAMES`).
+    """The estimated quantities with their uncertainty, in SI units.
+
+    θ of the paper first (the order of `PARAMETER_NAMES`), then any nuisance quantities
+    (`mavsysid.vehicle.parameters.EstimatedQuantity`), as ``names`` says.
 
     Attributes
     ----------
-    value : ndarray, shape (6,)
-    covariance : ndarray, shape (6, 6)
+    value : ndarray, shape (P,)
+    covariance : ndarray, shape (P, P)
+    names : tuple of str
+        The quantities' names; `PARAMETER_NAMES` when not given (then P must be 6).
     """
 
     value: np.ndarray
     covariance: np.ndarray
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.names:
+            if np.size(self.value) != len(PARAMETER_NAMES):
+                raise ValueError(f"{np.size(self.value)} quantities need their names")
+            object.__setattr__(self, "names", PARAMETER_NAMES)
 
     @property
     def sigma(self) -> np.ndarray:
-        """Standard deviations, shape (6,)."""
+        """Standard deviations, shape (P,)."""
         return np.sqrt(np.diag(self.covariance))
 
     @property
     def relative_sigma(self) -> np.ndarray:
-        """σ / |value|, shape (6,)."""
+        """σ / |value|, shape (P,)."""
         return self.sigma / np.abs(self.value)
 
     @property
+    def theta(self) -> ParameterEstimate:
+        """The paper's θ alone (the first six quantities)."""
+        six = slice(0, len(PARAMETER_NAMES))
+        return ParameterEstimate(self.value[six], self.covariance[six, six])
+
+    @property
     def d_optimality(self) -> float:
-        """det(Σ)^(1/6) via log-eigenvalues (paper Eq. dopt, docs/architecture.md), SI."""
-        return float(np.exp(np.mean(np.log(np.linalg.eigvalsh(self.covariance)))))
+        """det(Σ_θ)^(1/6) of the paper's θ via log-eigenvalues (paper Eq. dopt,
+        docs/architecture.md), SI; nuisance quantities are marginalised out."""
+        cov = self.theta.covariance
+        return float(np.exp(np.mean(np.log(np.linalg.eigvalsh(cov)))))
 
     def as_dict(self) -> dict[str, dict[str, float]]:
         """``{"c_T": {"value": .., "sigma": ..}, ...}`` (docs/architecture.md's estimate JSON)."""
         return {name: {"value": float(v), "sigma": float(s)}
-                for name, v, s in zip(PARAMETER_NAMES, self.value, self.sigma, strict=True)}
+                for name, v, s in zip(self.names, self.value, self.sigma, strict=True)}
 
 
 @dataclass(frozen=True)
@@ -414,11 +436,11 @@ class WrenchBalanceResult:
     ----------
     estimate : ParameterEstimate
         θ: the data's value and widened σ where determined, the prior's elsewhere (SI).
-    determined : ndarray of bool, shape (6,)
+    determined : ndarray of bool, shape (P,)
     data : DataTheta
         The data-only values (also where not determined) and the combinations.
-    sigma_parts : ndarray, shape (6, 6)
-        σ of θ by source (`SIGMA_PARTS`), SI.
+    sigma_parts : ndarray, shape (len(SIGMA_PARTS), P)
+        σ of each quantity by source (`SIGMA_PARTS`), SI.
     combination_sigma : ndarray, shape (2,)
         Widened σ of the combinations (`COMBINATION_NAMES`).
     prior : ParameterEstimate
@@ -468,7 +490,7 @@ class WrenchBalanceResult:
         w_data = np.where(has, 1.0 / np.where(has, sigma, 1.0) ** 2, 0.0)
         w_prior = 1.0 / prior.sigma**2
         mean = (w_data * np.where(has, value, 0.0) + w_prior * prior.value) / (w_data + w_prior)
-        return ParameterEstimate(mean, np.diag(1.0 / (w_data + w_prior)))
+        return ParameterEstimate(mean, np.diag(1.0 / (w_data + w_prior)), prior.names)
 
     @property
     def combination_determined(self) -> np.ndarray:
@@ -481,21 +503,25 @@ class WrenchBalanceResult:
 
         ``{"parameters": {name: {"value", "sigma", "unit", "status", "data_value",
         "data_sigma", "sigma_parts": {part: σ}, "prior_value", "prior_sigma"}},
-        "combinations": {name: {"value", "sigma", "status"}}, "choices": {"window_s",
-        "roll_pitch_band_hz", "yaw_band_hz", "force_lowpass_hz", "delay_s",
-        "delay_sigma_s"}, "holdout": {…} or None, "rows", "notes"}``.
+        "nuisance": {name: {the same but "unit"}}, "combinations": {name: {"value",
+        "sigma", "status"}}, "choices": {"window_s", "roll_pitch_band_hz", "yaw_band_hz",
+        "force_lowpass_hz", "delay_s", "delay_sigma_s"}, "holdout": {…} or None, "rows",
+        "notes"}``; "nuisance" only when the balance estimated quantities beyond θ.
         """
         with np.errstate(over="ignore", invalid="ignore"):
             data_sigma = np.sqrt(np.sum(self.sigma_parts**2, axis=0))
-        parameters = {}
-        for k, name in enumerate(PARAMETER_NAMES):
-            parameters[name] = {
+        quantities = {}
+        for k, name in enumerate(self.estimate.names):
+            quantities[name] = {
                 "value": _num(self.estimate.value[k]), "sigma": _num(self.estimate.sigma[k]),
-                "unit": PARAMETER_UNITS[name], "status": self.status[k],
+                "unit": PARAMETER_UNITS.get(name), "status": self.status[k],
                 "data_value": _num(self.data.value[k]), "data_sigma": _num(data_sigma[k]),
                 "sigma_parts": {p: _num(v) for p, v in zip(SIGMA_PARTS, self.sigma_parts[:, k],
                                                           strict=True)},
                 "prior_value": _num(self.prior.value[k]), "prior_sigma": _num(self.prior.sigma[k])}
+        parameters = {name: quantities.pop(name) for name in PARAMETER_NAMES}
+        for entry in quantities.values():
+            del entry["unit"]
         combinations = {
             name: {"value": _num(v), "sigma": _num(s),
                    "status": "determined" if d else "not determined"}
@@ -507,7 +533,8 @@ class WrenchBalanceResult:
         def band(b):
             return None if b is None else [float(b.low), float(b.high)]
 
-        return {"parameters": parameters, "combinations": combinations,
+        nuisance = {"nuisance": quantities} if quantities else {}
+        return {"parameters": parameters, **nuisance, "combinations": combinations,
                 "choices": {"window_s": c.window, "roll_pitch_band_hz": band(c.roll_pitch),
                             "yaw_band_hz": band(c.yaw),
                             "force_lowpass_hz": None if c.force is None else float(c.force.high),
@@ -525,14 +552,40 @@ NOT_DETERMINED = "not determined by this flight"
 AT_BOUND = "at the bound"
 
 
+def quantity_status(value: np.ndarray, sigma: np.ndarray, prior_sigma: np.ndarray,
+                    max_relative_sigma: float = MAX_RELATIVE_SIGMA) -> np.ndarray:
+    """Which quantities an estimate determines, shape like ``value`` (P,).
+
+    θ by `parameter_status` (physical and σ within ``max_relative_sigma`` of the value); a
+    nuisance quantity, whose value may well be 0, when its σ is as much narrower than its
+    prior's as θ's rule asks of the default prior (`PRIOR_RELATIVE_SIGMA`): fourfold.
+
+    Parameters
+    ----------
+    value, sigma, prior_sigma : ndarray, shape (P,)
+        The estimate, its σ and the prior's σ, SI.
+    max_relative_sigma : float
+    """
+    value, sigma = np.asarray(value, float), np.asarray(sigma, float)
+    out = np.zeros(value.shape, bool)
+    six = len(PARAMETER_NAMES)
+    out[:six] = parameter_status(value[:six], sigma[:six], max_relative_sigma)
+    narrowing = max_relative_sigma / PRIOR_RELATIVE_SIGMA
+    with np.errstate(invalid="ignore"):
+        out[six:] = np.isfinite(value[six:]) & (
+            sigma[six:] <= narrowing * np.asarray(prior_sigma, float)[six:])
+    return out
+
+
 def prior_from_config(config: VehicleConfig, settings: PriorChoices | None = None
                       ) -> ParameterEstimate:
-    """The prior: the config's nominal θ with σ = relative σ × |θ| (c_D: a floor if 0).
+    """The prior: the config's nominal θ with σ = relative σ × |θ| (c_D: a floor if 0), then
+    each of the config's nuisance quantities at its own prior value and σ.
 
     Parameters
     ----------
     config : VehicleConfig
-        The vehicle file: its θ is the prior's value.
+        The vehicle file: its θ is the prior's value; its ``extra_quantities`` follow.
     settings : PriorChoices, optional
         The relative σ and c_D's σ where its value is 0 (default `PRIOR_RELATIVE_SIGMA`,
         `C_D_PRIOR_SIGMA`).
@@ -540,7 +593,7 @@ def prior_from_config(config: VehicleConfig, settings: PriorChoices | None = Non
     Raises
     ------
     InputError
-        A relative σ that is not positive.
+        A relative σ that is not positive, or a nuisance quantity without a positive σ.
     """
     relative = PRIOR_RELATIVE_SIGMA if settings is None else settings.prior_relative_sigma
     c_d_sigma = C_D_PRIOR_SIGMA if settings is None else settings.c_D_scale
@@ -548,9 +601,13 @@ def prior_from_config(config: VehicleConfig, settings: PriorChoices | None = Non
         raise InputError(f"prior relative σ {relative:g}: expected > 0")
     value = config.theta.copy()
     sigma = relative * np.abs(value)
-    if value[1] == 0.0:
-        sigma[1] = c_d_sigma
-    return ParameterEstimate(value, np.diag(sigma**2))
-
-
-
+    if value[C_D] == 0.0:
+        sigma[C_D] = c_d_sigma
+    extras = config.extra_quantities
+    for quantity in extras:
+        if not quantity.prior_sigma > 0.0:
+            raise InputError(f"estimated quantity {quantity.name}: prior σ "
+                             f"{quantity.prior_sigma:g}: expected > 0")
+    value = np.concatenate([value, [q.nominal for q in extras]])
+    sigma = np.concatenate([sigma, [q.prior_sigma for q in extras]])
+    return ParameterEstimate(value, np.diag(sigma**2), quantity_names(extras))

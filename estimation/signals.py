@@ -8,7 +8,7 @@ from functools import cached_property, lru_cache
 import numpy as np
 from mavsysid.estimation.flight import FlightData
 from mavsysid.vehicle.config import GRAVITY
-from mavsysid.vehicle.rotation import continuous_sign, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.rotation import continuous_sign, quat_conjugate, quat_multiply, quat_to_matrix
 from scipy.ndimage import convolve1d
 from scipy.signal import butter, oaconvolve, savgol_coeffs, sosfiltfilt
 
@@ -33,6 +33,7 @@ __all__ = [
     "measured_pose_noise",
     "noise_gain",
     "pose_sigma",
+    "pose_states",
     "savgol_kernel",
     "smooth_pose",
     "uniform_segments",
@@ -347,6 +348,8 @@ class UniformSegment:
         Logged rotor speeds, rad/s.
     fresh_fraction : float
         Fraction of the segment's rows whose pose was fresh.
+    flight_start : float
+        The time the flight starts, s (time-dependent model terms count from it).
     """
 
     t: np.ndarray
@@ -356,6 +359,7 @@ class UniformSegment:
     rotor_time: np.ndarray
     rotor_samples: np.ndarray
     fresh_fraction: float
+    flight_start: float = 0.0
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -372,7 +376,7 @@ class UniformSegment:
 
 
 def _segment(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
-             rotors: np.ndarray, dt: float) -> UniformSegment | None:
+             rotors: np.ndarray, dt: float, flight_start: float) -> UniformSegment | None:
     fresh = fresh_pose(position, quaternion)
     tf = t[fresh]
     if tf.size < 4:
@@ -382,7 +386,7 @@ def _segment(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
     q = _interp_columns(grid, tf, continuous_sign(quaternion[fresh]))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     return UniformSegment(grid, dt, p, q, np.asarray(t, float), np.asarray(rotors, float),
-                          float(fresh.mean()))
+                          float(fresh.mean()), flight_start)
 
 
 def uniform_segments(flight: FlightData, min_duration: float) -> list[UniformSegment]:
@@ -409,7 +413,8 @@ def uniform_segments(flight: FlightData, min_duration: float) -> list[UniformSeg
         if stop - start < 4 or t[stop - 1] - t[start] < min_duration:
             continue
         seg = _segment(t[start:stop], flight.position[start:stop],
-                       flight.quaternion[start:stop], flight.rotor_speeds[start:stop], dt)
+                       flight.quaternion[start:stop], flight.rotor_speeds[start:stop], dt,
+                       float(t[0]))
         if seg is not None and seg.t[-1] - seg.t[0] >= min_duration:
             out.append(seg)
     return out
@@ -520,3 +525,29 @@ def _sos(low: float, high: float, dt: float) -> np.ndarray:
     if low > 0:
         return butter(FILTER_ORDER, [low, high], btype="bandpass", fs=1.0 / dt, output="sos")
     return butter(FILTER_ORDER, high, btype="lowpass", fs=1.0 / dt, output="sos")
+
+
+def pose_states(flight: FlightData) -> np.ndarray:
+    """Model states [p, v_B, q, ω] from the logged pose alone, shape (N, 13).
+
+    Velocity and body rates are central differences of the pose: where the nuisance
+    quantities' terms are evaluated before any filter pass (most depend on the rotor
+    speeds and time only; a velocity-dependent one sees the pose's noise through them).
+
+    Parameters
+    ----------
+    flight : FlightData
+        The logged pose (N samples, strictly increasing times).
+    """
+    t = np.asarray(flight.t, float)
+    q = continuous_sign(flight.quaternion)
+    x = np.zeros((len(t), 13))
+    x[:, 0:3] = flight.position
+    x[:, 6:10] = q
+    if len(t) < 2:
+        return x
+    velocity = np.gradient(np.asarray(flight.position, float), t, axis=0)
+    x[:, 3:6] = np.einsum("nji,nj->ni", quat_to_matrix(q), velocity)
+    q_dot = np.gradient(q, t, axis=0)
+    x[:, 10:13] = 2.0 * quat_multiply(quat_conjugate(q), q_dot)[:, 1:]
+    return x

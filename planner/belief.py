@@ -31,7 +31,7 @@ from mavsysid.vehicle.covariance import (
     update_covariance_kernel,
 )
 from mavsysid.vehicle.flatness import flat_to_state
-from mavsysid.vehicle.linearization import ERROR_DIM, ErrorStateModel
+from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel
 from mavsysid.vehicle.trajectory import FlatOutputs, Trajectory
 
 __all__ = [
@@ -52,7 +52,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class EdgeTransfer:
-    """The one-step transfer S = (A, B; C, D) of an edge, each block (18, 18)."""
+    """The one-step transfer S = (A, B; C, D) of an edge, each block (D, D) of the error
+    state (`ErrorStateModel.dim`)."""
 
     A: np.ndarray
     B: np.ndarray
@@ -60,9 +61,15 @@ class EdgeTransfer:
     D: np.ndarray
 
 
-def identity_transfer() -> EdgeTransfer:
-    """The transfer of an empty edge: (I, 0; 0, I)."""
-    eye, zero = np.eye(ERROR_DIM), np.zeros((ERROR_DIM, ERROR_DIM))
+def identity_transfer(dim: int = E_THETA.stop) -> EdgeTransfer:
+    """The transfer of an empty edge: (I, 0; 0, I).
+
+    Parameters
+    ----------
+    dim : int
+        Length of the error state (`ErrorStateModel.dim`; the paper's model's by default).
+    """
+    eye, zero = np.eye(dim), np.zeros((dim, dim))
     return EdgeTransfer(eye, zero, zero.copy(), eye.copy())
 
 
@@ -210,7 +217,7 @@ def _riccati_kernel(P, F, Q, R, history):
 
 def riccati_final(model: ErrorStateModel, sigma0: np.ndarray, F: np.ndarray,
                   Q: np.ndarray) -> np.ndarray:
-    """`propagate_steps`' final covariance from the steps' F and Q, compiled, (18, 18).
+    """`propagate_steps`' final covariance from the steps' F and Q, compiled, (D, D).
 
     For one known starting belief this is several times cheaper than building the
     edge's transfer and applying it; the refinement prices each candidate segment this
@@ -218,7 +225,7 @@ def riccati_final(model: ErrorStateModel, sigma0: np.ndarray, F: np.ndarray,
     """
     P = np.array(sigma0, dtype=float)
     _riccati_kernel(P, F, Q, model.measurement_covariance(),
-                    np.empty((0, ERROR_DIM, ERROR_DIM)))
+                    np.empty((0, model.dim, model.dim)))
     return P
 
 
@@ -226,7 +233,7 @@ def propagate_final(
     model: ErrorStateModel, sigma0: np.ndarray, states: np.ndarray, rotor_speeds: np.ndarray,
     theta: np.ndarray, dt: float,
 ) -> np.ndarray:
-    """`riccati_final` along samples as returned by `edge_samples`, shape (18, 18)."""
+    """`riccati_final` along samples as returned by `edge_samples`, shape (D, D)."""
     F, Q = model.discrete(states[:-1], rotor_speeds[:-1], theta, dt)
     return riccati_final(model, sigma0, F, Q)
 
@@ -245,8 +252,8 @@ def edge_transfer(
 
 
 def steps_transfer(model: ErrorStateModel, F: np.ndarray, Q: np.ndarray) -> EdgeTransfer:
-    """The transfer of K steps with transitions F and process noises Q, each (K, 18, 18)."""
-    information = measurement_information(model.measurement_covariance())
+    """The transfer of K steps with transitions F and process noises Q, each (K, D, D)."""
+    information = measurement_information(model.measurement_covariance(), model.dim)
     return EdgeTransfer(*_chain_kernel(F, Q, information))
 
 
@@ -254,13 +261,13 @@ def propagate_steps(
     model: ErrorStateModel, sigma0: np.ndarray, states: np.ndarray, rotor_speeds: np.ndarray,
     theta: np.ndarray, dt: float,
 ) -> np.ndarray:
-    """Step-by-step EKF covariance (paper Eqs. prior–posterior) along samples, (K + 1, 18, 18).
+    """Step-by-step EKF covariance (paper Eqs. prior–posterior) along samples, (K + 1, D, D).
 
     The reference the star-product transfer is checked against, and the predicted σ over
     time of a chosen path.
     """
     F, Q = model.discrete(states[:-1], rotor_speeds[:-1], theta, dt)
-    out = np.empty((F.shape[0] + 1, ERROR_DIM, ERROR_DIM))
+    out = np.empty((F.shape[0] + 1, model.dim, model.dim))
     out[0] = sigma0
     _riccati_kernel(np.array(sigma0, dtype=float), F, Q, model.measurement_covariance(), out)
     return out

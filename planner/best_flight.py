@@ -64,7 +64,7 @@ def refine_best(search: GraphSearch, gradient: bool = False) -> RefinablePath | 
         return path
     settings = search.settings
     pricing = FlightPricing(search.sigma0, search.propagate_segments, search.kept_transfer,
-                            apply_transfer, search.dopt, identity_transfer())
+                            apply_transfer, search.dopt, identity_transfer(search.model.dim))
     path = split_path(path, settings.refine_split, search.feasible, search.transfer_of)
     es = PathRefiner(path, search.feasible,
                      lambda state: search.stop_at(state, with_transfer=False), pricing,

@@ -227,7 +227,7 @@ class GraphSearch:
         Without ``with_transfer`` a moving state's stop comes without its transfer.
         """
         if np.all(np.abs(state.position[1:]) <= 1e-12) and np.all(np.abs(state.yaw[1:]) <= 1e-12):
-            return StopChoice(None, identity_transfer())
+            return StopChoice(None, identity_transfer(self.model.dim))
         inner_lo, inner_hi = self.box[:3] + _STOP_MARGIN, self.box[3:] - _STOP_MARGIN
         for duration in STOP_DURATIONS:
             # Where a smooth stop would end, kept inside the box.
@@ -243,7 +243,7 @@ class GraphSearch:
         """A vertex with its stopping segment, when one is feasible."""
         stop = self.stop_at(state)
         if stop is None:
-            self.vertices.append(Vertex(state, None, identity_transfer(), False))
+            self.vertices.append(Vertex(state, None, identity_transfer(self.model.dim), False))
         else:
             self.vertices.append(Vertex(state, stop.segment, stop.transfer, True))
         return len(self.vertices) - 1

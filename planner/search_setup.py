@@ -17,7 +17,7 @@ from mavsysid.planner.feasibility import check_segment
 from mavsysid.planner.segments import Segment, VertexState, connect_free_end
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig
-from mavsysid.vehicle.linearization import E_THETA, ERROR_DIM, ErrorStateModel, initial_state_sigma
+from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel, initial_state_sigma
 from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 __all__ = ["initial_covariance", "search_model", "segment_trajectory", "warm_up"]
@@ -47,7 +47,7 @@ def initial_covariance(model: ErrorStateModel, config: VehicleConfig,
     diag = np.concatenate([np.full(3, v**2) for v in s] + [np.full(6, 0.0)])
     sigma = np.diag(diag)
     sigma[E_THETA, E_THETA] = settings.theta_covariance
-    assert sigma.shape == (ERROR_DIM, ERROR_DIM)
+    assert sigma.shape == (model.dim, model.dim)
     return sigma
 
 
@@ -61,6 +61,6 @@ def warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
     states, n, dt = edge_samples(segment_trajectory(segment), config, config.theta,
                                  settings.propagation_rate)
     transfer = edge_transfer(model, states, n, config.theta, dt)
-    apply_transfer_logdet(np.eye(ERROR_DIM), transfer)
-    propagate_final(model, np.eye(ERROR_DIM), states, n, config.theta, dt)
+    apply_transfer_logdet(np.eye(model.dim), transfer)
+    propagate_final(model, np.eye(model.dim), states, n, config.theta, dt)
 

@@ -49,7 +49,6 @@ NOT_YET_DOCUMENTED: frozenset[str] = frozenset({
     "mavsysid.cli.evaluate.main",
     "mavsysid.cli.main.exit_code",
     "mavsysid.cli.main.main",
-    "mavsysid.cli.options.add_log_arguments",
     "mavsysid.cli.options.add_window_arguments",
     "mavsysid.cli.options.allow_negative_values",
     "mavsysid.cli.options.parse_numbers",

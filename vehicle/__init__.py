@@ -2,7 +2,8 @@
 
 Configurations (`load_vehicle`), the dynamics ẋ = f(x, u, θ) (`state_derivative`), rotor
 allocation, differential flatness (`flat_to_state`), the error-state linearisation used
-by both the planner and the estimator (`ErrorStateModel`) and trajectories.
+by both the planner and the estimator (`ErrorStateModel`), the estimated quantities
+(`PAPER_THETA` and nuisance `EstimatedQuantity`s) and trajectories.
 """
 
 from __future__ import annotations
@@ -18,19 +19,22 @@ from mavsysid.vehicle.config import (
 )
 from mavsysid.vehicle.dynamics import STATE_DIM, hover_state, state_derivative
 from mavsysid.vehicle.flatness import FlatState, flat_to_state
-from mavsysid.vehicle.linearization import ERROR_DIM, ErrorStateModel
+from mavsysid.vehicle.linearization import ErrorStateModel
+from mavsysid.vehicle.parameters import PAPER_THETA, EstimatedQuantity, QuantityTerm
 from mavsysid.vehicle.trajectory import FlatOutputs, PiecewisePolynomial, Trajectory
 
 __all__ = [
-    "ERROR_DIM",
+    "PAPER_THETA",
     "PARAMETER_NAMES",
     "SHIPPED_VEHICLES",
     "STATE_DIM",
     "ErrorStateModel",
+    "EstimatedQuantity",
     "FlatOutputs",
     "FlatState",
     "Parameters",
     "PiecewisePolynomial",
+    "QuantityTerm",
     "Trajectory",
     "VehicleConfig",
     "allocation_matrix",

@@ -19,6 +19,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.effect_base import ModelEffect
+from mavsysid.vehicle.parameters import (
+    PAPER_THETA,
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    EstimatedQuantity,
+)
 
 __all__ = [
     "ALLOCATION_MODES",
@@ -35,19 +41,6 @@ __all__ = [
     "default_noise_densities",
 ]
 
-
-#: Order of the parameter vector θ everywhere in mavsysid.
-PARAMETER_NAMES: tuple[str, ...] = ("c_T", "c_D", "c_M", "j_x", "j_y", "j_z")
-
-#: Unit of each parameter of θ, by name (messages, tables and the estimate JSON).
-PARAMETER_UNITS: dict[str, str] = {
-    "c_T": "N/(rad/s)²",
-    "c_D": "s/m",
-    "c_M": "N·m/(rad/s)²",
-    "j_x": "kg·m²",
-    "j_y": "kg·m²",
-    "j_z": "kg·m²",
-}
 
 #: ``[limits] allocation``: how rotor limits bound the wrench. "pseudo_inverse": n² = A⁺ w
 #: must lie in the rotor box (the mixers of ArduPilot, PX4 and RotorS's Lee controller);
@@ -229,6 +222,10 @@ class VehicleConfig:
         controllers that fly a plan realise (autopilot mixers, mavsysid's simulators);
         "exact" only for a vehicle whose controller allocates over the null space. Kept
         out of `Limits`, whose fields are numbers (the trajectory file copies them).
+    extra_quantities : tuple of EstimatedQuantity
+        Nuisance quantities estimated beside θ, each with its prior and the term by which
+        it enters the model (`mavsysid.vehicle.parameters`); the estimator adds those a
+        log calls for. Not part of the vehicle file. Empty by default: the paper's θ.
     """
 
     name: str
@@ -243,6 +240,7 @@ class VehicleConfig:
     autopilot_frame: str | None = None
     box: tuple[float, ...] | None = None
     allocation: str = "pseudo_inverse"
+    extra_quantities: tuple[EstimatedQuantity, ...] = ()
 
     @property
     def rotor_count(self) -> int:
@@ -258,6 +256,11 @@ class VehicleConfig:
     def rotor_directions(self) -> np.ndarray:
         """Rotor spin directions ε_i, shape (k,), float ±1."""
         return np.array([r.direction for r in self.rotors], dtype=float)
+
+    @property
+    def quantities(self) -> tuple[EstimatedQuantity, ...]:
+        """The estimated quantities: the paper's θ, then ``extra_quantities``."""
+        return PAPER_THETA + self.extra_quantities
 
     @property
     def theta(self) -> np.ndarray:

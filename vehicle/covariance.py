@@ -11,8 +11,8 @@ process noise accumulated between shooting nodes, by the batch refinement
 The measurement is a motion-capture pose, z = [p (3), q (4)], with
 ``q_meas = q ⊗ Exp(φ)`` (paper measurement model). Its residual is
 [p_meas − p̂, Log(q̂⁻¹ ⊗ q_meas)] (`pose_residual_kernel`), which depends on the error
-state δx (18,) of `mavsysid.vehicle.linearization` through δp and δφ with unit gain:
-H (6, 18) selects the entries `MEASURED_ERROR_INDICES`. The update kernel uses that H
+state δx (D,) of `mavsysid.vehicle.linearization` through δp and δφ with unit gain:
+H (6, D) selects the entries `MEASURED_ERROR_INDICES`. The update kernel uses that H
 is a selection, reading P Hᵀ and H P Hᵀ off P instead of multiplying.
 """
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from mavsysid.vehicle.linearization import E_ATT, E_POS, ERROR_DIM, MEAS_DIM
+from mavsysid.vehicle.linearization import E_ATT, E_POS, MEAS_DIM
 from mavsysid.vehicle.rotation import log_kernel, multiply_kernel
 
 __all__ = [
@@ -36,34 +36,41 @@ __all__ = [
 MEASURED_ERROR_INDICES = np.r_[E_POS, E_ATT]
 
 
-def measurement_matrix() -> np.ndarray:
-    """H, shape (6, 18): the pose residual's derivative by the error state (unit gain).
+def measurement_matrix(dim: int) -> np.ndarray:
+    """H, shape (6, D): the pose residual's derivative by the error state (unit gain).
+
+    Parameters
+    ----------
+    dim : int
+        D, the length of the error state (`ErrorStateModel.dim`).
 
     Returns
     -------
-    ndarray, shape (6, 18)
+    ndarray, shape (6, D)
         Row i has a one in column ``MEASURED_ERROR_INDICES[i]``, zeros elsewhere.
     """
-    H = np.zeros((MEAS_DIM, ERROR_DIM))
+    H = np.zeros((MEAS_DIM, dim))
     H[np.arange(MEAS_DIM), MEASURED_ERROR_INDICES] = 1.0
     return H
 
 
-def measurement_information(R: np.ndarray) -> np.ndarray:
-    """Hᵀ R⁻¹ H, shape (18, 18): the information one pose measurement adds.
+def measurement_information(R: np.ndarray, dim: int) -> np.ndarray:
+    """Hᵀ R⁻¹ H, shape (D, D): the information one pose measurement adds.
 
     Parameters
     ----------
     R : ndarray, shape (6, 6)
         Measurement noise covariance, m² and rad² (position first).
+    dim : int
+        D, the length of the error state.
 
     Returns
     -------
-    ndarray, shape (18, 18)
+    ndarray, shape (D, D)
         R⁻¹ placed at the measured rows and columns, zeros elsewhere (paper Eq. one_step,
         the measurement transfer S_k^M).
     """
-    H = measurement_matrix()
+    H = measurement_matrix(dim)
     return H.T @ np.linalg.solve(np.asarray(R, dtype=float), H)
 
 
@@ -125,13 +132,13 @@ def update_covariance_kernel(P, R, S, SI, K):
 
     Parameters
     ----------
-    P : ndarray, shape (18, 18)
+    P : ndarray, shape (D, D)
         Predicted error-state covariance; receives the posterior.
     R : ndarray, shape (6, 6)
         Measurement noise covariance, m² and rad².
     S, SI : ndarray, shape (6, 6)
         Receive the innovation covariance and its inverse.
-    K : ndarray, shape (18, 6)
+    K : ndarray, shape (D, 6)
         Receives the Kalman gain.
     """
     n = P.shape[0]

@@ -140,19 +140,20 @@ def jacobian_kernel(x, n, theta, mass, r, eps, scale, A, G):
         State [p, v_B, q, ω].
     n : ndarray, shape (k,)
         Rotor speeds, rad/s.
-    theta : ndarray, shape (6,)
-        θ, SI.
+    theta : ndarray, shape (P,)
+        Quantities, SI: the paper's θ first (the only ones read here).
     mass : float
         kg.
     r : ndarray, shape (k, 3)
         Rotor positions, m, body FLU.
     eps : ndarray, shape (k,)
         Rotor directions ±1.
-    scale : ndarray, shape (6,)
-        Units of the θ error states (`ErrorStateModel.theta_scale`).
-    A : ndarray, shape (18, 18)
-        Receives ∂ẋ/∂δx.
-    G : ndarray, shape (18, 6)
+    scale : ndarray, shape (P,)
+        Units of the quantities' error states (`ErrorStateModel.theta_scale`).
+    A : ndarray, shape (12 + P, 12 + P)
+        Receives ∂ẋ/∂δx; the columns of nuisance quantities stay 0 here
+        (`mavsysid.vehicle.linearization.extra_columns_kernel` fills them).
+    G : ndarray, shape (12 + P, 6)
         Receives the process-noise input matrix.
     """
     c_D = theta[1]

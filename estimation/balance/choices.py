@@ -8,9 +8,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from mavsysid.estimation.balance.regression import LinearFit, fit_rows, reverse_coefficient
 from mavsysid.estimation.balance.rows import (
+    FORCE_COEFFICIENTS,
     ROTOR_FORCE_COLUMNS,
     ROTOR_TORQUE_COLUMNS,
     TORQUE_AXIS,
+    TORQUE_COEFFICIENTS,
     BalanceBuilder,
     BalanceRows,
 )
@@ -330,11 +332,12 @@ def _shifted(rows: BalanceRows, delay: float, stride: int) -> BalanceRows:
         out = np.column_stack([np.interp(ts, t, flat[:, j]) for j in range(flat.shape[1])])
         return out.reshape((len(keep),) + x.shape[1:])
 
+    # The nuisance quantities' columns (after the model's) are taken as the rotors' too.
     torque_cols = rows.torque_columns[keep].copy()
-    rotor = list(ROTOR_TORQUE_COLUMNS)
+    rotor = [*ROTOR_TORQUE_COLUMNS, *range(len(TORQUE_COEFFICIENTS), torque_cols.shape[2])]
     torque_cols[:, :, rotor] = shift(rows.torque_columns[:, :, rotor])
     force_cols = rows.force_columns[keep].copy()
-    rotor = list(ROTOR_FORCE_COLUMNS)
+    rotor = [*ROTOR_FORCE_COLUMNS, *range(len(FORCE_COEFFICIENTS), force_cols.shape[2])]
     force_cols[:, :, rotor] = shift(rows.force_columns[:, :, rotor])
     return BalanceRows(t[keep], rows.force[keep], force_cols, rows.torque[keep], torque_cols)
 

@@ -15,7 +15,6 @@ from mavsysid.estimation.balance.choices import (
 from mavsysid.estimation.balance.regression import fit_rows
 from mavsysid.estimation.balance.rows import (
     FORCE_COEFFICIENTS,
-    STACKED_COEFFICIENTS,
     BalanceBuilder,
     BalanceRows,
 )
@@ -23,23 +22,28 @@ from mavsysid.estimation.balance.theta import (
     coefficients_from_theta,
     errors_in_variables_sigma,
     split_widening,
+    stack,
+    stacked_covariance,
     theta_from_coefficients,
+    unstack,
     widened_sigma,
 )
 from mavsysid.estimation.checks import check_rotor_balance
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import (
+    COMBINATION_NAMES,
     MAX_RELATIVE_SIGMA,
     DataTheta,
     FitChoices,
     HoldoutCheck,
     ParameterEstimate,
     WrenchBalanceResult,
-    parameter_status,
     prior_from_config,
+    quantity_status,
 )
 from mavsysid.estimation.signals import Band, UniformSegment, uniform_segments
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.parameters import C_D, C_M, C_T, INERTIA
 
 from mavsysid.errors import JobFailedError
 
@@ -59,7 +63,8 @@ def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
     choices : FitChoices
         The training part's window, bands and offset.
     coefficients, prior_coefficients : ndarray, shape (P,)
-        Stacked force and torque coefficients (`STACKED_COEFFICIENTS`) of the fitted model
+        Stacked force and torque coefficients (`mavsysid.estimation.balance.theta.stack`)
+        of the fitted model
         and of the prior.
 
     Returns
@@ -74,11 +79,10 @@ def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
         return None
     measured = np.concatenate([np.hstack([r.force, r.torque]) for r in rows])
 
-    split = len(FORCE_COEFFICIENTS)
-
     def prediction(b: np.ndarray) -> np.ndarray:
-        return np.concatenate([np.hstack([r.force_columns @ b[:split],
-                                          r.torque_columns @ b[split:]]) for r in rows])
+        force, torque = unstack(b)
+        return np.concatenate([np.hstack([r.force_columns @ force,
+                                          r.torque_columns @ torque]) for r in rows])
 
     def rmse(b: np.ndarray) -> np.ndarray:
         return np.sqrt(np.mean((measured - prediction(b)) ** 2, axis=0))
@@ -90,7 +94,7 @@ def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
 
 
 #: Stacked coefficients, and where the torque ones start.
-COUNT, TORQUE_START = len(STACKED_COEFFICIENTS), len(FORCE_COEFFICIENTS)
+TORQUE_START = len(FORCE_COEFFICIENTS)
 
 
 @dataclass(frozen=True)
@@ -114,10 +118,8 @@ class WrenchBalanceSettings:
 
 def _theta(fit_force: np.ndarray, fit_torque: np.ndarray, cov_force: np.ndarray,
            cov_torque: np.ndarray) -> DataTheta:
-    cov = np.zeros((COUNT, COUNT))
-    cov[:TORQUE_START, :TORQUE_START] = cov_force
-    cov[TORQUE_START:, TORQUE_START:] = cov_torque
-    return theta_from_coefficients(np.concatenate([fit_force, fit_torque]), cov)
+    return theta_from_coefficients(stack(fit_force, fit_torque),
+                                   stacked_covariance(cov_force, cov_torque))
 
 
 def _fit_theta(fit: BalanceFit) -> DataTheta:
@@ -133,24 +135,25 @@ def _eiv_sigma(fit: BalanceFit, base: DataTheta) -> tuple[np.ndarray, np.ndarray
             reverse = fit.reverse[name].get(column)
             if reverse is None or not np.isfinite(reverse):
                 continue
-            b = np.concatenate([fit.force.coefficients, fit.torque.coefficients])
+            b = stack(fit.force.coefficients, fit.torque.coefficients)
             b[offset + column] = reverse
             with np.errstate(divide="ignore", invalid="ignore"):
-                other = theta_from_coefficients(b, np.zeros((COUNT, COUNT)))
+                other = theta_from_coefficients(b, np.zeros((b.size, b.size)))
             parts.append(errors_in_variables_sigma(base.value, other.value))
             combos.append(errors_in_variables_sigma(base.combinations, other.combinations))
     if not parts:
-        return np.zeros(6), np.zeros(2)
+        return np.zeros_like(base.value), np.zeros_like(base.combinations)
     return widened_sigma(parts), widened_sigma(combos)
 
 
-def _split_sigma(rows_a: list[BalanceRows], rows_b: list[BalanceRows]
+def _split_sigma(rows_a: list[BalanceRows], rows_b: list[BalanceRows], count: int
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """σ added by two parts of the rows that disagree beyond their own σ."""
+    """σ added by two parts of the rows that disagree beyond their own σ (``count``
+    quantities, then the combinations)."""
     try:
         fits = [regress(rows) for rows in (rows_a, rows_b)]
     except np.linalg.LinAlgError:
-        return np.zeros(6), np.zeros(2)
+        return np.zeros(count), np.zeros(len(COMBINATION_NAMES))
     a, b = (_theta(f.coefficients, m.coefficients, f.covariance, m.covariance)
             for f, m, _ in fits)
     return (split_widening(a.value, a.sigma, b.value, b.sigma),
@@ -171,9 +174,11 @@ def _thrust_row_sigma(fit: BalanceFit, rows: list[BalanceRows], theta: np.ndarra
     """
     magnitude = float(np.mean(np.concatenate([r.force[:, 2] for r in rows]))) if rows else 0.0
     if not magnitude > 0.0:
-        return np.zeros(6)
+        return np.zeros_like(theta)
     relative = float(np.sum(fit.force.residual_rms[:2] ** 2)) / (2.0 * magnitude**2)
-    scaled = np.array([1.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+    scaled = np.zeros(theta.size)
+    scaled[[C_T, C_M]] = 1.0
+    scaled[INERTIA] = 1.0
     with np.errstate(invalid="ignore"):
         return np.nan_to_num(relative * np.abs(theta) * scaled)
 
@@ -239,17 +244,17 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
             settings: WrenchBalanceSettings) -> tuple[WrenchBalanceResult, BalanceFit]:
     """The fit, θ, its widened σ and the statuses (no held-out check)."""
     segments = _segments(flight, settings)
-    fit, builders = fit_balance(segments, config, float(prior.value[1]))
+    fit, builders = fit_balance(segments, config, float(prior.value[C_D]))
     base = _fit_theta(fit)
     eiv, eiv_c = _eiv_sigma(fit, base)
     rows = balance_rows_for(builders, fit.choices)
-    halves, halves_c = _split_sigma(*_halves(rows))
-    bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices))
+    halves, halves_c = _split_sigma(*_halves(rows), base.value.size)
+    bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices), base.value.size)
     parts = np.vstack([base.sigma, eiv, halves, bands, base.route_sigma,
                        _thrust_row_sigma(fit, rows, base.value)])
     sigma = widened_sigma(parts)
     combo_sigma = widened_sigma([base.combination_sigma, eiv_c, halves_c, bands_c])
-    determined = parameter_status(base.value, sigma, settings.max_relative_sigma)
+    determined = quantity_status(base.value, sigma, prior.sigma, settings.max_relative_sigma)
     value = np.where(determined, base.value, prior.value)
     cov = np.diag(np.where(determined, sigma, prior.sigma) ** 2)
     keep = np.flatnonzero(determined)
@@ -260,7 +265,7 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     corr[np.diag_indices_from(corr)] = 1.0
     cov[np.ix_(keep, keep)] = corr * np.outer(sigma[keep], sigma[keep])
     result = WrenchBalanceResult(
-        ParameterEstimate(value, cov), determined, base, parts, combo_sigma, prior,
+        ParameterEstimate(value, cov, prior.names), determined, base, parts, combo_sigma, prior,
         fit.choices, _delay_sigma(fit, builders), None, fit.force.rows)
     return result, fit
 
@@ -321,6 +326,6 @@ def _holdout(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
     test = uniform_segments(flight.time_slice(cut, t1), 4 * fit.choices.window)
     if not test:
         return None
-    model = np.concatenate([fit.force.coefficients, fit.torque.coefficients])
+    model = stack(fit.force.coefficients, fit.torque.coefficients)
     return predict_holdout(test, config, fit.choices, model,
                            coefficients_from_theta(prior.value))

@@ -20,6 +20,7 @@ from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.effect_base import EffectInputs
 from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
 from mavsysid.vehicle.model_effects import ModelEffect, RotorDragLinear, total_wrench
+from mavsysid.vehicle.parameters import INERTIA
 
 __all__ = [
     "FORCE_COEFFICIENTS",
@@ -66,12 +67,14 @@ class BalanceRows:
         s.
     force : ndarray, shape (N, 3)
         Measured body specific force, m/s².
-    force_columns : ndarray, shape (N, 3, 3)
-        Model body specific force per unit of each `FORCE_COEFFICIENTS` entry.
+    force_columns : ndarray, shape (N, 3, 3 + E)
+        Model body specific force per unit of each `FORCE_COEFFICIENTS` entry, then of
+        each of the config's E nuisance quantities.
     torque : ndarray, shape (N, 3)
         Measured body angular acceleration minus the model's rate term, rad/s².
-    torque_columns : ndarray, shape (N, 3, 10)
-        Model angular acceleration per unit of each `TORQUE_COEFFICIENTS` entry.
+    torque_columns : ndarray, shape (N, 3, 10 + E)
+        Model angular acceleration per unit of each `TORQUE_COEFFICIENTS` entry, then of
+        each nuisance quantity.
     """
 
     t: np.ndarray
@@ -128,13 +131,19 @@ def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float,
     z row alone would bias c_T low by σ_ε². The magnitude is free of it. The rotor drag,
     perpendicular to the thrust, lengthens it at second order, so the model's magnitude
     includes it: c_D times the quadratic column and ``drag_linear`` (k / c_T) times the
-    linear one (linear in c_T; the drag columns leave this row).
+    linear one (linear in c_T; the drag columns leave this row). A nuisance quantity's
+    column enters the magnitude along the thrust (its first-order change of it).
     """
     force, cols = force.copy(), cols.copy()
     force[:, 2] = np.linalg.norm(force, axis=1)
     drag = c_d * cols[:, :, 1] + drag_linear * cols[:, :, 2]
-    cols[:, 2, 0] = np.linalg.norm(cols[:, :, 0] + drag, axis=1)
+    thrust = cols[:, :, 0] + drag
+    magnitude = np.linalg.norm(thrust, axis=1)
+    along = thrust / np.where(magnitude > 0.0, magnitude, 1.0)[:, None]
+    extras = np.einsum("na,nae->ne", along, cols[:, :, len(FORCE_COEFFICIENTS):])
+    cols[:, 2, 0] = magnitude
     cols[:, 2, 1:] = 0.0
+    cols[:, 2, len(FORCE_COEFFICIENTS):] = extras
     return force, cols
 
 
@@ -170,6 +179,30 @@ class BalanceBuilder:
         omega_dot[:, axis] = values
         return body_rotation_readout(self.pose, self.pose, omega_dot, self.kernel,
                                      rate_term=False)
+
+    def _extra_columns(self, n: np.ndarray, v_b: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Each nuisance quantity's columns per unit value: force (N, 3, E), torque (N, 3, E).
+
+        Its term's wrench (`mavsysid.vehicle.parameters.QuantityTerm`) at the smoothed
+        states, through the same readouts as the model's; the torque is divided by the
+        prior's inertia (the rows are angular accelerations), so the coefficient is the
+        quantity's value to the ratio of the prior's inertia to the true one.
+        """
+        pose, config = self.pose, self.config
+        inputs = EffectInputs(pose.t - self.segment.flight_start, pose.position,
+                              pose.quaternion, v_b, pose.rates, n, config.theta,
+                              config.rotor_positions,
+                              rotor_directions=config.rotor_directions)
+        inertia = config.theta[INERTIA]
+        forces, torques = [], []
+        for quantity in config.extra_quantities:
+            assert quantity.term is not None
+            force, torque = quantity.term.wrench_basis(inputs)
+            forces.append(body_force_readout(pose, pose, force / config.mass, self.kernel))
+            torques.append(body_rotation_readout(pose, pose, torque / inertia, self.kernel,
+                                                 rate_term=False))
+        return np.stack(forces, axis=-1), np.stack(torques, axis=-1)
 
     @property
     def edge(self) -> int:
@@ -219,6 +252,10 @@ class BalanceBuilder:
             torque_cols[:, :, col] = self._readout(axis, values)
         for col, readout in self._gyroscopic.items():
             torque_cols[:, :, col] = readout
+        if config.extra_quantities:
+            extra_force, extra_torque = self._extra_columns(n, v_b)
+            force_cols = np.concatenate([force_cols, extra_force], axis=-1)
+            torque_cols = np.concatenate([torque_cols, extra_torque], axis=-1)
         torque = pose.angular_acceleration - self._rate_term
         specific_force = pose.specific_force()
         edge, settle = self.edge, trim

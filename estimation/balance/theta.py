@@ -5,12 +5,20 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from mavsysid.estimation.balance.rows import STACKED_COEFFICIENTS
-from mavsysid.estimation.results import Z95, DataTheta
+from mavsysid.estimation.balance.rows import (
+    FORCE_COEFFICIENTS,
+    STACKED_COEFFICIENTS,
+    TORQUE_COEFFICIENTS,
+)
+from mavsysid.estimation.results import COMBINATION_NAMES, Z95, DataTheta
+from mavsysid.vehicle.parameters import C_M, PARAMETER_NAMES
 
-__all__ = ["coefficients_from_theta", "errors_in_variables_sigma", "split_widening",
-           "theta_from_coefficients", "widened_sigma"]
+__all__ = ["J_Z", "coefficients_from_theta", "errors_in_variables_sigma", "split_widening", "stack",
+           "stacked_covariance", "theta_from_coefficients", "unstack", "widened_sigma"]
 
+
+#: Where j_z sits in θ.
+J_Z = PARAMETER_NAMES.index("j_z")
 
 # Indices into the stacked coefficient vector (`STACKED_COEFFICIENTS`).
 _CT, _CTCD, _AX, _GX, _AY, _GY, _BZ, _DZ, _GZ, _RZ = (
@@ -38,19 +46,88 @@ def _jacobian(f: Callable[[np.ndarray], np.ndarray], b: np.ndarray) -> np.ndarra
     return jac
 
 
+def stack(force: np.ndarray, torque: np.ndarray) -> np.ndarray:
+    """The stacked coefficient vector of a force and a torque fit, shape (13 + 2E,).
+
+    `STACKED_COEFFICIENTS` (the model's force, then torque coefficients) first, then the
+    E nuisance quantities' force coefficients and their torque coefficients.
+
+    Parameters
+    ----------
+    force : ndarray, shape (3 + E,)
+        The force fit's coefficients (`FORCE_COEFFICIENTS`, then the nuisance quantities).
+    torque : ndarray, shape (10 + E,)
+        The torque fit's (`TORQUE_COEFFICIENTS`, then the nuisance quantities).
+    """
+    f, m = len(FORCE_COEFFICIENTS), len(TORQUE_COEFFICIENTS)
+    return np.concatenate([force[:f], torque[:m], force[f:], torque[m:]])
+
+
+def stacked_covariance(force: np.ndarray, torque: np.ndarray) -> np.ndarray:
+    """The covariance of `stack` of two independent fits, from theirs.
+
+    Parameters
+    ----------
+    force : ndarray, shape (3 + E, 3 + E)
+        The force fit's covariance.
+    torque : ndarray, shape (10 + E, 10 + E)
+        The torque fit's.
+    """
+    f, m = len(FORCE_COEFFICIENTS), len(TORQUE_COEFFICIENTS)
+    order = np.r_[np.arange(f), force.shape[0] + np.arange(m), np.arange(f, force.shape[0]),
+                  force.shape[0] + np.arange(m, torque.shape[0])]
+    joint = np.zeros((order.size, order.size))
+    joint[:force.shape[0], :force.shape[0]] = force
+    joint[force.shape[0]:, force.shape[0]:] = torque
+    return joint[np.ix_(order, order)]
+
+
+def unstack(coefficients: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The force and the torque fit's coefficients of a `stack` vector.
+
+    Parameters
+    ----------
+    coefficients : ndarray, shape (13 + 2E,)
+        As `stack` returns.
+    """
+    f, m = len(FORCE_COEFFICIENTS), len(TORQUE_COEFFICIENTS)
+    e = (coefficients.size - f - m) // 2
+    b = np.asarray(coefficients, float)
+    return (np.concatenate([b[:f], b[f + m:f + m + e]]),
+            np.concatenate([b[f:f + m], b[f + m + e:]]))
+
+
+def _extras(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Each nuisance quantity from its force and torque coefficients, combined."""
+    e = (x.size - _COUNT) // 2
+    return weight[:, 0] * x[_COUNT:_COUNT + e] + weight[:, 1] * x[_COUNT + e:]
+
+
+def _extra_weights(b: np.ndarray, cov: np.ndarray, unexcited: np.ndarray) -> np.ndarray:
+    """Inverse-variance weights (E, 2) of each nuisance quantity's force and torque value."""
+    e = (b.size - _COUNT) // 2
+    var = np.diag(cov)[_COUNT:].reshape(2, e).T
+    use = ~unexcited[_COUNT:].reshape(2, e).T & (var > 0.0)
+    w = np.where(use, 1.0 / np.where(use, var, 1.0), 0.0)
+    total = w.sum(axis=1, keepdims=True)
+    return np.where(total > 0.0, w / np.where(total > 0.0, total, 1.0), 0.5)
+
+
 def theta_from_coefficients(coefficients: np.ndarray, covariance: np.ndarray) -> DataTheta:
     """θ and the combinations from the stacked coefficients (module docstring).
 
     Parameters
     ----------
-    coefficients : ndarray, shape (P,)
-        `STACKED_COEFFICIENTS`: force, then torque coefficients.
-    covariance : ndarray, shape (P, P)
+    coefficients : ndarray, shape (13 + 2E,)
+        `stack` of the force and torque coefficients.
+    covariance : ndarray, shape (13 + 2E, 13 + 2E)
         Their covariance (inf on the diagonal of a coefficient not excited).
 
     Returns
     -------
     DataTheta
+        θ, then the E nuisance quantities (each its force and torque values combined by
+        inverse variance).
     """
     b = np.asarray(coefficients, float)
     cov = np.where(np.isfinite(covariance), covariance, 0.0)
@@ -61,12 +138,14 @@ def theta_from_coefficients(coefficients: np.ndarray, covariance: np.ndarray) ->
     route_var[[unexcited[[_GX, _AX]].any(), unexcited[[_GY, _AY]].any()]] = np.inf
     weight = np.where(np.isfinite(route_var) & (route_var > 0), 1.0 / route_var, 0.0)
     weight = weight / weight.sum() if weight.sum() > 0 else np.array([0.5, 0.5])
+    extra_weight = _extra_weights(b, cov, unexcited)
 
     def theta(x: np.ndarray) -> np.ndarray:
         c_t = x[_CT]
         j_z = float(weight @ _j_z_routes(x))
-        return np.array([c_t, x[_CTCD] / c_t, x[_BZ] * j_z, c_t / x[_AX], c_t / x[_AY], j_z,
-                         x[_BZ], -x[_RZ]])
+        return np.concatenate([[c_t, x[_CTCD] / c_t, x[_BZ] * j_z, c_t / x[_AX],
+                                c_t / x[_AY], j_z], _extras(x, extra_weight),
+                               [x[_BZ], -x[_RZ]]])
 
     with np.errstate(divide="ignore", invalid="ignore"):
         full = theta(b)
@@ -77,34 +156,40 @@ def theta_from_coefficients(coefficients: np.ndarray, covariance: np.ndarray) ->
         np.zeros(full.size, bool)
     var = np.where(unknown, np.inf, np.diag(full_cov))
     full_cov[np.diag_indices_from(full_cov)] = var
+    p = full.size - len(COMBINATION_NAMES)
     with np.errstate(divide="ignore", invalid="ignore"):
         routes = _j_z_routes(b)
         spread = split_widening(routes[0], np.sqrt(route_var[0]), routes[1],
                                 np.sqrt(route_var[1]))
-        route_sigma = np.zeros(6)
-        route_sigma[5] = spread
-        route_sigma[2] = abs(full[6]) * spread
-    return DataTheta(full[:6], full_cov[:6, :6], full[6:], np.sqrt(np.abs(var[6:])),
+        route_sigma = np.zeros(p)
+        route_sigma[J_Z] = spread
+        route_sigma[C_M] = abs(full[p]) * spread
+    return DataTheta(full[:p], full_cov[:p, :p], full[p:], np.sqrt(np.abs(var[p:])),
                      route_sigma)
 
 
 def coefficients_from_theta(theta: np.ndarray, nuisance: np.ndarray | None = None
                             ) -> np.ndarray:
-    """The stacked coefficients a θ implies, shape (P,): the inverse of the mapping above.
+    """The stacked coefficients a θ implies, shape (13 + 2E,): the inverse of the mapping
+    above.
 
     Parameters
     ----------
-    theta : ndarray, shape (6,)
-        SI.
-    nuisance : ndarray, shape (P,), optional
+    theta : ndarray, shape (6 + E,)
+        θ, then the E nuisance quantities (each its force and its torque coefficient), SI.
+    nuisance : ndarray, shape (13 + 2E,), optional
         Coefficients beyond the paper's model (the rotors' gyroscopic and reaction terms)
         are taken from here; 0 without it.
     """
-    c_t, c_d, c_m, j_x, j_y, j_z = np.asarray(theta, float)
-    out = np.zeros(_COUNT) if nuisance is None else np.array(nuisance, float)
+    theta = np.asarray(theta, float)
+    extras = theta[len(PARAMETER_NAMES):]
+    c_t, c_d, c_m, j_x, j_y, j_z = theta[:len(PARAMETER_NAMES)]
+    out = (np.zeros(_COUNT + 2 * extras.size) if nuisance is None
+           else np.array(nuisance, float))
     out[[_CT, _CTCD, _AX, _GX, _AY, _GY, _BZ, _DZ, _GZ]] = [
         c_t, c_t * c_d, c_t / j_x, -(j_z - j_y) / j_x, c_t / j_y, -(j_x - j_z) / j_y, c_m / j_z,
         c_t * c_d / j_z, -(j_y - j_x) / j_z]
+    out[_COUNT:] = np.concatenate([extras, extras])
     return out
 
 

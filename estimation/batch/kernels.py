@@ -12,7 +12,12 @@ from mavsysid.vehicle.covariance import (
     predict_covariance_kernel,
 )
 from mavsysid.vehicle.dynamics import rk4_linear_step_kernel
-from mavsysid.vehicle.linearization import jacobian_kernel, transition_kernel
+from mavsysid.vehicle.linearization import (
+    extra_columns_kernel,
+    extra_wrench_kernel,
+    jacobian_kernel,
+    transition_kernel,
+)
 from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
 
 __all__ = ["MODE_COO", "MODE_NORMAL", "MODE_RESIDUALS", "BlockSystem", "ThetaBorderedFactor",
@@ -29,13 +34,13 @@ class BlockSystem:
         Diagonal node blocks.
     U : ndarray, shape (max(K-1, 1), 12, 12)
         Blocks (k, k+1).
-    B : ndarray, shape (K, 12, 6)
-        Node–θ blocks.
-    T : ndarray, shape (6, 6)
+    B : ndarray, shape (K, 12, P)
+        Node–θ blocks (θ: the P estimated quantities).
+    T : ndarray, shape (P, P)
         θ block.
     g : ndarray, shape (K, 12)
         Right-hand side (Jᵀr) of the nodes.
-    gt : ndarray, shape (6,)
+    gt : ndarray, shape (P,)
         Right-hand side of θ.
     """
 
@@ -47,19 +52,20 @@ class BlockSystem:
     gt: np.ndarray
 
     @classmethod
-    def zeros(cls, K: int) -> BlockSystem:
-        """An all-zero system of K nodes."""
+    def zeros(cls, K: int, parameters: int = 6) -> BlockSystem:
+        """An all-zero system of K nodes and ``parameters`` quantities."""
+        p = parameters
         return cls(np.zeros((K, 12, 12)), np.zeros((max(K - 1, 1), 12, 12)),
-                   np.zeros((K, 12, 6)), np.zeros((6, 6)), np.zeros((K, 12)), np.zeros(6))
+                   np.zeros((K, 12, p)), np.zeros((p, p)), np.zeros((K, 12)), np.zeros(p))
 
     def diagonal(self) -> tuple[np.ndarray, np.ndarray]:
-        """The matrix diagonal: of the nodes (K, 12) and of θ (6,)."""
+        """The matrix diagonal: of the nodes (K, 12) and of θ (P,)."""
         return np.diagonal(self.D, axis1=1, axis2=2).copy(), np.diag(self.T).copy()
 
     def dense(self) -> np.ndarray:
-        """The full matrix (12K + 6 square); for tests on small systems."""
-        K = self.D.shape[0]
-        A = np.zeros((12 * K + 6, 12 * K + 6))
+        """The full matrix (12K + P square); for tests on small systems."""
+        K, p = self.D.shape[0], self.T.shape[0]
+        A = np.zeros((12 * K + p, 12 * K + p))
         for k in range(K):
             A[12 * k:12 * k + 12, 12 * k:12 * k + 12] = self.D[k]
             A[12 * k:12 * k + 12, 12 * K:] = self.B[k]
@@ -73,14 +79,14 @@ class BlockSystem:
 
 @numba.njit(cache=True)
 def _factor_kernel(D, U, B, T, dn, dt, lam, Linv, C, P):
-    """Block Cholesky of the Jacobi-scaled matrix with λ·diag added; returns S (6, 6).
+    """Block Cholesky of the Jacobi-scaled matrix with λ·diag added; returns S (P, P).
 
     Linv[k] = L_kk⁻¹, C[k] = L_{k+1,k}, P[k] = L_{θ,k}; S is the Schur complement of θ.
     Raises numba's LinAlgError if a block is not positive definite.
     """
     K = D.shape[0]
     S = T * np.outer(dt, dt)
-    for j in range(6):
+    for j in range(T.shape[0]):
         S[j, j] += lam * max(T[j, j], 1e-12) * dt[j] * dt[j]
     for k in range(K):
         Dk = D[k] * np.outer(dn[k], dn[k])
@@ -145,19 +151,19 @@ class ThetaBorderedFactor:
         self.dt = 1.0 / np.sqrt(np.maximum(diag_t, 1e-300))
         self.Linv = np.empty((K, 12, 12))
         self.C = np.empty((max(K - 1, 1), 12, 12))
-        self.P = np.empty((K, 6, 12))
+        self.P = np.empty((K, system.T.shape[0], 12))
         S = _factor_kernel(system.D, system.U, system.B, system.T, self.dn, self.dt, lam,
                            self.Linv, self.C, self.P)
         self.Lt_inv = np.linalg.inv(np.linalg.cholesky(S))
         self.schur_scaled = S
 
     def solve(self, bn: np.ndarray, bt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """x with A x = b: nodes (K, 12) and θ (6,), for b given as ``bn`` (K, 12), ``bt`` (6,)."""
+        """x with A x = b: nodes (K, 12) and θ (P,), for b given as ``bn`` (K, 12), ``bt`` (P,)."""
         x, xt = _solve_kernel(self.Linv, self.C, self.P, self.Lt_inv, bn * self.dn, bt * self.dt)
         return x * self.dn, xt * self.dt
 
     def theta_inverse(self) -> np.ndarray:
-        """The θ block (6, 6) of the matrix's inverse: the inverse Schur complement."""
+        """The θ block (P, P) of the matrix's inverse: the inverse Schur complement."""
         inv_scaled = self.Lt_inv.T @ self.Lt_inv
         return inv_scaled * np.outer(self.dt, self.dt)
 
@@ -193,94 +199,98 @@ def difference_kernel(x, x_ref, out):
 def accumulate_kernel(Jr, r, m, ncols, k, D, U, B, T, g, gt):
     """Add the rows Jr[:m, :ncols] (residuals r[:m]) to the blocks of JᵀJ and Jᵀr.
 
-    Local columns: 0–11 node k, 12–17 θ, 18–29 node k+1 (only with ``ncols`` 30).
-    D (K, 12, 12) diagonal node blocks; U (K-1, 12, 12) the (k, k+1) blocks; B (K, 12, 6)
-    node–θ blocks; T (6, 6) the θ block; g (K, 12) and gt (6,) Jᵀr.
+    Local columns: 0–11 node k, 12 … 11 + P θ, then node k+1 (only with ``ncols``
+    24 + P). D (K, 12, 12) diagonal node blocks; U (K-1, 12, 12) the (k, k+1) blocks;
+    B (K, 12, P) node–θ blocks; T (P, P) the θ block; g (K, 12) and gt (P,) Jᵀr.
     """
+    p = T.shape[0]
+    e = 12 + p
     J = np.ascontiguousarray(Jr[:m, :ncols])
     Jt = np.ascontiguousarray(J.T)
     M = Jt @ J
     v = Jt @ np.ascontiguousarray(r[:m])
     D[k] += M[0:12, 0:12]
-    B[k] += M[0:12, 12:18]
-    T += M[12:18, 12:18]
+    B[k] += M[0:12, 12:e]
+    T += M[12:e, 12:e]
     g[k] += v[0:12]
-    gt += v[12:18]
-    if ncols > 18:
-        U[k] += M[0:12, 18:30]
-        B[k + 1] += M[18:30, 12:18]
-        D[k + 1] += M[18:30, 18:30]
-        g[k + 1] += v[18:30]
+    gt += v[12:e]
+    if ncols > e:
+        U[k] += M[0:12, e:e + 12]
+        B[k + 1] += M[e:e + 12, 12:e]
+        D[k + 1] += M[e:e + 12, e:e + 12]
+        g[k + 1] += v[e:e + 12]
 
 
 @numba.njit(cache=True)
-def _write_coo(Jr, m, ncols, row, k, th_col, rows, cols, vals, e):
+def _write_coo(Jr, m, ncols, p, row, k, th_col, rows, cols, vals, e):
     for a in range(m):
         for b in range(ncols):
             rows[e] = row + a
             if b < 12:
                 cols[e] = 12 * k + b
-            elif b < 18:
+            elif b < 12 + p:
                 cols[e] = th_col + b - 12
             else:
-                cols[e] = 12 * (k + 1) + b - 18
+                cols[e] = 12 * (k + 1) + b - 12 - p
             vals[e] = Jr[a, b]
             e += 1
     return e
 
 
 @numba.njit(cache=True)
-def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W, sig_p, sig_a,
-                 mode, want_q, res, rows, cols, vals, Q_out, D, U, B, T, g, gt):
+def _pose_rows(Phi, sig_p, sig_a, Jr):
+    """Jr's first 6 rows: −H Φ of the measured error-state entries, whitened."""
+    for a in range(6):
+        s = sig_p if a < 3 else sig_a
+        for b in range(Phi.shape[1]):
+            Jr[a, b] = -Phi[MEASURED_ERROR_INDICES[a], b] / s
+
+
+@numba.njit(cache=True)
+def shoot_kernel(nodes, theta, t, z, n, w, basis, node_idx, mass, r, eps, scale, Qc, W,
+                 sig_p, sig_a, mode, want_q, res, rows, cols, vals, Q_out, D, U, B, T, g, gt):
     """Residuals of the shooting problem, and its Jacobian as ``mode`` asks.
 
-    w (N, 6) is the known effects' extra body force and torque per sample (as in the EKF);
-    Qc (N, 6, 6) the process-noise density of the step from each sample to the next.
-    Column layout of J: node k's error at 12k … 12k+11, the θ error (scaled) at 12K … 12K+5.
-    ``mode`` 1 writes J as COO (rows, cols, vals); ``mode`` 2 adds JᵀJ and Jᵀr into the
-    blocks D, U, B, T, g, gt (see `accumulate_kernel`; zero them first). ``Q_out``
-    (K-1, 12, 12) receives the process noise accumulated over each interval if ``want_q``.
-    Returns the number of residual rows and of COO entries written.
+    w (N, 6): the known effects' wrench per sample (as in the EKF); basis (N, 6, E): the
+    nuisance quantities' wrench per unit value; Qc (N, 6, 6): the process-noise density of
+    each step; θ: P quantities. J's columns: node k's error at 12k … 12k+11, the scaled θ
+    error at 12K … 12K+P−1. ``mode`` 1 writes J as COO (rows, cols, vals); ``mode`` 2 adds
+    JᵀJ and Jᵀr into D, U, B, T, g, gt (`accumulate_kernel`; zero them first). ``Q_out``
+    (K-1, 12, 12) receives each interval's process noise if ``want_q``. Returns the number
+    of residual rows and of COO entries written.
     """
-    K = nodes.shape[0]
-    th_col = 12 * K
-    row = 0
-    e = 0
-    A = np.empty((18, 18))
-    G = np.empty((18, 6))
-    F = np.empty((18, 18))
-    Qs = np.empty((18, 18))
-    x = np.empty(13)
-    x_next = np.empty(13)
-    y = np.empty(6)
-    d = np.empty(12)
-    Jr = np.zeros((12, 30))
+    K, p = nodes.shape[0], theta.shape[0]
+    dim, th_col, row, e = 12 + p, 12 * K, 0, 0
+    A, G, F, Qs = np.empty((dim, dim)), np.empty((dim, 6)), np.empty((dim, dim)), np.empty(
+        (dim, dim))
+    x, x_next, y, d = np.empty(13), np.empty(13), np.empty(6), np.empty(12)
+    wa, wb = np.empty(6), np.empty(6)
+    extras = theta[6:]
+    Jr = np.zeros((12, dim + 12))
     want_jac = mode != MODE_RESIDUALS
     for k in range(K):
         x[:] = nodes[k]
-        Phi = np.eye(18)
-        Qacc = np.zeros((18, 18))
+        Phi = np.eye(dim)
+        Qacc = np.zeros((dim, dim))
         last = node_idx[k + 1] if k < K - 1 else node_idx[K] - 1
         for i in range(node_idx[k], last + 1):
             if i < node_idx[k + 1]:  # measurement at sample i
                 pose_residual_kernel(z[i], x, y)
                 res[row:row + 3] = y[0:3] / sig_p
                 res[row + 3:row + 6] = y[3:6] / sig_a
-                if want_jac:  # the rows H Φ of the measured error-state entries
-                    for a in range(6):
-                        s = sig_p if a < 3 else sig_a
-                        for b in range(18):
-                            Jr[a, b] = -Phi[MEASURED_ERROR_INDICES[a], b] / s
+                if want_jac:
+                    _pose_rows(Phi, sig_p, sig_a, Jr)
                     if mode == MODE_COO:
-                        e = _write_coo(Jr, 6, 18, row, k, th_col, rows, cols, vals, e)
+                        e = _write_coo(Jr, 6, dim, p, row, k, th_col, rows, cols, vals, e)
                     else:
-                        accumulate_kernel(Jr, res[row:row + 6], 6, 18, k, D, U, B, T, g, gt)
+                        accumulate_kernel(Jr, res[row:row + 6], 6, dim, k, D, U, B, T, g, gt)
                 row += 6
             if i == last:
                 break
             dt = t[i + 1] - t[i]
             if want_jac or (want_q and k < K - 1):
                 jacobian_kernel(x, n[i], theta, mass, r, eps, scale, A, G)
+                extra_columns_kernel(basis[i], theta[3:6], mass, scale, A)
                 transition_kernel(A, G, Qc[i], dt, F, Qs)
                 first = i == node_idx[k]  # Phi = I and Qacc = 0 so far: skip the products
                 Phi = F.copy() if first else F @ Phi
@@ -289,8 +299,9 @@ def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W,
                         Qacc[:] = Qs
                     else:
                         predict_covariance_kernel(Qacc, F, Qs)
-            rk4_linear_step_kernel(x, n[i], n[i + 1], w[i], w[i + 1], theta, dt, mass, r, eps,
-                                   x_next)
+            extra_wrench_kernel(w[i], basis[i], extras, wa)
+            extra_wrench_kernel(w[i + 1], basis[i + 1], extras, wb)
+            rk4_linear_step_kernel(x, n[i], n[i + 1], wa, wb, theta, dt, mass, r, eps, x_next)
             x[:] = x_next
         if k < K - 1:
             if want_q:
@@ -299,11 +310,12 @@ def shoot_kernel(nodes, theta, t, z, n, w, node_idx, mass, r, eps, scale, Qc, W,
             res[row:row + 12] = W[k] @ d
             if want_jac:
                 WPhi = W[k] @ np.ascontiguousarray(Phi[0:12, :])
-                Jr[:, 0:18] = -WPhi
-                Jr[:, 18:30] = W[k]
+                Jr[:, 0:dim] = -WPhi
+                Jr[:, dim:dim + 12] = W[k]
                 if mode == MODE_COO:
-                    e = _write_coo(Jr, 12, 30, row, k, th_col, rows, cols, vals, e)
+                    e = _write_coo(Jr, 12, dim + 12, p, row, k, th_col, rows, cols, vals, e)
                 else:
-                    accumulate_kernel(Jr, res[row:row + 12], 12, 30, k, D, U, B, T, g, gt)
+                    accumulate_kernel(Jr, res[row:row + 12], 12, dim + 12, k, D, U, B, T, g,
+                                      gt)
             row += 12
     return row, e

@@ -20,6 +20,7 @@ from mavsysid.estimation.flight import FlightData, step_process_noise
 from mavsysid.estimation.progress import report_progress
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.estimation.robust import inflated_theta_covariance
+from mavsysid.estimation.signals import pose_states
 from mavsysid.vehicle.linearization import ErrorStateModel
 from scipy.optimize import least_squares
 
@@ -50,7 +51,7 @@ def whitening(Q: np.ndarray) -> np.ndarray:
 
 def apply_step(model: ErrorStateModel, nodes: np.ndarray, theta: np.ndarray,
                step_nodes: np.ndarray, step_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes ⊞ their steps (K, 12) and θ + scale × its step (6,), SI."""
+    """Nodes ⊞ their steps (K, 12) and θ + scale × its step (P,), SI."""
     new_nodes = np.empty_like(nodes)
     for k in range(nodes.shape[0]):
         inject_kernel(nodes[k], step_nodes[k], new_nodes[k])
@@ -98,7 +99,15 @@ class ShootingProblem:
             # Each step's process noise, with the slow inputs' interpolation error.
             "Qc": step_process_noise(self.model.process_noise_density(), t, n, fl.inputs,
                                      self.prior.value, r, eps),
+            # The nuisance quantities' wrench per unit value, on the pose's states.
+            "basis": np.ascontiguousarray(self.model.extra_basis(
+                pose_states(fl), n, self.prior.value, t - t[0])),
         }
+
+    @property
+    def parameter_count(self) -> int:
+        """P: θ and the nuisance quantities."""
+        return self.model.parameter_count
 
     @property
     def node_count(self) -> int:
@@ -107,8 +116,8 @@ class ShootingProblem:
 
     @property
     def residual_count(self) -> int:
-        """Rows of the residual vector: 6 per sample, 12 per defect, 6 for the prior."""
-        return 6 * len(self.flight) + 12 * (self.node_count - 1) + 6
+        """Rows of the residual vector: 6 per sample, 12 per defect, P for the prior."""
+        return 6 * len(self.flight) + 12 * (self.node_count - 1) + self.parameter_count
 
     def _run(self, nodes: np.ndarray, theta: np.ndarray, mode: int, want_q: bool = False,
              coo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
@@ -118,19 +127,19 @@ class ShootingProblem:
         res = np.empty(self.residual_count)
         rows, cols, vals = coo if coo is not None else (np.empty(1, np.int64),) * 2 + (
             np.empty(1),)
-        system = system if system is not None else BlockSystem.zeros(1)
+        system = system if system is not None else BlockSystem.zeros(1, self.parameter_count)
         Q_out = np.empty((max(K - 1, 1), 12, 12))
         mass, r, eps, scale = self.model.kernel_args()
-        m, _ = shoot_kernel(nodes, theta, a["t"], a["z"], a["n"], a["w"], self.node_idx, mass, r,
-                            eps, scale, a["Qc"], self.W, self.sigma[0], self.sigma[1], mode,
-                            want_q, res, rows, cols, vals, Q_out, system.D, system.U, system.B,
-                            system.T, system.g, system.gt)
+        m, _ = shoot_kernel(nodes, theta, a["t"], a["z"], a["n"], a["w"], a["basis"],
+                            self.node_idx, mass, r, eps, scale, a["Qc"], self.W, self.sigma[0],
+                            self.sigma[1], mode, want_q, res, rows, cols, vals, Q_out, system.D,
+                            system.U, system.B, system.T, system.g, system.gt)
         res[m:] = (theta - self.prior.value) / self.prior_sigma
         return res, Q_out
 
     @property
     def prior_sigma(self) -> np.ndarray:
-        """σ of the θ prior, SI (6,)."""
+        """σ of the θ prior, SI (P,)."""
         return np.sqrt(np.diag(self.prior.covariance))
 
     def interval_noise(self, nodes: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -144,25 +153,26 @@ class ShootingProblem:
     def normal_equations(self, nodes: np.ndarray, theta: np.ndarray
                          ) -> tuple[np.ndarray, BlockSystem]:
         """r, and JᵀJ with Jᵀr in blocks (θ in its scaled units)."""
-        system = BlockSystem.zeros(self.node_count)
+        p = self.parameter_count
+        system = BlockSystem.zeros(self.node_count, p)
         res, _ = self._run(nodes, theta, MODE_NORMAL, system=system)
         w = self.model.theta_scale / self.prior_sigma
-        system.T[np.diag_indices(6)] += w * w
-        system.gt[:] += w * res[-6:]
+        system.T[np.diag_indices(p)] += w * w
+        system.gt[:] += w * res[-p:]
         return res, system
 
     def jacobian(self, nodes: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
-        """r and J as a sparse matrix (columns: 12 per node, then the 6 scaled θ)."""
-        K = self.node_count
+        """r and J as a sparse matrix (columns: 12 per node, then the P scaled quantities)."""
+        K, p = self.node_count, self.parameter_count
         n_meas = len(self.flight)
-        m = self.residual_count - 6
-        nnz = 6 * 18 * n_meas + 12 * 30 * (K - 1)
+        m = self.residual_count - p
+        nnz = 6 * (12 + p) * n_meas + 12 * (24 + p) * (K - 1)
         coo = (np.empty(nnz, np.int64), np.empty(nnz, np.int64), np.empty(nnz))
         res, _ = self._run(nodes, theta, MODE_COO, coo=coo)
-        rows = np.concatenate([coo[0], m + np.arange(6)])
-        cols = np.concatenate([coo[1], 12 * K + np.arange(6)])
+        rows = np.concatenate([coo[0], m + np.arange(p)])
+        cols = np.concatenate([coo[1], 12 * K + np.arange(p)])
         vals = np.concatenate([coo[2], self.model.theta_scale / self.prior_sigma])
-        shape = (m + 6, 12 * K + 6)
+        shape = (m + p, 12 * K + p)
         if np.all(rows[1:] >= rows[:-1]):
             # The kernel writes row by row with no repeated column: CSR directly, without
             # the sort of a COO conversion (2 s of a 60 s, 500 Hz estimate).
@@ -186,7 +196,7 @@ class BatchResult:
     iterations : int
     cost_initial, cost_final : float
         ½ Σ r² at the filter's estimate and at the optimum.
-    sigma_inflation : ndarray, shape (6,), optional
+    sigma_inflation : ndarray, shape (P,), optional
         How much each σ was widened (≥ 1) for residuals correlated or larger than the
         model assumes (`sigma_inflation`).
     """
@@ -219,14 +229,14 @@ def shooting_problem(
 
 
 def _theta_covariance(fac: ThetaBorderedFactor, theta_scale: np.ndarray) -> np.ndarray:
-    """θ covariance (6, 6), SI: the θ block of (JᵀJ)⁻¹, from its factorisation."""
+    """θ covariance (P, P), SI: the θ block of (JᵀJ)⁻¹, from its factorisation."""
     cov = fac.theta_inverse() * np.outer(theta_scale, theta_scale)
     return 0.5 * (cov + cov.T)
 
 
 def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarray,
                     fac: ThetaBorderedFactor) -> np.ndarray:
-    """σ multiplier (6,) ≥ 1 of each parameter at the optimum, from the residuals' HAC.
+    """σ multiplier (P,) ≥ 1 of each quantity at the optimum, from the residuals' HAC.
 
     `mavsysid.estimation.robust.inflated_theta_covariance` on this problem:
     rows grouped by sample (a defect with the last sample of its interval, the prior
@@ -243,10 +253,11 @@ def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarr
             out[:12 * K, i], out[12 * K:, i] = x.ravel(), xt
         return out
 
+    p = problem.parameter_count
     rows = np.full(len(problem.flight), 6)
     rows[problem.node_idx[1:-1] - 1] += 12
-    sample = np.append(np.repeat(np.arange(rows.size), rows), np.full(6, -1))
-    return inflated_theta_covariance(J, res, solve, 12 * K + np.arange(6), sample,
+    sample = np.append(np.repeat(np.arange(rows.size), rows), np.full(p, -1))
+    return inflated_theta_covariance(J, res, solve, 12 * K + np.arange(p), sample,
                                      rows.size)[1]
 
 
@@ -341,7 +352,7 @@ def refine(
     inflation = sigma_inflation(problem, nodes, theta, optimum)
     return BatchResult(
         estimate=ParameterEstimate(theta, _theta_covariance(optimum, model.theta_scale)
-                                   * np.outer(inflation, inflation)),
+                                   * np.outer(inflation, inflation), filtered.names),
         states=nodes,
         node_times=flight.t[problem.node_idx[:-1]], iterations=iterations, cost_initial=cost0,
         cost_final=cost, sigma_inflation=inflation,
@@ -354,8 +365,8 @@ class LeastSquaresResult:
 
     Attributes
     ----------
-    theta : ndarray, shape (6,)
-        θ at the end, SI.
+    theta : ndarray, shape (P,)
+        θ (and the nuisance quantities) at the end, SI.
     nodes : ndarray, shape (K, 13)
     cost : float
         ½ Σ r² at the end.
@@ -382,7 +393,7 @@ def solve_least_squares(problem: ShootingProblem, nodes: np.ndarray, theta: np.n
         With its defect whitening set (`mavsysid.estimation.batch.refine.shooting_problem`).
     nodes : ndarray, shape (K, 13)
         The start.
-    theta : ndarray, shape (6,)
+    theta : ndarray, shape (P,)
         The start, SI.
     max_evaluations : int
         ``max_nfev``.
@@ -401,8 +412,9 @@ def solve_least_squares(problem: ShootingProblem, nodes: np.ndarray, theta: np.n
     def jac(u: np.ndarray) -> sp.csr_matrix:
         return problem.jacobian(*unpack(u))[1]
 
-    sol = least_squares(fun, np.zeros(12 * K + 6), jac=jac, method="trf", tr_solver="lsmr",
-                        x_scale="jac", max_nfev=max_evaluations, ftol=tol, xtol=tol, gtol=tol)
+    sol = least_squares(fun, np.zeros(12 * K + problem.parameter_count), jac=jac,
+                        method="trf", tr_solver="lsmr", x_scale="jac",
+                        max_nfev=max_evaluations, ftol=tol, xtol=tol, gtol=tol)
     end_nodes, end_theta = unpack(sol.x)
     return LeastSquaresResult(end_theta, end_nodes, float(sol.cost), int(sol.nfev),
                               int(sol.status))

@@ -1,4 +1,27 @@
-"""filter.ekf."""
+"""The parameter EKF (paper Sections "Robot Model and EKF" and "MAV Model"), on filterpy.
+
+`ParameterEKF` subclasses `filterpy.kalman.ExtendedKalmanFilter` and keeps its API:
+``x``, ``P``, ``F``, ``Q``, ``R``, ``y``, ``S``, ``SI``, ``K``, ``predict()``,
+``update(z)``, ``log_likelihood``, ``mahalanobis``, ``x_prior``/``P_prior``,
+``x_post``/``P_post``. What differs, and why:
+
+* ``x`` is the nominal state [p, v_B, q, ω, θ], shape (13 + P,), with the P estimated
+  quantities (θ, then any nuisance ones: `mavsysid.vehicle.parameters`) in SI units,
+  while ``P`` is the covariance of the error state (12 + P, 12 + P) of
+  `mavsysid.vehicle.linearization`: the attitude error is a 3-vector
+  (``q = q̂ ⊗ Exp(δφ)``) and the quantities' errors are in units of ``theta_scale`` (the
+  prior), so P stays well conditioned at any vehicle scale.
+* ``predict(u, dt, u_next)`` integrates the nonlinear model (the model's RK4,
+  `mavsysid.vehicle.dynamics.rk4_linear_step_kernel`, rotor speeds linear between ``u``
+  and ``u_next``) and propagates P with the shared linearisation (paper Eq. prior);
+  ``update(z)`` takes z = [p (3), q (4)] and applies the correction multiplicatively to
+  the attitude (Joseph form, with the error-state reset).
+
+The covariance step and the measurement (H, residual) are the planner's too
+(`mavsysid.vehicle.covariance`), so the belief the planner predicts is this filter's P.
+The arithmetic lives in compiled kernels shared by the per-step methods and by `run`,
+which filters a whole flight in one compiled loop.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +32,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from mavsysid.estimation.flight import FlightData, step_process_noise
 from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
+from mavsysid.estimation.signals import pose_states
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.covariance import (
     pose_residual_kernel,
@@ -17,12 +41,14 @@ from mavsysid.vehicle.covariance import (
 )
 from mavsysid.vehicle.dynamics import STATE_DIM, rk4_linear_step_kernel
 from mavsysid.vehicle.linearization import (
-    ERROR_DIM,
     MEAS_DIM,
     ErrorStateModel,
+    extra_columns_kernel,
+    extra_wrench_kernel,
     jacobian_kernel,
     transition_kernel,
 )
+from mavsysid.vehicle.parameters import PAPER_THETA, quantity_names
 from mavsysid.vehicle.rotation import (
     exp_kernel,
     multiply_kernel,
@@ -33,11 +59,7 @@ from mavsysid.vehicle.rotation import (
 
 from mavsysid.errors import JobFailedError, LogFormatError
 
-__all__ = ["FILTER_DIM", "FilterOverflow", "FilterRun", "ParameterEKF"]
-
-
-#: Length of the nominal filter state x = [p, v_B, q, ω, θ].
-FILTER_DIM = STATE_DIM + 6
+__all__ = ["FilterOverflow", "FilterRun", "ParameterEKF"]
 
 
 @dataclass(frozen=True)
@@ -62,17 +84,24 @@ class FilterRun:
 
 
 @numba.njit(cache=True)
-def _predict_kernel(x, P, n0, n1, w0, w1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
+def _predict_kernel(x, P, n0, n1, w0, w1, b0, b1, dt, mass, r, eps, scale, Qc, A, G, F, Q):
     """Paper Eq. prior: x ← f-integrated, P ← F P Fᵀ + Q (F, Q at the step's start).
 
     The effects' wrench w0, w1 (6,) is a known input: it shifts the mean and does not
-    enter F (its state derivatives are second order for the small effects it models).
+    enter F (its state derivatives are second order for the small effects it models). The
+    nuisance quantities add their wrench b @ x_extra (b0, b1 of shape (6, E)) to it and
+    their columns to F.
     """
-    theta = x[13:19]
+    theta = x[13:]
     jacobian_kernel(x[:13], n0, theta, mass, r, eps, scale, A, G)
+    extra_columns_kernel(b0, theta[3:6], mass, scale, A)
     transition_kernel(A, G, Qc, dt, F, Q)
+    extras = theta[6:]
+    wa, wb = np.empty(6), np.empty(6)
+    extra_wrench_kernel(w0, b0, extras, wa)
+    extra_wrench_kernel(w1, b1, extras, wb)
     state = np.empty(13)
-    rk4_linear_step_kernel(x[:13], n0, n1, w0, w1, theta, dt, mass, r, eps, state)
+    rk4_linear_step_kernel(x[:13], n0, n1, wa, wb, theta, dt, mass, r, eps, state)
     x[:13] = state
     predict_covariance_kernel(P, F, Q)
 
@@ -92,7 +121,7 @@ def _update_kernel(x, P, z, R, scale, y, S, SI, K):
     q = multiply_kernel(x[6:10], exp_kernel(dx[6:9]))
     x[6:10] = q / np.sqrt(np.sum(q * q))
     x[10:13] += dx[9:12]
-    x[13:19] += scale * dx[12:18]
+    x[13:] += scale * dx[12:]
     # Error-state reset: the new attitude error is measured from the corrected nominal.
     n = P.shape[0]
     Gam = np.eye(n)
@@ -106,32 +135,35 @@ def _update_kernel(x, P, z, R, scale, y, S, SI, K):
 
 
 @numba.njit(cache=True)
-def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
+def _filter_kernel(t, z, n, w, basis, x, P, mass, r, eps, scale, Qc, R,
                    out_x, out_sigma, out_innov, out_nis):
     """Filter samples 1..N-1 (sample 0 initialised x, P); histories into the out arrays.
 
     w (N, 6) is the effects' extra body force and torque at every sample (zeros: none);
-    Qc (N, 6, 6) the process-noise density of each step (from sample k − 1 to k).
+    basis (N, 6, E) the nuisance quantities' wrench per unit value; Qc (N, 6, 6) the
+    process-noise density of each step (from sample k − 1 to k).
 
     Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k).
     """
     log_likelihood = 0.0
-    A = np.empty((ERROR_DIM, ERROR_DIM))
-    G = np.empty((ERROR_DIM, 6))
-    F = np.empty((ERROR_DIM, ERROR_DIM))
-    Q = np.empty((ERROR_DIM, ERROR_DIM))
+    d = P.shape[0]
+    p = scale.shape[0]
+    A = np.empty((d, d))
+    G = np.empty((d, 6))
+    F = np.empty((d, d))
+    Q = np.empty((d, d))
     y = np.empty(6)
     S = np.empty((6, 6))
     SI = np.empty((6, 6))
-    K = np.empty((ERROR_DIM, 6))
+    K = np.empty((d, 6))
     out_x[0] = x
-    for j in range(6):
+    for j in range(p):
         out_sigma[0, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
     out_innov[0] = 0.0
     out_nis[0] = np.nan
     for k in range(1, t.shape[0]):
-        _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], t[k] - t[k - 1], mass, r, eps,
-                        scale, Qc[k - 1], A, G, F, Q)
+        _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], basis[k - 1], basis[k],
+                        t[k] - t[k - 1], mass, r, eps, scale, Qc[k - 1], A, G, F, Q)
         # A diverged state overflows: the update would invert a NaN S, or normalise the
         # attitude to zero and divide by it next step. Stop; the caller refuses the run.
         if not (np.isfinite(np.sum(x)) and np.isfinite(np.trace(P))):
@@ -145,7 +177,7 @@ def _filter_kernel(t, z, n, w, x, P, mass, r, eps, scale, Qc, R,
         log_likelihood -= 0.5 * (out_nis[k] + log_det + 6.0 * np.log(2.0 * np.pi))
         out_innov[k] = y
         out_x[k] = x
-        for j in range(6):
+        for j in range(p):
             out_sigma[k, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
     return log_likelihood
 
@@ -161,15 +193,25 @@ class ParameterEKF(ExtendedKalmanFilter):
         Prior θ (SI) and its covariance; its values also set the θ error units.
     measurement_sigma : tuple of 2 float
         Position σ (m) and attitude σ (rad) of the pose measurements.
+
+    The quantities are θ and the config's ``extra_quantities`` (their prior the last
+    entries of ``prior``).
     """
 
     def __init__(
         self, config: VehicleConfig, prior: ParameterEstimate,
         measurement_sigma: tuple[float, float],
     ) -> None:
-        super().__init__(dim_x=ERROR_DIM, dim_z=MEAS_DIM)
+        extras = tuple(config.extra_quantities)
+        if prior.value.shape != (len(PAPER_THETA) + len(extras),):
+            raise ValueError(f"prior of {prior.value.size} quantities for θ and "
+                             f"{len(extras)} nuisance quantities")
+        # A quantity's unit: its prior value, or its prior σ where the value is 0.
         scale = np.abs(prior.value)
-        self.model = ErrorStateModel.for_vehicle(config, np.where(scale > 0.0, scale, 1.0))
+        scale = np.where(scale > 0.0, scale, np.where(prior.sigma > 0.0, prior.sigma, 1.0))
+        self.model = ErrorStateModel.for_vehicle(config, scale, extras)
+        dim = self.model.dim
+        super().__init__(dim_x=dim, dim_z=MEAS_DIM)
         self.prior = prior
         self._kernel_args = self.model.kernel_args()
         self._Qc = self.model.process_noise_density()
@@ -178,12 +220,13 @@ class ParameterEKF(ExtendedKalmanFilter):
         self.x = np.concatenate([np.zeros(STATE_DIM), prior.value])
         self.x[6] = 1.0
         s = self.model.theta_scale
-        self.P = np.zeros((ERROR_DIM, ERROR_DIM))
+        self.P = np.zeros((dim, dim))
         self.P[12:, 12:] = prior.covariance / np.outer(s, s)
-        self.K = np.zeros((ERROR_DIM, MEAS_DIM))
+        self.K = np.zeros((dim, MEAS_DIM))
         self.y = np.zeros(MEAS_DIM)
-        self._G = np.zeros((ERROR_DIM, 6))
-        self._A = np.zeros((ERROR_DIM, ERROR_DIM))
+        self._G = np.zeros((dim, 6))
+        self._A = np.zeros((dim, dim))
+        self._no_basis = np.zeros((6, len(extras)))
 
     # -- filterpy API -----------------------------------------------------------------
 
@@ -214,8 +257,9 @@ class ParameterEKF(ExtendedKalmanFilter):
         w0 = np.zeros(6) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
         w1 = w0 if wrench_next is None else np.ascontiguousarray(wrench_next, dtype=float)
         mass, r, eps, scale = self._kernel_args
-        _predict_kernel(self.x, self.P, u, u1, w0, w1, float(dt), mass, r, eps, scale,
-                        self._Qc, self._A, self._G, self.F, self.Q)
+        _predict_kernel(self.x, self.P, u, u1, w0, w1, self._no_basis, self._no_basis,
+                        float(dt), mass, r, eps, scale, self._Qc, self._A, self._G, self.F,
+                        self.Q)
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 
     def update(self, z: np.ndarray, R: np.ndarray | None = None) -> None:  # type: ignore[override]
@@ -235,13 +279,19 @@ class ParameterEKF(ExtendedKalmanFilter):
 
     @property
     def theta(self) -> np.ndarray:
-        """Current θ estimate, SI, shape (6,)."""
+        """Current estimate of θ and the nuisance quantities, SI, shape (P,)."""
         return self.x[STATE_DIM:].copy()
 
     @property
     def theta_covariance(self) -> np.ndarray:
-        """Current θ covariance, SI, shape (6, 6)."""
+        """Their current covariance, SI, shape (P, P)."""
         return self.model.parameter_covariance_si(self.P)
+
+    @property
+    def estimate(self) -> ParameterEstimate:
+        """The current estimate with its covariance and the quantities' names."""
+        return ParameterEstimate(self.theta, self.theta_covariance,
+                                 quantity_names(self.model.extras))
 
     def start_segment(self, flight: FlightData, i: int,
                       state_sigma: tuple[float, float, float, float]) -> None:
@@ -282,8 +332,8 @@ class ParameterEKF(ExtendedKalmanFilter):
         z = np.ascontiguousarray(np.hstack([flight.position, flight.quaternion]))
         n = np.ascontiguousarray(flight.rotor_speeds, dtype=float)
         N = t.size
-        out_x = np.empty((N, FILTER_DIM))
-        out_sigma = np.empty((N, 6))
+        out_x = np.empty((N, STATE_DIM + self.model.parameter_count))
+        out_sigma = np.empty((N, self.model.parameter_count))
         out_innov = np.full((N, MEAS_DIM), np.nan)  # NaN: not reached (`FilterOverflow`)
         out_nis = np.empty(N)
         mass, r, eps, scale = self._kernel_args
@@ -293,14 +343,18 @@ class ParameterEKF(ExtendedKalmanFilter):
         # Each step's process noise: the configured density plus the wrench error that
         # interpolating slow rotor-speed inputs leaves (`mavsysid.estimation.flight`).
         Qc = step_process_noise(self._Qc, t, n, flight.inputs, self.prior.value, r, eps)
+        basis = np.ascontiguousarray(self.model.extra_basis(
+            pose_states(flight), n, self.prior.value, t - t[0]) if self.model.extras
+            else np.zeros((N, 6, 0)))
         try:
             log_likelihood = 0.0
             for i, (a, b) in enumerate(flight.segment_bounds):
                 if i:  # after a gap: the vehicle states restart, θ and its σ carry on
                     self.start_segment(flight, a, state_sigma)
                 log_likelihood += _filter_kernel(
-                    t[a:b], z[a:b], n[a:b], w[a:b], self.x, self.P, mass, r, eps, scale,
-                    Qc[a:b], self.R, out_x[a:b], out_sigma[a:b], out_innov[a:b], out_nis[a:b])
+                    t[a:b], z[a:b], n[a:b], w[a:b], basis[a:b], self.x, self.P, mass, r, eps,
+                    scale, Qc[a:b], self.R, out_x[a:b], out_sigma[a:b], out_innov[a:b],
+                    out_nis[a:b])
         except (ZeroDivisionError, np.linalg.LinAlgError) as error:
             # A model that cannot follow the log (wrong vehicle or rotor order) drives the
             # state to overflow; the compiled kernel then fails on a division or on S.
@@ -312,8 +366,7 @@ class ParameterEKF(ExtendedKalmanFilter):
             t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],
             quaternion=out_x[:, 6:10], innovation=out_innov, nis=out_nis,
         )
-        return FilterRun(history, out_x[:, :STATE_DIM],
-                         ParameterEstimate(self.theta, self.theta_covariance), log_likelihood)
+        return FilterRun(history, out_x[:, :STATE_DIM], self.estimate, log_likelihood)
 
 
 class FilterOverflow(JobFailedError):

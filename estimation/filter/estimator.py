@@ -147,7 +147,7 @@ def _with_increment(estimate: ParameterEstimate | None, increment: np.ndarray | 
                     ) -> ParameterEstimate | None:
     if estimate is None or increment is None:
         return estimate
-    return ParameterEstimate(estimate.value, estimate.covariance + increment)
+    return ParameterEstimate(estimate.value, estimate.covariance + increment, estimate.names)
 
 
 def estimate_parameters(
@@ -222,7 +222,7 @@ def estimate_with_effects(
         ee = reference if reference is not None else _reference(flight, config, prior, notes)
     start = prior
     if ee is not None and settings.start_from_equation_error:
-        start = ParameterEstimate(ee.value, prior.covariance)
+        start = ParameterEstimate(ee.value, prior.covariance, prior.names)
         notes.append("filter started at the equation-error θ")
 
     fit, used = _effects(flight, config, effects, fit_effects, start, sigma, state_sigma,
@@ -244,8 +244,9 @@ def estimate_with_effects(
     truth = flight.true_theta
     final = refined if refined is not None else filtered
     history = run.history
-    conv = convergence_time(history.t - history.t[0], history.theta,
-                            truth if truth is not None else final.value)
+    six = len(PARAMETER_NAMES)
+    conv = convergence_time(history.t - history.t[0], history.theta[:, :six],
+                            truth if truth is not None else final.value[:six])
     notes.extend(_closing_notes(flight, sigma, final))
     return EstimationResult(
         prior=prior, filtered=filtered, refined=refined, history=history,
@@ -284,12 +285,12 @@ def _widen_by_disagreement(
     factor = disagreement_widening(final.value, final.sigma, ee.value, ee.sigma)
     if np.all(factor == 1.0):
         return filtered, refined, factor
-    wide = ", ".join(f"{n} ×{f:.3g}" for n, f in zip(PARAMETER_NAMES, factor, strict=True)
+    wide = ", ".join(f"{n} ×{f:.3g}" for n, f in zip(final.names, factor, strict=True)
                      if f > 1.0)
     notes.append(f"σ widened where the equation-error θ disagrees beyond both σ ({wide}): the "
                  "physics differ from the model; --auto-effects or mavsysid diagnose names "
                  "what it misses")
-    final = ParameterEstimate(final.value, widened(final.covariance, factor))
+    final = ParameterEstimate(final.value, widened(final.covariance, factor), final.names)
     return (filtered, final, factor) if refined is not None else (final, None, factor)
 
 
@@ -370,7 +371,8 @@ def _closing_notes(flight: FlightData, sigma: tuple[float, float],
     if flight.pose_source == "autopilot":
         notes.append("pose from the autopilot's own estimator (filtered and lagged): measurement "
                      f"σ {1000 * sigma[0]:.0f} mm, {math.degrees(sigma[1]):.1f}° assumed")
-    weak = [n for n, s in zip(PARAMETER_NAMES, final.relative_sigma, strict=True) if s > 0.2]
+    weak = [n for n, s in zip(PARAMETER_NAMES, final.theta.relative_sigma, strict=True)
+            if s > 0.2]
     if weak:
         notes.append(f"poorly identified (σ > 20 %): {', '.join(weak)}; the flight did not "
                      "excite them enough")

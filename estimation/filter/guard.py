@@ -14,6 +14,7 @@ from mavsysid.estimation.signals import NOISE_TOLERANCE
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM, initial_state_sigma
 from mavsysid.vehicle.model_effects import ModelEffect
+from mavsysid.vehicle.parameters import PAPER_THETA
 from scipy.stats import chi2
 
 from mavsysid.errors import JobFailedError
@@ -42,7 +43,7 @@ DIVERGED_NIS = "mean normalised innovation squared"
 
 #: Agreement rule of the cross-check: sigmas and relative tolerance per parameter.
 AGREEMENT_SIGMAS = 3.0
-AGREEMENT_TOLERANCE = np.array([0.05, 0.15, 0.05, 0.05, 0.05, 0.05])
+AGREEMENT_TOLERANCE = np.array([q.tolerance for q in PAPER_THETA])
 
 #: A disagreement of this fraction of the value leaves the parameter undetermined (the
 #: σ that holds it is half the value: `mavsysid.estimation.checks`'s "the log does
@@ -128,7 +129,7 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
     nis : ndarray, shape (N,)
         The filter's NIS per sample.
     theta : ParameterEstimate
-        The filter's final θ.
+        The filter's final estimate (its θ is judged; nuisance quantities are not).
     prior : ParameterEstimate
         The prior (the vehicle file's θ and σ).
     may_vanish : ndarray of bool, shape (6,), optional
@@ -136,6 +137,7 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
     floor : ndarray, shape (6,), optional
         Their least possible values (`mavsysid.estimation.checks.vanishing_floor`).
     """
+    theta, prior = theta.theta, prior.theta
     reason = implausibility(theta.value, theta.sigma, prior.value, prior.sigma, may_vanish,
                             floor)
     if reason is not None:
@@ -148,13 +150,15 @@ def divergence(t: np.ndarray, nis: np.ndarray, theta: ParameterEstimate,
 
 
 def disagreements(final: ParameterEstimate, ee: ParameterEstimate) -> np.ndarray:
-    """Which parameters the two estimates disagree on (the rule above), bool (6,).
+    """Which entries of θ the two estimates disagree on (the rule above), bool (6,).
 
     Parameters
     ----------
     final, ee : ParameterEstimate
-        The estimator's θ (σ before any widening) and the equation-error θ, SI.
+        The estimator's θ (σ before any widening) and the equation-error θ, SI (nuisance
+        quantities beyond θ are not compared).
     """
+    final, ee = final.theta, ee.theta
     delta = np.abs(final.value - ee.value)
     spread = np.sqrt(final.sigma**2 + ee.sigma**2)
     return (delta > AGREEMENT_SIGMAS * spread) & (delta > AGREEMENT_TOLERANCE * np.abs(ee.value))
@@ -174,9 +178,11 @@ def check_agreement(source: str, final: ParameterEstimate, ee: ParameterEstimate
     final, ee : ParameterEstimate
         The estimator's θ (σ before any widening) and the equation-error θ, SI.
     """
+    bad = disagreements(final, ee)
+    final, ee = final.theta, ee.theta
     delta = final.value - ee.value
     spread = np.sqrt(final.sigma**2 + ee.sigma**2)
-    bad = disagreements(final, ee) & (np.abs(delta) >= UNDETERMINED_RELATIVE
+    bad &= (np.abs(delta) >= UNDETERMINED_RELATIVE
                                       * np.abs(final.value))
     for i in np.flatnonzero(bad):
         name, unit = PARAMETER_NAMES[i], PARAMETER_UNITS[PARAMETER_NAMES[i]]
@@ -298,7 +304,7 @@ def guarded_filter(
     terms, run, reason = filter_attempt(flight, effects, config, start, prior, sigma)
     if reason is not None and not restart:
         raise JobFailedError(f"{flight.source}: the parameter filter {failure_phrase(reason)}")
-    from_ee = ParameterEstimate(ee.value, prior.covariance)
+    from_ee = ParameterEstimate(ee.value, prior.covariance, prior.names)
     for _ in range(MAX_RESTARTS):
         if reason is None:
             break

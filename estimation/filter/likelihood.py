@@ -267,8 +267,8 @@ class EffectFit:
         Each effect with its fitted values and σ.
     covariance : ndarray, shape (P, P)
         Covariance of all P fitted parameters, stacked in effect order, SI.
-    theta_sensitivity : ndarray, shape (6, P)
-        dθ̂/dψ of the filter's final θ, SI.
+    theta_sensitivity : ndarray, shape (Q, P)
+        dθ̂/dψ of the filter's final estimate of the Q quantities, SI.
     noise_scale : float
         Fitted process-noise scale (as `mavsysid.estimation.filter.likelihood`).
     noise_at_bound : bool
@@ -294,7 +294,8 @@ class EffectFit:
     evaluations: int
 
     def theta_covariance_increment(self) -> np.ndarray:
-        """J Σ_ψ Jᵀ, the part of θ's covariance due to the effects' uncertainty, (6, 6)."""
+        """J Σ_ψ Jᵀ, the part of θ's covariance due to the effects' uncertainty, (Q, Q) for
+        the Q estimated quantities."""
         J = self.theta_sensitivity
         return J @ self.covariance @ J.T
 
@@ -383,7 +384,7 @@ class _Derivatives:
     H: np.ndarray         # ∂²ℓ/∂u² (P, P)
     gv: float             # ∂ℓ/∂v
     hv: float             # ∂²ℓ/∂v²
-    dtheta: np.ndarray    # ∂θ̂/∂u (6, P)
+    dtheta: np.ndarray    # ∂θ̂/∂u (quantities, P)
 
 
 def _derivatives(f: _Objective, u: np.ndarray, v: float, h: np.ndarray, h_v: float,
@@ -395,8 +396,8 @@ def _derivatives(f: _Objective, u: np.ndarray, v: float, h: np.ndarray, h_v: flo
     """
     P = u.size
     u = np.maximum(u, lower + h)
-    ll0, _ = f(u, v)
-    g, H, dtheta = np.zeros(P), np.zeros((P, P)), np.zeros((6, P))
+    ll0, theta0 = f(u, v)
+    g, H, dtheta = np.zeros(P), np.zeros((P, P)), np.zeros((theta0.size, P))
     E = np.eye(P) * h
     for i in range(P):
         lp, tp = f(u + E[i], v)

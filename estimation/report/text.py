@@ -292,6 +292,24 @@ def _block(
     return out
 
 
+def _nuisance_block(result: EstimationResult, config: VehicleConfig
+                    ) -> dict[str, dict[str, Any]]:
+    """The answer's nuisance quantities: ``{name: {"value", "unit", "sigma", "status",
+    "source", "prior_value", "prior_sigma"}}`` (empty for the paper's θ alone)."""
+    final, prior = result.final, result.prior
+    six = len(PARAMETER_NAMES)
+    units = {q.name: q.unit for q in config.extra_quantities}
+    out: dict[str, dict[str, Any]] = {}
+    for j, name in enumerate(final.names[six:], start=six):
+        out[name] = {"value": _number(final.value[j]), "unit": units.get(name),
+                     "sigma": _number(final.sigma[j]),
+                     "status": result.status[j] if result.status else None,
+                     "source": result.answer_source[j] if result.status else None,
+                     "prior_value": _number(prior.value[j]),
+                     "prior_sigma": _number(prior.sigma[j])}
+    return out
+
+
 def result_to_json(
     result: EstimationResult, config: VehicleConfig, log_path: str | Path
 ) -> dict[str, Any]:
@@ -321,7 +339,9 @@ def result_to_json(
         (value − true)/|true|) when the truth is known. ``convergence_time_s`` (s) is the
         filter's (see `EstimationResult.convergence_time`): given in ``parameters`` and
         ``filter``, None there for a parameter that never settled, and always None in
-        ``refined`` and ``prior``, which have no time history. Also ``covariance`` (final, 6×6, SI),
+        ``refined`` and ``prior``, which have no time history. Also ``covariance`` (final, SI,
+        in the order of ``parameter_names``: θ, then any nuisance quantities, which
+        ``nuisance`` holds as `_nuisance_block` says),
         ``parameter_names``, ``log``, ``vehicle``, ``pose_source``,
         ``measurement_sigma`` (``position_m``, ``attitude_rad``), ``notes`` and
         ``software`` (``name``, ``version``). With the per-parameter answer
@@ -342,8 +362,10 @@ def result_to_json(
             parameters[name]["status"] = result.status[j]
             parameters[name]["source"] = result.answer_source[j]
     balance = result.balance
+    nuisance = _nuisance_block(result, config)
     return {
         "parameters": parameters,
+        **({"nuisance": nuisance} if nuisance else {}),
         "effects": [fe.as_dict() for fe in result.effects],
         "log_likelihood": _number(result.log_likelihood),
         "filter": None if result.filter_refusal is not None
@@ -356,7 +378,7 @@ def result_to_json(
         "refined": None if result.refined is None else _block(result.refined, None, truth),
         "prior": _block(result.prior, None, truth),
         "covariance": [[_number(c) for c in row] for row in result.final.covariance],
-        "parameter_names": list(PARAMETER_NAMES),
+        "parameter_names": list(result.final.names),
         "log": str(log_path),
         "vehicle": config.name,
         "pose_source": result.pose_source,

@@ -27,6 +27,7 @@ PRIOR_SIGMA = 0.5 * PRIOR
 def _stub_result(theta: np.ndarray) -> SimpleNamespace:
     final = SimpleNamespace(value=theta, sigma=0.05 * np.abs(theta))
     prior = SimpleNamespace(value=PRIOR, sigma=PRIOR_SIGMA)
+    final.theta, prior.theta = final, prior  # θ alone: the paper's six
     return SimpleNamespace(final=final, prior=prior, equation_error=None, effects=())
 
 

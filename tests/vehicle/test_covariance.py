@@ -26,11 +26,14 @@ from mavsysid.vehicle.dynamics import rk4_linear_step_kernel
 from mavsysid.vehicle.linearization import (
     E_ATT,
     E_POS,
-    ERROR_DIM,
+    E_THETA,
     MEAS_DIM,
     ErrorStateModel,
     initial_state_sigma,
 )
+
+#: The paper's model: 12 states and θ.
+ERROR_DIM = E_THETA.stop
 
 #: The agreement asked of the planner's covariance and the filter's, relative.
 AGREEMENT = 1e-6
@@ -51,7 +54,7 @@ def _random_covariance(rng: np.random.Generator, n: int) -> np.ndarray:
 
 def test_measurement_matrix_selects_position_and_attitude_errors():
     """H has a unit entry at δp and δφ, in residual order, and nothing else."""
-    H = measurement_matrix()
+    H = measurement_matrix(ERROR_DIM)
     assert H.shape == (MEAS_DIM, ERROR_DIM)
     np.testing.assert_array_equal(np.flatnonzero(H.sum(axis=0)), MEASURED_ERROR_INDICES)
     np.testing.assert_array_equal(H[:, E_POS], np.vstack([np.eye(3), np.zeros((3, 3))]))
@@ -64,7 +67,7 @@ def test_measurement_matrix_matches_finite_differences(firefly, aggressive_traje
     model = ErrorStateModel.for_vehicle(firefly)
     rng = np.random.default_rng(3)
     flat = edge_samples(aggressive_trajectory, firefly, firefly.theta, 10.0)[0]
-    H = measurement_matrix()
+    H = measurement_matrix(ERROR_DIM)
     eps = 1e-6
     for x in flat[rng.choice(flat.shape[0], 10, replace=False)]:
         fd = np.empty((MEAS_DIM, ERROR_DIM))
@@ -91,7 +94,7 @@ def test_kernels_equal_the_dense_kalman_step(seed):
     np.testing.assert_allclose(P, prior, rtol=1e-12, atol=1e-14 * np.abs(prior).max())
     S, SI, K = np.empty((6, 6)), np.empty((6, 6)), np.empty((ERROR_DIM, 6))
     update_covariance_kernel(P, R, S, SI, K)
-    H = measurement_matrix()
+    H = measurement_matrix(ERROR_DIM)
     S_ref = H @ prior @ H.T + R
     K_ref = prior @ H.T @ np.linalg.inv(S_ref)
     posterior = (np.eye(ERROR_DIM) - K_ref @ H) @ prior  # paper Eq. posterior (plain form)
@@ -99,7 +102,7 @@ def test_kernels_equal_the_dense_kalman_step(seed):
     np.testing.assert_allclose(K, K_ref, rtol=1e-9, atol=1e-12 * np.abs(K_ref).max())
     np.testing.assert_allclose(P, posterior, rtol=1e-7, atol=1e-10 * np.abs(posterior).max())
     np.testing.assert_array_equal(P, P.T)
-    np.testing.assert_allclose(measurement_information(R), H.T @ np.linalg.inv(R) @ H,
+    np.testing.assert_allclose(measurement_information(R, ERROR_DIM), H.T @ np.linalg.inv(R) @ H,
                                rtol=1e-12)
 
 

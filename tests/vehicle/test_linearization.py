@@ -12,10 +12,12 @@ from mavsysid.vehicle.linearization import (
     E_RATE,
     E_THETA,
     E_VEL,
-    ERROR_DIM,
     ErrorStateModel,
 )
 from mavsysid.vehicle.rotation import quat_conjugate, quat_exp, quat_multiply, quat_to_matrix
+
+#: The paper's model: 12 states and θ.
+ERROR_DIM = E_THETA.stop
 
 _BLOCKS = (E_POS, E_VEL, E_ATT, E_RATE, E_THETA)
 
