@@ -21,8 +21,12 @@ from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.effect_base import ModelEffect
 
 __all__ = [
+    "ACCEL_BIAS_SIGMA",
+    "ACCEL_SIGMA",
     "ALLOCATION_MODES",
     "ANGULAR_NOISE_DENSITY",
+    "GYRO_BIAS_SIGMA",
+    "GYRO_SIGMA",
     "LINEAR_NOISE_DENSITY",
     "PARAMETER_NAMES",
     "PARAMETER_UNITS",
@@ -60,6 +64,22 @@ ALLOCATION_MODES: tuple[str, ...] = ("pseudo_inverse", "exact")
 LINEAR_NOISE_DENSITY = 0.02
 #: Default unmodelled angular acceleration noise density, rad/s²·√s.
 ANGULAR_NOISE_DENSITY = 0.02
+
+# IMU noise defaults, measured on the real PX4 logs of ../shared/real-logs (a Pixhawk
+# AUAV-X2.1, a Pixhawk 4 Pro, a Cube Orange, PX4 SITL): the white noise of a logged
+# sample is the σ of the samples minus their 15 Hz low-pass, 0.0005–0.005 rad/s (gyro)
+# and 0.008–0.036 m/s² (accelerometer) at 205–409 Hz, at rest and in flight; a residual
+# constant bias after the autopilot's calibration shows at rest as a mean gyro of
+# 0.001–0.008 rad/s per axis and a |specific force| 0.07–0.19 m/s² off g. The defaults
+# take the upper end (docs/architecture.md, "Noise defaults", gives the command).
+#: Gyro white noise σ per logged sample, rad/s.
+GYRO_SIGMA = 0.005
+#: Accelerometer white noise σ per logged sample, m/s².
+ACCEL_SIGMA = 0.04
+#: σ of a gyro's constant bias per axis, rad/s.
+GYRO_BIAS_SIGMA = 0.005
+#: σ of an accelerometer's constant bias per axis, m/s².
+ACCEL_BIAS_SIGMA = 0.1
 
 
 @dataclass(frozen=True)
@@ -184,6 +204,15 @@ class NoiseConfig:
         White-noise density of the unmodelled body force, N·√s (continuous time).
     moment_density : float
         White-noise density of the unmodelled body moment, N·m·√s.
+    gyro_sigma : float
+        IMU gyro white noise σ of each logged sample, rad/s, per axis.
+    accel_sigma : float
+        IMU accelerometer white noise σ of each logged sample, m/s², per axis.
+    gyro_bias_sigma : float
+        σ of the gyro's constant bias, rad/s, per axis (what remains after the
+        autopilot's calibration).
+    accel_bias_sigma : float
+        σ of the accelerometer's constant bias, m/s², per axis.
     """
 
     position_sigma: float = 0.0005
@@ -191,6 +220,10 @@ class NoiseConfig:
     rotor_speed_sigma: float = 0.0
     force_density: float = 0.0
     moment_density: float = 0.0
+    gyro_sigma: float = GYRO_SIGMA
+    accel_sigma: float = ACCEL_SIGMA
+    gyro_bias_sigma: float = GYRO_BIAS_SIGMA
+    accel_bias_sigma: float = ACCEL_BIAS_SIGMA
 
 
 @dataclass(frozen=True)
@@ -229,6 +262,9 @@ class VehicleConfig:
         controllers that fly a plan realise (autopilot mixers, mavsysid's simulators);
         "exact" only for a vehicle whose controller allocates over the null space. Kept
         out of `Limits`, whose fields are numbers (the trajectory file copies them).
+    imu_position : tuple of 3 float or None
+        ``[imu] position``: the IMU's offset from the centre of gravity, m, body FLU (the
+        lever arm between the accelerometer and the CoG). None: not stated.
     """
 
     name: str
@@ -243,6 +279,7 @@ class VehicleConfig:
     autopilot_frame: str | None = None
     box: tuple[float, ...] | None = None
     allocation: str = "pseudo_inverse"
+    imu_position: tuple[float, float, float] | None = None
 
     @property
     def rotor_count(self) -> int:
