@@ -56,6 +56,33 @@ the autopilot's motor i + 1.
   output channels.
 
 Modes: ``MODE`` at each change (``Mode``, ``ModeNum``, ``Rsn`` the reason).
+
+IMU, of instance 0 (the first IMU), body FRD, gyro in rad/s, accelerometer the specific
+force in m/s² (AccZ ≈ −9.81 level at rest), the first present of:
+
+1. ``GYR`` / ``ACC`` ``"QBQfff" TimeUS,I,SampleUS,GyrX..`` (raw IMU logging, LOG_BITMASK
+   IMU_RAW, at the sensor rate; older logs: ``GYR1``/``ACC1``, one name per instance), at
+   ``SampleUS``, the sensor's own time. INS_RAW_LOG_OPT bit 2 alone logs them after the
+   low-pass filter; otherwise they are taken before it (with bit 3 the filtered copies are
+   instances ``I + count``, never read).
+2. ``IMU`` ``"QBffffffIIfBBHH" TimeUS,I,GyrX,..,AccZ,EG,EA,T,GH,AH,GHz,AHz`` (3.x: no ``I``;
+   ``IMU2``, ``IMU3`` the other instances), the low-passed samples the attitude controller
+   uses, at 25 Hz (LOG_BITMASK IMU, Copter's 25 Hz loop) or the loop rate (IMU_FAST,
+   ``Copter::loop_rate_logging``).
+3. The batch sampler (INS_LOG_BAT_MASK): ``ISBH`` ``"QHBBHHQf"
+   TimeUS,N,type,instance,mul,smp_cnt,SampleUS,smp_rate`` heads batch ``N`` of
+   ``smp_cnt`` samples of one sensor (``type`` `ISB_ACCEL` or `ISB_GYRO`) sampled at
+   ``smp_rate`` Hz from ``SampleUS``; its ``ISBD`` ``"QHHaaa" TimeUS,N,seqno,x,y,z``
+   messages each carry 32 int16 samples per axis, sample j of ``seqno`` being sample
+   32 seqno + j, in m/s² or rad/s × ``mul`` (``AP_InertialSensor::BatchSampler``). The
+   batches of one sensor come in bursts, with gaps while the others are sampled. Raw
+   samples unless INS_LOG_BAT_OPT bit 1 (post-filter).
+4. Gyro only: ``RATE`` ``R, P, Y`` (deg/s), the AHRS body rates (filtered gyro less the
+   EKF's bias estimate).
+
+Its position is ``PARM`` INS_POS1_X/Y/Z (m, body FRD, from the centre of gravity), its
+filter INS_GYRO_FILTER / INS_ACCEL_FILTER (Hz; `mavsysid.formats.parsed_log.ImuFilter`,
+0 for raw samples).
 """
 
 from __future__ import annotations
@@ -113,6 +140,8 @@ ARDUPILOT_MESSAGES: dict[str, DataFlashFormat] = {
     "XKQ": (188, "QBffff", "TimeUS,C,Q1,Q2,Q3,Q4"),
     "ESC": (153, "QBffffcfcf", "TimeUS,Instance,RPM,RawRPM,Volt,Curr,Temp,CTot,MotTemp,Err"),
     "RCOU": (34, "QHHHHHHHHHHHHHH", "TimeUS," + ",".join(f"C{i}" for i in range(1, 15))),
+    "IMU": (57, "QBffffffIIfBBHH", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,"
+                                   "AHz"),
 }
 #: MODE.Rsn (ModeReason) of a mode set by the pilot's radio or by a ground station.
 MODE_REASONS: dict[str, int] = {"RC_COMMAND": 1, "GCS_COMMAND": 2}

@@ -124,6 +124,10 @@ PX4_TOPICS: dict[str, str] = {
                   "uint8_t esc_connectiontype;esc_report[8] esc;",
     "actuator_motors": "uint64_t timestamp;uint64_t timestamp_sample;"
                        "uint16_t reversible_flags;float[12] control;",
+    "sensor_combined": "uint64_t timestamp;float[3] gyro_rad;uint32_t gyro_integral_dt;"
+                       "int32_t accelerometer_timestamp_relative;float[3] accelerometer_m_s2;"
+                       "uint32_t accelerometer_integral_dt;uint8_t accelerometer_clipping;"
+                       "uint8_t gyro_clipping;",
 }
 
 #: Longest median sample period of esc_status rpm that is used in preference to motor
