@@ -31,6 +31,7 @@ from mavsysid.flight.offline.effects import (
     hidden_effect,
     motor_time_constant,
 )
+from mavsysid.flight.offline.imu_sensor import ImuSensor
 from mavsysid.flight.simvehicle.autopilot import SimAutopilot
 from mavsysid.flight.simvehicle.clock import SimClock, is_lockstep_stamp
 from mavsysid.flight.simvehicle.commands import CommandHandler
@@ -79,15 +80,17 @@ class SimEndpoint:
         if s.signing_key is not None:
             self.link.setup_signing(s.signing_key, sign_outgoing=True,
                                     allow_unsigned_callback=self._reject)
+        imu = ImuSensor(config, s.seed, s.sensor_noise)
         try:
             truth = None if s.truth_log is None else TruthLog(
-                s.truth_log, config, self._meta(connect, true_theta), s.seed, s.sensor_noise)
+                s.truth_log, config, self._meta(connect, true_theta, imu), s.seed,
+                s.sensor_noise)
         except BaseException:
             self.link.close()
             raise
         self.vehicle = SimVehicle(config, true_theta, s.start, seed=s.seed,
                                   sensor_noise=s.sensor_noise, truth_log=truth,
-                                  effects=[hidden_effect(e) for e in s.hidden_effects])
+                                  effects=[hidden_effect(e) for e in s.hidden_effects], imu=imu)
         self.params = default_parameters(s.autopilot, config)
         self.autopilot = SimAutopilot(self.vehicle, s.autopilot, self.params, s.ekf_delay,
                                       deny_arm=s.deny_arm)
@@ -326,7 +329,7 @@ class SimEndpoint:
                           rejected=self.rejected(),
                           truth_log=None if log is None else log.recorder.directory)
 
-    def _meta(self, connect: str, true_theta: np.ndarray) -> dict[str, Any]:
+    def _meta(self, connect: str, true_theta: np.ndarray, imu: ImuSensor) -> dict[str, Any]:
         s = self.settings
         effects = [*config_truth_effects(self.config),
                    *(hidden_effect(e) for e in s.hidden_effects)]
@@ -345,6 +348,7 @@ class SimEndpoint:
                 "motor_time_constant_s": motor_time_constant(
                     effects, self.config.motor.time_constant),
                 "effects": [effect_metadata(e) for e in effects if e.hidden],
+                "imu": imu.truth(),
             },
             "model_effects": [effect_metadata(e) for e in effects if not e.hidden],
         }
