@@ -297,7 +297,8 @@ def _imu_rows(own: _Messages, name: str, autopilot: int | None, mavlink: ModuleT
     """The rows of one IMU message that are the primary IMU's and in known units."""
     rows = own.get(name, [])
     if name in ("HIGHRES_IMU", "RAW_IMU"):
-        rows = [r for r in rows if int(getattr(r[2], "id", 0) or 0) == 0]
+        # Their field ``id`` names the IMU (not the message id).
+        rows = [r for r in rows if "id" not in r[2].get_fieldnames() or int(r[2].id or 0) == 0]
     if name == "RAW_IMU" and autopilot != mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
         return []
     return rows

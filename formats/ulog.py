@@ -101,7 +101,8 @@ _CODES = {"int8_t": "b", "uint8_t": "B", "int16_t": "h", "uint16_t": "H", "int32
 Row = Mapping[str, float]
 
 #: vehicle_status.nav_state values of the modes mavsysid flies in (msg/VehicleStatus.msg).
-NAVIGATION_STATES: dict[str, int] = {"POSCTL": 2, "OFFBOARD": 14, "AUTO_LAND": 18}
+NAVIGATION_STATES: dict[str, int] = {"MANUAL": 0, "POSCTL": 2, "AUTO_LOITER": 4, "OFFBOARD": 14,
+                                     "AUTO_TAKEOFF": 17, "AUTO_LAND": 18}
 #: vehicle_status.arming_state of an armed vehicle.
 ARMING_STATE_ARMED = 2
 #: ESC reports in esc_status, motor slots in actuator_motors.

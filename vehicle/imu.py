@@ -8,18 +8,20 @@ rest, F_B/m at the centre of gravity in flight, where F_B is the body force of
 
     f_imu = F_B/m + ω̇ × p + ω × (ω × p),    gyro = ω
 
-with ω̇ from Euler's equation (`mavsysid.vehicle.mav_model.euler_acceleration`). The rotor
-wrench is the model's one (`mavsysid.vehicle.mav_model.rotor_wrench`). Autopilots log the
-same quantities in body FRD (`mavsysid.vehicle.frames.flu_to_frd`): [0, 0, −9.81] level
-at rest.
+with ω̇ from Euler's equation. The rotor wrench and Euler's equation are the model's
+(`mavsysid.vehicle.mav_model.add_rotor_wrench`, `euler_kernel`); `imu_kernel` is the
+compiled reading of one sample (a simulator calls it at every tick), `imu_reading` the
+same for arrays of samples. Autopilots log the same quantities in body FRD
+(`mavsysid.vehicle.frames.flu_to_frd`): [0, 0, −9.81] level at rest.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
+from mavsysid.vehicle.mav_model import add_rotor_wrench, euler_kernel
 
-__all__ = ["imu_reading", "lever_arm_acceleration"]
+__all__ = ["imu_kernel", "imu_reading", "lever_arm_acceleration"]
 
 
 def lever_arm_acceleration(w: np.ndarray, w_dot: np.ndarray, position: np.ndarray) -> np.ndarray:
@@ -41,6 +43,59 @@ def lever_arm_acceleration(w: np.ndarray, w_dot: np.ndarray, position: np.ndarra
     """
     p = np.asarray(position, dtype=float)
     return np.cross(w_dot, p) + np.cross(w, np.cross(w, p))
+
+
+@numba.njit(cache=True)
+def imu_kernel(x, n, theta, mass, r, eps, force_ext, torque_ext, p, out):
+    """The ideal [gyro, specific force] of one sample into ``out`` (6,), body frame.
+
+    Parameters
+    ----------
+    x : ndarray, shape (13,)
+        State [p, v_B, q, ω].
+    n : ndarray, shape (k,)
+        Rotor speeds, rad/s.
+    theta : ndarray, shape (6,)
+        θ, SI.
+    mass : float
+        kg.
+    r : ndarray, shape (k, 3)
+        Rotor positions, m.
+    eps : ndarray, shape (k,)
+        Spin directions ±1.
+    force_ext, torque_ext : ndarray, shape (3,)
+        Extra body force (N) and torque (N·m).
+    p : ndarray, shape (3,)
+        The IMU's offset from the CoG, m.
+    out : ndarray, shape (6,)
+        Receives ω (rad/s) and f at the IMU (m/s²).
+    """
+    force = force_ext.copy()
+    torque = torque_ext.copy()
+    w = x[10:13]
+    add_rotor_wrench(n, theta, r, eps, x[3:6], w, force, torque)
+    w_dot = np.empty(3)
+    euler_kernel(torque, w, theta[3:6], w_dot)
+    # ω × p, then ω × (ω × p) and ω̇ × p.
+    cx = w[1] * p[2] - w[2] * p[1]
+    cy = w[2] * p[0] - w[0] * p[2]
+    cz = w[0] * p[1] - w[1] * p[0]
+    out[0], out[1], out[2] = w[0], w[1], w[2]
+    out[3] = force[0] / mass + (w_dot[1] * p[2] - w_dot[2] * p[1]) + (w[1] * cz - w[2] * cy)
+    out[4] = force[1] / mass + (w_dot[2] * p[0] - w_dot[0] * p[2]) + (w[2] * cx - w[0] * cz)
+    out[5] = force[2] / mass + (w_dot[0] * p[1] - w_dot[1] * p[0]) + (w[0] * cy - w[1] * cx)
+
+
+@numba.njit(cache=True)
+def _imu_batch(X, N, theta, mass, r, eps, F, T, p, out):
+    for j in range(X.shape[0]):
+        imu_kernel(X[j], N[j], theta, mass, r, eps, F[j], T[j], p, out[j])
+
+
+def _rows(a: np.ndarray | None, batch: tuple[int, ...], width: int) -> np.ndarray:
+    """``a`` (zeros if None) broadcast to a contiguous (m, width) float array."""
+    a = np.zeros(width) if a is None else np.asarray(a, dtype=float)
+    return np.ascontiguousarray(np.broadcast_to(a, (*batch, width)).reshape(-1, width))
 
 
 def imu_reading(x: np.ndarray, n: np.ndarray, theta: np.ndarray, mass: float,
@@ -76,14 +131,15 @@ def imu_reading(x: np.ndarray, n: np.ndarray, theta: np.ndarray, mass: float,
         Specific force at the IMU, m/s², body FLU.
     """
     x = np.asarray(x, dtype=float)
-    v, w = x[..., 3:6], x[..., 10:13]
-    force, torque = rotor_wrench(n, theta, rotor_positions, rotor_directions, v, w)
-    if force_ext is not None:
-        force = force + force_ext
-    if torque_ext is not None:
-        torque = torque + torque_ext
-    accel = force / mass
-    if imu_position is not None and np.any(np.asarray(imu_position) != 0.0):
-        w_dot = euler_acceleration(torque, w, np.asarray(theta, dtype=float)[3:6])
-        accel = accel + lever_arm_acceleration(w, w_dot, imu_position)
-    return w.copy(), accel
+    n = np.asarray(n, dtype=float)
+    k = n.shape[-1]
+    batch = np.broadcast_shapes(x.shape[:-1], n.shape[:-1])
+    out = np.empty((int(np.prod(batch, dtype=int)), 6))
+    _imu_batch(_rows(x, batch, 13), _rows(n, batch, k), np.ascontiguousarray(theta, dtype=float),
+               float(mass), np.ascontiguousarray(rotor_positions, dtype=float),
+               np.ascontiguousarray(rotor_directions, dtype=float), _rows(force_ext, batch, 3),
+               _rows(torque_ext, batch, 3),
+               np.zeros(3) if imu_position is None else np.asarray(imu_position, dtype=float),
+               out)
+    out = out.reshape(*batch, 6)
+    return out[..., :3], out[..., 3:]

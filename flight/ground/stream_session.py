@@ -241,7 +241,9 @@ class StreamSession:
         self._made_root = not Path(settings.log_dir).exists()
         self.directory = stream_flight_dir(Path(settings.log_dir), Path(path).stem)
         self.history = SetpointHistory()
-        self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history)
+        # The streamer says whether the vehicle sends its IMU, once the telemetry streams.
+        self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history,
+                                          imu=None)
         self.meta: dict[str, Any] = self._initial_meta(path)
         self._outcome: tuple[str, str | None] | None = None
         # Before any thread starts: they inherit the policy (see realtime's docstring).
@@ -396,6 +398,8 @@ class StreamSession:
         else:
             self.meta["reason"] = reason
         self.meta["tracking"] = self.recorder.tracking_summary()
+        if self.recorder.writes_imu:
+            self.meta.setdefault("imu", {}).update(self.recorder.imu_summary())
         self.meta.setdefault("telemetry_rates_hz", {})["flight"] = {
             k: round(v, 3) for k, v in sorted(self.recorder.rates().items())}
         if self.recorder.skipped:

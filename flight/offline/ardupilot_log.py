@@ -90,13 +90,16 @@ class ArduPilotLogSettings:
 
 
 def _mode_rows(flight: LoggedFlight, stamp: Stamp) -> list[Message]:
-    """MODE at take-off (LOITER), calibration start (GUIDED) and end (LAND)."""
-    p = flight.phases
-    changes = ((p.takeoff, "LOITER", "RC_COMMAND"), (p.calibration_start, "GUIDED", "GCS_COMMAND"),
-               (p.calibration_end, "LAND", "GCS_COMMAND"))
-    return [("MODE", {"TimeUS": stamp(t), "Mode": ARDUCOPTER_MODES[name],
-                      "ModeNum": ARDUCOPTER_MODES[name], "Rsn": MODE_REASONS[reason]})
-            for t, name, reason in changes]
+    """MODE at each change: LOITER for the take-off (the pilot's), GUIDED for the
+    calibration part and LAND (the ground station's), or the flight's own mode changes."""
+    rows: list[Message] = []
+    for t, name in flight.modes(("LOITER", "GUIDED", "LAND")):
+        reason = "RC_COMMAND" if name in ("LOITER", "STABILIZE") else "GCS_COMMAND"
+        number = ARDUCOPTER_MODES.get(name)
+        if number is not None:
+            rows.append(("MODE", {"TimeUS": stamp(t), "Mode": number, "ModeNum": number,
+                                  "Rsn": MODE_REASONS[reason]}))
+    return rows
 
 
 def _ekf_rows(flight: LoggedFlight, rate: float, stamp: Stamp) -> list[Message]:

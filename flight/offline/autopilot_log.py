@@ -28,6 +28,7 @@ from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.flight_log import TRUTH_COLUMNS, command_columns
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.rotation import quat_to_matrix
+from scipy.signal import butter, lfilter, lfilter_zi
 
 __all__ = ["LoggedFlight", "check_motor_order", "lowpass", "microsecond_stamp", "sample_indices"]
 
@@ -50,8 +51,9 @@ class LoggedFlight:
         Actual rotor speeds, rad/s, in the config's rotor order.
     commands : ndarray, shape (S, k)
         Commanded rotor speeds, rad/s, in the config's rotor order.
-    phases : FlightPhases
-        Take-off, calibration part and landing, s on the same clock as ``t``.
+    phases : FlightPhases or None
+        Take-off, calibration part and landing, s on the same clock as ``t``; the modes
+        logged follow from them unless ``mode_changes`` gives the modes themselves.
     gyro : ndarray, shape (S, 3), or None
         The IMU's gyro, rad/s, body FLU, as sampled (noise and bias, no filter).
     accel : ndarray, shape (S, 3), or None
@@ -59,6 +61,9 @@ class LoggedFlight:
     imu_position : tuple of 3 float or None
         The IMU's offset from the centre of gravity, m, body FLU, as the vehicle's
         parameters state it (written as INS_POS1_* / EKF2_IMU_POS_*); None: not stated.
+    mode_changes : tuple of (float, str), or None
+        The modes flown, (s, the autopilot's mode name) at each change; None: the modes
+        of ``phases``.
     """
 
     t: np.ndarray
@@ -67,10 +72,27 @@ class LoggedFlight:
     velocity: np.ndarray
     rotor_speeds: np.ndarray
     commands: np.ndarray
-    phases: FlightPhases
+    phases: FlightPhases | None
     gyro: np.ndarray | None = None
     accel: np.ndarray | None = None
     imu_position: tuple[float, float, float] | None = None
+    mode_changes: tuple[tuple[float, str], ...] | None = None
+
+    def modes(self, names: tuple[str, str, str]) -> list[tuple[float, str]]:
+        """The modes flown, (s, name): ``mode_changes``, else the three of ``phases``.
+
+        Parameters
+        ----------
+        names : (str, str, str)
+            The autopilot's names of the take-off, calibration and landing modes.
+        """
+        if self.mode_changes is not None:
+            return list(self.mode_changes)
+        if self.phases is None:
+            return []
+        p = self.phases
+        return list(zip((p.takeoff, p.calibration_start, p.calibration_end), names,
+                        strict=True))
 
     @property
     def rotor_count(self) -> int:
@@ -193,8 +215,6 @@ def lowpass(t: np.ndarray, values: np.ndarray, cutoff_hz: float) -> np.ndarray:
     -------
     ndarray, shape (S, m)
     """
-    from scipy.signal import butter, lfilter, lfilter_zi
-
     if cutoff_hz <= 0.0 or t.size < 2:
         return np.array(values, dtype=float)
     rate = (t.size - 1) / (t[-1] - t[0])

@@ -2,7 +2,7 @@
 
 Shared by the offline simulator (`mavsysid.flight.offline.simulator`) and the simulated
 MAVLink vehicle (`mavsysid.flight.simvehicle.physics`). The ideal reading is the model's
-(`mavsysid.vehicle.imu.imu_reading`: ω, and F_B/m plus the lever-arm terms at the IMU's
+(`mavsysid.vehicle.imu.imu_kernel`: ω, and F_B/m plus the lever-arm terms at the IMU's
 position); the sensor adds, per axis, a constant bias drawn once per flight (σ
 ``[noise] gyro_bias_sigma``, ``accel_bias_sigma``) and white noise on every sample (σ
 ``gyro_sigma``, ``accel_sigma``). Everything is in body FLU.
@@ -20,11 +20,12 @@ from collections.abc import Sequence
 import numpy as np
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.imu import imu_reading
+from mavsysid.vehicle.imu import imu_kernel
 from mavsysid.vehicle.rotation import quat_to_matrix
 
 __all__ = ["ImuSensor"]
 
+_ZERO = np.zeros(3)
 #: Keys of the IMU's generators beside the seed: not any other sensor's.
 _BIAS_STREAM, _NOISE_STREAM = 0x1B1A5, 0x1A015E
 
@@ -60,6 +61,8 @@ class ImuSensor:
         self.gyro_bias = gyro_bias if enabled else np.zeros(3)
         self.accel_bias = accel_bias if enabled else np.zeros(3)
         self._sigma = np.repeat([noise.gyro_sigma, noise.accel_sigma], 3)
+        self._r = np.ascontiguousarray(config.rotor_positions)
+        self._eps = np.ascontiguousarray(config.rotor_directions)
         self._seed = seed
         self._block = -1
         self._noise = np.zeros((self._BLOCK, 6))
@@ -86,9 +89,12 @@ class ImuSensor:
         if landed:
             up = quat_to_matrix(np.asarray(x[6:10], dtype=float))[2]  # Rᵀ e_z
             return np.zeros(3), GRAVITY * up
-        cfg = self.config
-        return imu_reading(x, n, theta, float(cfg.mass), cfg.rotor_positions,
-                           cfg.rotor_directions, force_ext, torque_ext, self.position)
+        out = np.empty(6)
+        imu_kernel(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(n, dtype=float),
+                   np.ascontiguousarray(theta, dtype=float), float(self.config.mass), self._r,
+                   self._eps, _ZERO if force_ext is None else force_ext,
+                   _ZERO if torque_ext is None else torque_ext, self.position, out)
+        return out[:3], out[3:]
 
     def _row(self, sample: int) -> np.ndarray:
         block, row = divmod(sample, self._BLOCK)

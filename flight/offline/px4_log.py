@@ -78,11 +78,17 @@ class PX4LogSettings:
     boot_time: float = 30.0
 
 
+#: The simulated vehicle's PX4 mode names → vehicle_status nav_state names.
+_NAV_STATE_OF_MODE = {"HOLD": "AUTO_LOITER", "LAND": "AUTO_LAND", "TAKEOFF": "AUTO_TAKEOFF"}
+
+
 def _status_rows(flight: LoggedFlight, stamp: Stamp) -> list[Row]:
     """vehicle_status at 2 Hz and at each mode change, from take-off to landed."""
-    p = flight.phases
-    changes = [(p.takeoff, "POSCTL"), (p.calibration_start, "OFFBOARD"),
-               (p.calibration_end, "AUTO_LAND")]
+    changes = [(t, _NAV_STATE_OF_MODE.get(name, name))
+               for t, name in flight.modes(("POSCTL", "OFFBOARD", "AUTO_LAND"))]
+    changes = [(t, name) for t, name in changes if name in NAVIGATION_STATES]
+    if not changes:
+        return []
     times = np.union1d(np.arange(flight.t[0], flight.t[-1], 0.5), [t for t, _ in changes])
     rows = []
     for t in times:

@@ -2,8 +2,10 @@
 
 One thread does everything, in sim-time ticks of 2 ms paced by `mavsysid.flight.simvehicle.clock`:
 drain the link without blocking and act on what came (commands → COMMAND_ACK,
-setpoints, parameters, stream requests), run the autopilot's timeouts and failsafes,
-send the telemetry that is due, and advance the physics by one tick. Falling behind
+setpoints, parameters, stream requests, log downloads), run the autopilot's timeouts and
+failsafes, send the telemetry that is due, record the tick in the vehicle's own flight
+log (`mavsysid.flight.simvehicle.onboard_log`, served over the log protocol), and advance
+the physics by one tick. Falling behind
 runs ticks back to back until caught up, so sim time stays wall time × speedup. With
 ``lockstep`` the loop also sends lock-step frames and reads the link only while a frame
 waits for the ground station's acknowledgement, into an inbox that the tick after the
@@ -36,6 +38,7 @@ from mavsysid.flight.simvehicle.autopilot import SimAutopilot
 from mavsysid.flight.simvehicle.clock import SimClock, is_lockstep_stamp
 from mavsysid.flight.simvehicle.commands import CommandHandler
 from mavsysid.flight.simvehicle.link import COMPONENT_ID, SYSTEM_ID, mavlink, open_link
+from mavsysid.flight.simvehicle.onboard_log import LogService, OnboardLog
 from mavsysid.flight.simvehicle.params import ParameterProtocol, default_parameters
 from mavsysid.flight.simvehicle.physics import CONTROL_DT_US, SimVehicle, TruthLog
 from mavsysid.flight.simvehicle.services import (
@@ -100,6 +103,9 @@ class SimEndpoint:
         self.param_protocol = ParameterProtocol(self.params,
                                                 bytewise=s.autopilot is Autopilot.PX4)
         self.missions = MissionProtocol(self.autopilot.fence)
+        self.onboard_log = OnboardLog(config, s.autopilot,
+                                      lambda name: self.params.get(name, 0.0))
+        self.log_service = LogService(self.onboard_log, lambda: self.autopilot.armed)
         self.clock = SimClock(CONTROL_DT_US * 1e-6, s.speedup, lockstep=s.lockstep)
         self._inbox: deque[Any] = deque()  # read while held for a lock-step ack
         self.received = self.sent = 0
@@ -119,6 +125,8 @@ class SimEndpoint:
             "TIMESYNC": lambda m: self._send(timesync_reply(m, self.vehicle.time_us * 1000)),
             **dict.fromkeys(MISSION_MESSAGES, self._on_mission),
             "FILE_TRANSFER_PROTOCOL": lambda m: self._send(ftp_refusal(m)),
+            **dict.fromkeys(("LOG_REQUEST_LIST", "LOG_REQUEST_DATA", "LOG_REQUEST_END",
+                             "LOG_ERASE"), self._on_log),
         }
 
     # --- control from other threads -------------------------------------------------------
@@ -190,6 +198,9 @@ class SimEndpoint:
             self._send(M.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
         for msg_id in self.scheduler.due(t_us):
             self._send(self.builder.build(msg_id))
+        for msg in self.log_service.due():
+            self._send(msg)
+        self.onboard_log.record(t, ap.armed, ap.mode, v)
         if self.clock.frame_due(t_us) and not self._silent:
             # Last of the tick: the frame says "everything up to t_us has been sent".
             self._send(M.MAVLink_system_time_message(t_us, t_us // 1000))
@@ -283,6 +294,10 @@ class SimEndpoint:
 
     def _on_param(self, msg) -> None:
         for reply in self.param_protocol.handle(msg):
+            self._send(reply)
+
+    def _on_log(self, msg) -> None:
+        for reply in self.log_service.handle(msg):
             self._send(reply)
 
     def _on_mission(self, msg) -> None:
