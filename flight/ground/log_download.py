@@ -37,8 +37,8 @@ from mavsysid.formats.ulog import ULOG_MAGIC
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["CHUNK", "IDLE_SECONDS", "MAX_REQUESTS", "LogDownload", "download_flight_log",
-           "download_latest_log", "log_file_name"]
+__all__ = ["CHUNK", "IDLE_SECONDS", "IMU_FAST", "MAX_REQUESTS", "LogDownload",
+           "download_flight_log", "download_latest_log", "log_file_name", "log_imu_fast"]
 
 #: Bytes of one LOG_DATA message.
 CHUNK = 90
@@ -291,3 +291,31 @@ def download_flight_log(connect: str, directory: Path, signing_key: bytes | None
         return download_latest_log(link, directory, say)
     finally:
         link.close()
+
+
+#: LOG_BITMASK bit of ArduCopter's IMU_FAST: the IMU message at the loop rate, not 25 Hz.
+IMU_FAST = 1 << 18
+
+
+def log_imu_fast(parameters: Any, say: Callable[[str], None]) -> None:
+    """Make an ArduPilot vehicle log its IMU at the loop rate for this flight.
+
+    With LOG_BITMASK's IMU_FAST bit, ArduCopter writes its IMU message at the loop rate
+    (400 Hz) instead of 25 Hz (``Copter::loop_rate_logging``), at once; the streamer puts
+    LOG_BITMASK back after landing with the other parameters it changed.
+
+    Parameters
+    ----------
+    parameters : ParameterSession
+        The flight's parameter session (it remembers the value to restore).
+    say : callable
+        Receives a warning line when the vehicle has no LOG_BITMASK or refuses it.
+    """
+    value = parameters.read(["LOG_BITMASK"]).get("LOG_BITMASK")
+    if value is None:
+        say("warning: no LOG_BITMASK on the vehicle: its log keeps its own IMU rate")
+        return
+    try:
+        parameters.set("LOG_BITMASK", float(int(value) | IMU_FAST))
+    except JobFailedError as error:
+        say(f"warning: LOG_BITMASK not set for a 400 Hz IMU in the log: {error}")

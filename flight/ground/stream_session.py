@@ -115,6 +115,9 @@ class StreamSettings:
         Connect and run every check, list the box, the fence and the parameters the flight
         would change, and stop there: nothing armed, no parameter written, no fence
         uploaded.
+    download_log : bool
+        After a completed flight that landed, download the vehicle's own log of it
+        (`mavsysid.flight.ground.log_download`) into the flight directory.
     """
 
     connect: str
@@ -143,6 +146,7 @@ class StreamSettings:
     set_limits: bool = False
     lockstep: bool = False
     dry_run: bool = False
+    download_log: bool = False
 
 
 def _embedded_config(plan: TrajectoryFile, source: str) -> VehicleConfig:

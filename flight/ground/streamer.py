@@ -6,7 +6,8 @@
    and for the IMU at the rate the link carries (SET_MESSAGE_INTERVAL,
    `mavsysid.flight.ground.imu_telemetry`), wait for a usable local position, measure the
    rates achieved (the pose log carries the IMU if it came), and check the vehicle
-   (airframe, health, rates): refuse, or warn.
+   (airframe, health, rates): refuse, or warn. With the log download on, ArduPilot logs
+   its IMU at the loop rate for the flight (LOG_BITMASK IMU_FAST, restored after).
 3. ArduPilot: GUIDED, arm, NAV_TAKEOFF to the start altitude. PX4: stream a hold
    setpoint, then OFFBOARD, arm, and climb with setpoints.
 4. Fly to the trajectory's start with a smooth move and settle there; stream the
@@ -41,6 +42,7 @@ from mavsysid.flight.ground.flight_safety import (
     restore_parameters,
 )
 from mavsysid.flight.ground.imu_telemetry import request_imu
+from mavsysid.flight.ground.log_download import log_imu_fast
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
 from mavsysid.flight.ground.preflight import check_vehicle
 from mavsysid.flight.ground.rotor_watch import RotorWatch
@@ -174,6 +176,8 @@ class _Flight:
             self.say(f"warning: {warning}")
         report.raise_if_refused()
         check_session_limits(self.s, self.say)  # before anything is changed
+        if self.settings.download_log and self.link.vehicle.autopilot is Autopilot.ARDUPILOT:
+            log_imu_fast(self.s.parameters, self.say)  # recorded with the fence's changes
         install_safety(self.s, self._pose().position, self.say)
         self.say(before_arming(self.s, self._pose().position))
         self.link.watch_silence = True  # telemetry streams: a second of silence is a loss
