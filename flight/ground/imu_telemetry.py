@@ -4,9 +4,10 @@ An autopilot sends its first IMU as ArduPilot's RAW_IMU (mG and mrad/s,
 ``GCS_MAVLINK::send_raw_imu``) or PX4's HIGHRES_IMU (SI floats); either may also send
 SCALED_IMU (mG, mrad/s). `request_imu` asks for the autopilot's own message with
 SET_MESSAGE_INTERVAL at `imu_rate`, the highest rate the link carries: a network link
-(UDP, TCP) carries the autopilot's loop rate, `MAX_IMU_RATE`; a serial link at B baud
-carries B/10 bytes/s, of which the IMU gets `SERIAL_SHARE`, one message of
-`IMU_MESSAGE_BYTES` at a time. `ImuTelemetry` keeps the latest sample, body FLU (gyro
+(UDP, TCP) carries what the autopilot sends at most, `MAX_IMU_RATE`; a serial link at B
+baud carries B/10 bytes/s, of which the IMU gets `SERIAL_SHARE`, one message of
+`IMU_MESSAGE_BYTES` at a time. A refused rate is asked for again at half of it, down to
+`MIN_IMU_RATE`. `ImuTelemetry` keeps the latest sample, body FLU (gyro
 rad/s, specific force m/s², +9.81 on z level at rest), stamped with the autopilot's clock
 (``time_usec`` or ``time_boot_ms``, s). RAW_IMU is read only from an ArduPilot autopilot
 (its HEARTBEAT says so): elsewhere it carries raw sensor counts.
@@ -24,11 +25,14 @@ from mavsysid.flight.mavlink_setup import parse_connect
 from mavsysid.formats.tlog import STANDARD_GRAVITY
 from mavsysid.vehicle.frames import frd_to_flu
 
-__all__ = ["IMU_MESSAGE_BYTES", "MAX_IMU_RATE", "SERIAL_SHARE", "ImuSample", "ImuTelemetry",
-           "imu_message", "imu_rate", "request_imu"]
+__all__ = ["IMU_MESSAGE_BYTES", "MAX_IMU_RATE", "MIN_IMU_RATE", "SERIAL_SHARE", "ImuSample",
+           "ImuTelemetry", "imu_message", "imu_rate", "request_imu"]
 
-#: Hz: ArduCopter's main loop rate, the fastest it sends a message.
-MAX_IMU_RATE = 400.0
+#: Hz: the fastest ArduCopter sends a message, 0.8 × its 400 Hz loop
+#: (``GCS_MAVLINK::cap_message_interval`` refuses shorter intervals: 400 Hz is DENIED).
+MAX_IMU_RATE = 320.0
+#: Hz: the slowest IMU rate asked for after refusals.
+MIN_IMU_RATE = 10.0
 #: Share of a serial link's bandwidth the IMU may take (the pose, attitude, ESC telemetry
 #: and setpoints need the rest).
 SERIAL_SHARE = 0.3
@@ -110,11 +114,13 @@ def request_imu(set_interval: Callable[[str, float], str | None], autopilot: Aut
     rate : float
         Hz asked for.
     refusal : str or None
-        Why the vehicle refused, or None.
+        Why the vehicle refused the last rate asked for, or None once one was accepted.
     """
     message = imu_message(autopilot)
     rate = imu_rate(connect, message)
-    return message, rate, set_interval(message, rate)
+    while (refusal := set_interval(message, rate)) is not None and rate / 2.0 >= MIN_IMU_RATE:
+        rate /= 2.0
+    return message, rate, refusal
 
 
 class ImuTelemetry:

@@ -50,19 +50,22 @@ def test_rate_is_what_the_link_carries() -> None:
     expected = SERIAL_SHARE * 57600 / 10.0 / IMU_MESSAGE_BYTES["RAW_IMU"]
     assert imu_rate("serial:/dev/ttyUSB0:57600", "RAW_IMU") == pytest.approx(expected)
     assert 30.0 < expected < 50.0  # a 57600 baud radio: a few tens of Hz
-    assert imu_rate("/dev/ttyACM0:921600", "RAW_IMU") == MAX_IMU_RATE  # USB: the loop rate
-    assert imu_rate("/dev/ttyACM0:921600", "HIGHRES_IMU") < MAX_IMU_RATE
+    assert imu_rate("/dev/ttyACM0:921600", "RAW_IMU") == MAX_IMU_RATE  # USB: all it sends
+    assert imu_rate("/dev/ttyACM0:460800", "HIGHRES_IMU") < MAX_IMU_RATE
     asked = []
 
     def set_interval(name: str, rate: float) -> str | None:
+        """Refuses any HIGHRES_IMU, and RAW_IMU faster than 100 Hz."""
         asked.append((name, rate))
-        return None if name == "RAW_IMU" else "MAV_RESULT_DENIED"
+        return None if name == "RAW_IMU" and rate <= 100.0 else "MAV_RESULT_DENIED"
 
     assert request_imu(set_interval, Autopilot.ARDUPILOT, "udp:127.0.0.1:1") == (
-        "RAW_IMU", MAX_IMU_RATE, None)
-    assert request_imu(set_interval, Autopilot.PX4, "udp:127.0.0.1:1")[::2] == (
-        "HIGHRES_IMU", "MAV_RESULT_DENIED")
-    assert asked == [("RAW_IMU", MAX_IMU_RATE), ("HIGHRES_IMU", MAX_IMU_RATE)]
+        "RAW_IMU", MAX_IMU_RATE / 4, None)
+    assert [rate for _, rate in asked] == [MAX_IMU_RATE, MAX_IMU_RATE / 2, MAX_IMU_RATE / 4]
+    asked.clear()
+    assert request_imu(set_interval, Autopilot.PX4, "udp:127.0.0.1:1") == (
+        "HIGHRES_IMU", 10.0, "MAV_RESULT_DENIED")
+    assert [rate for _, rate in asked] == [320.0, 160.0, 80.0, 40.0, 20.0, 10.0]
 
 
 def test_samples_of_each_message_in_flu(wire: _Wire) -> None:
