@@ -9,8 +9,9 @@ prints:
 
 - the RAW_IMU rate asked and achieved, and the IMU in pose.csv (|specific force| and gyro
   on the ground before take-off);
-- the download: size, link seconds, rate, requests, and whether the bytes equal SITL's
-  own file in its ``logs/`` directory;
+- the download: size, link seconds, rate, requests, and which of SITL's own files in its
+  ``logs/`` directory the bytes are (equal to, or the start of: ArduPilot may write on
+  after listing the log);
 - the downloaded log read back (`mavsysid.formats.dataflash.read_dataflash`): its IMU
   message and rate, filter, position, motor outputs and ESC speeds.
 
@@ -73,9 +74,10 @@ def _report(flight: Path, sitl_logs: Path, stream_seconds: float) -> None:
         return
     path = flight / record["file"]
     own = sorted(sitl_logs.glob("*.BIN")) if sitl_logs.is_dir() else []
-    same = [p.name for p in own if p.read_bytes() == path.read_bytes()]
+    data = path.read_bytes()
+    same = [p.name for p in own if p.read_bytes()[:len(data)] == data]
     print(f"SITL's own logs: {[p.name + f' {p.stat().st_size} B' for p in own]}; "
-          f"identical to the download: {same}")
+          f"the download is (the start of): {same}")
     log = read_dataflash(path, load_vehicle("sitl_quad"))
     for series in (log.gyro, log.accel):
         t = series.t
