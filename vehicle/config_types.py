@@ -65,13 +65,13 @@ LINEAR_NOISE_DENSITY = 0.02
 #: Default unmodelled angular acceleration noise density, rad/s²·√s.
 ANGULAR_NOISE_DENSITY = 0.02
 
-# IMU noise defaults, measured on the real PX4 logs of ../shared/real-logs (a Pixhawk
-# AUAV-X2.1, a Pixhawk 4 Pro, a Cube Orange, PX4 SITL): the white noise of a logged
-# sample is the σ of the samples minus their 15 Hz low-pass, 0.0005–0.005 rad/s (gyro)
-# and 0.008–0.036 m/s² (accelerometer) at 205–409 Hz, at rest and in flight; a residual
-# constant bias after the autopilot's calibration shows at rest as a mean gyro of
-# 0.001–0.008 rad/s per axis and a |specific force| 0.07–0.19 m/s² off g. The defaults
-# take the upper end (docs/architecture.md, "Noise defaults", gives the command).
+# IMU noise defaults, typical of the real PX4 logs of ../shared/real-logs (a Pixhawk
+# AUAV-X2.1, a Pixhawk 4 Pro, a Cube Orange, PX4 SITL; bench/imu_noise_real_logs.py): the
+# white noise of a logged sample, the σ of the samples minus their 15 Hz low-pass, is
+# 0.0005–0.005 rad/s (gyro) and 0.007–0.036 m/s² (accelerometer) in four of them, at rest
+# and in flight, up to 0.046 rad/s and 0.086 m/s² in the fifth; a constant bias shows at
+# rest as a mean gyro of 0–0.007 rad/s per axis and a |specific force| up to 0.19 m/s²
+# off g (docs/architecture.md, "Noise defaults").
 #: Gyro white noise σ per logged sample, rad/s.
 GYRO_SIGMA = 0.005
 #: Accelerometer white noise σ per logged sample, m/s².

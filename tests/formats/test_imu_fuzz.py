@@ -28,7 +28,7 @@ from mavsysid.formats.ulog import read_ulog, write_ulog
 from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError, LogFormatError
-from tests.formats.test_imu_readers import _DF, _ULOG
+from tests.formats.test_imu_readers import DATAFLASH_FORMATS, ULOG_FORMATS
 from tests.support.log_fuzz import BYTE_MUTATIONS
 
 _T0 = 30.0
@@ -82,7 +82,7 @@ def _dataflash_rows(rng: np.random.Generator) -> list[tuple[str, dict[str, Any]]
 
     for _ in range(int(rng.integers(1, 40))):
         name, values = imu[int(rng.integers(0, len(imu)))]
-        tid, fmt, columns = _DF[name]
+        tid, fmt, columns = DATAFLASH_FORMATS[name]
         layout = DFFormat(tid, name, 0, fmt, columns)
         numeric = [(c, k) for c, k in zip(layout.columns, fmt, strict=True) if k in _DF_CODES]
         column, kind = numeric[int(rng.integers(0, len(numeric)))]
@@ -91,7 +91,7 @@ def _dataflash_rows(rng: np.random.Generator) -> list[tuple[str, dict[str, Any]]
 
 
 def _write_dataflash(path: Path, rng: np.random.Generator) -> None:
-    write_dataflash(path, _DF, _dataflash_rows(rng))
+    write_dataflash(path, DATAFLASH_FORMATS, _dataflash_rows(rng))
 
 
 # --- ULog ------------------------------------------------------------------------------------
@@ -123,7 +123,7 @@ def _write_ulog(path: Path, rng: np.random.Generator) -> None:
         if name == "sensor_combined" and field.startswith("xyz"):
             field = "gyro_rad[2]"
         row[field] = _extreme(rng, codes.get(field, "f"))
-    write_ulog(path, _ULOG, topics, parameters={"IMU_INTEG_RATE": int(rng.integers(-5, 500)),
+    write_ulog(path, ULOG_FORMATS, topics, parameters={"IMU_INTEG_RATE": int(rng.integers(-5, 500)),
                                                 "IMU_GYRO_CUTOFF": float(rng.choice(_FLOATS))})
 
 

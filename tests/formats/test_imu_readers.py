@@ -45,7 +45,7 @@ def _check(series: Any, tolerance: float, which: int, label: str) -> None:
 
 # --- DataFlash -------------------------------------------------------------------------------
 
-_DF = {
+DATAFLASH_FORMATS = {
     "PARM": (64, "QNff", "TimeUS,Name,Value,Default"),
     "IMU": (65, "QBffffffIIfBBHH", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"),
     "GYR": (66, "QBQfff", "TimeUS,I,SampleUS,GyrX,GyrY,GyrZ"),
@@ -57,11 +57,10 @@ _DF = {
     "RCOU": (72, "QHHHHHHHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8,C9,C10,C11,C12,C13,C14"),
 }
 # ArduCopter 3.5/3.6: IMU of instance 0, IMU2 of instance 1, no I field.
-_DF_OLD = {"IMU": (65, "QffffffIIfBBHH", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,"
-                                         "GHz,AHz"),
-           "IMU2": (73, "QffffffIIfBBHH", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,"
-                                          "GHz,AHz"),
-           "RCOU": _DF["RCOU"]}
+_IMU_3X = "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"
+DATAFLASH_FORMATS_3X = {"IMU": (65, "QffffffIIfBBHH", _IMU_3X),
+                        "IMU2": (73, "QffffffIIfBBHH", _IMU_3X),
+                        "RCOU": DATAFLASH_FORMATS["RCOU"]}
 
 
 def _motor_rows(t: np.ndarray) -> list[tuple[str, dict[str, Any]]]:
@@ -100,7 +99,7 @@ def test_dataflash_imu_of_instance_0_with_its_position_and_filter(tmp_path: Path
     rows = _parm({"INS_POS1_X": 0.05, "INS_POS1_Y": -0.02, "INS_POS1_Z": 0.01,
                   "INS_GYRO_FILTER": 20.0, "INS_ACCEL_FILTER": 10.0})
     rows += _imu_rows(t) + _motor_rows(t[::40])
-    write_dataflash(tmp_path / "a.bin", _DF, rows)
+    write_dataflash(tmp_path / "a.bin", DATAFLASH_FORMATS, rows)
     log = read_dataflash(tmp_path / "a.bin", quad)
     _check(log.gyro, 1e-6, 0, "IMU GyrX")
     _check(log.accel, 1e-5, 1, "IMU AccX")
@@ -114,7 +113,8 @@ def test_dataflash_imu_of_instance_0_with_its_position_and_filter(tmp_path: Path
 
 def test_dataflash_older_imu_messages_by_name(tmp_path: Path, quad: VehicleConfig) -> None:
     t = T0 + np.arange(100) / 50.0
-    write_dataflash(tmp_path / "old.bin", _DF_OLD, _imu_rows(t, old=True) + _motor_rows(t[::5]))
+    write_dataflash(tmp_path / "old.bin", DATAFLASH_FORMATS_3X,
+                    _imu_rows(t, old=True) + _motor_rows(t[::5]))
     log = read_dataflash(tmp_path / "old.bin", quad)
     _check(log.gyro, 1e-6, 0, "IMU GyrX")
     _check(log.accel, 1e-5, 1, "IMU AccX")
@@ -133,7 +133,7 @@ def test_dataflash_raw_gyr_acc_at_their_sample_times_over_imu(tmp_path: Path,
                              **dict(zip(("GyrX", "GyrY", "GyrZ"), wi, strict=True))}))
         rows.append(("ACC", {"TimeUS": written, "I": 0, "SampleUS": round(ti * 1e6),
                              **dict(zip(("AccX", "AccY", "AccZ"), fi, strict=True))}))
-    write_dataflash(tmp_path / "raw.bin", _DF, rows)
+    write_dataflash(tmp_path / "raw.bin", DATAFLASH_FORMATS, rows)
     log = read_dataflash(tmp_path / "raw.bin", quad)
     _check(log.gyro, 1e-6, 0, "GYR")
     _check(log.accel, 1e-5, 1, "ACC")
@@ -165,7 +165,8 @@ def test_dataflash_batch_sampler_scaled_by_its_multiplier(tmp_path: Path,
     rows += _isb_rows(ISB_ACCEL, 0, T0, 1000.0, accel_mul)
     rows += _isb_rows(ISB_GYRO, 1, T0 + 0.2, 1000.0, gyro_mul)
     rows += _isb_rows(ISB_ACCEL, 2, T0 + 0.4, 1000.0, accel_mul)
-    write_dataflash(tmp_path / "isb.bin", _DF, rows + _motor_rows(T0 + np.arange(5) * 0.1))
+    write_dataflash(tmp_path / "isb.bin", DATAFLASH_FORMATS,
+                    rows + _motor_rows(T0 + np.arange(5) * 0.1))
     log = read_dataflash(tmp_path / "isb.bin", quad)
     _check(log.gyro, 0.6 / gyro_mul, 0, "ISBD")
     _check(log.accel, 0.6 / accel_mul, 1, "ISBD")
@@ -181,7 +182,7 @@ def test_dataflash_rate_message_is_the_gyro_without_imu_messages(tmp_path: Path,
     rows = [("RATE", {"TimeUS": round(ti * 1e6), "R": float(np.degrees(wi[0])),
                       "P": float(np.degrees(wi[1])), "Y": float(np.degrees(wi[2]))})
             for ti, wi in zip(t, w, strict=True)]
-    write_dataflash(tmp_path / "rate.bin", _DF, rows + _motor_rows(t[::10]))
+    write_dataflash(tmp_path / "rate.bin", DATAFLASH_FORMATS, rows + _motor_rows(t[::10]))
     log = read_dataflash(tmp_path / "rate.bin", quad)
     _check(log.gyro, 1e-6, 0, "RATE")
     assert log.accel is None
@@ -199,7 +200,7 @@ def test_dataflash_keeps_motor_outputs_and_sparse_esc_rpm_both(tmp_path: Path,
             rows.append(("ESC", {"TimeUS": round(ti * 1e6) + i, "Instance": i,
                                  "RPM": 6000.0 + 100 * i}))
     rows.sort(key=lambda row: row[1]["TimeUS"])
-    write_dataflash(tmp_path / "esc.bin", _DF, rows)
+    write_dataflash(tmp_path / "esc.bin", DATAFLASH_FORMATS, rows)
     log = read_dataflash(tmp_path / "esc.bin", quad)
     assert len(log.esc_speeds) == 4 and log.esc_speeds[1].t.size == 8
     assert log.esc_speeds[1].values[0, 0] == pytest.approx(6100.0 * 2 * np.pi / 60.0)
@@ -209,7 +210,7 @@ def test_dataflash_keeps_motor_outputs_and_sparse_esc_rpm_both(tmp_path: Path,
 
 # --- ULog ------------------------------------------------------------------------------------
 
-_ULOG = {
+ULOG_FORMATS = {
     "sensor_combined": "uint64_t timestamp;float[3] gyro_rad;uint32_t gyro_integral_dt;"
                        "int32_t accelerometer_timestamp_relative;float[3] accelerometer_m_s2;"
                        "uint32_t accelerometer_integral_dt;",
@@ -248,7 +249,7 @@ def test_ulog_sensor_combined_with_the_accelerometer_at_its_own_time(
         tmp_path: Path, quad: VehicleConfig) -> None:
     t = T0 + np.arange(250) / 250.0
     topics = {"sensor_combined": _combined_rows(t, -1500), **_ulog_motor_topics(t[::25])}
-    write_ulog(tmp_path / "c.ulg", _ULOG, topics, parameters={
+    write_ulog(tmp_path / "c.ulg", ULOG_FORMATS, topics, parameters={
         "EKF2_IMU_POS_X": 0.03, "EKF2_IMU_POS_Y": 0.0, "EKF2_IMU_POS_Z": -0.02,
         "IMU_INTEG_RATE": 250, "IMU_GYRO_CUTOFF": 40.0, "IMU_ACCEL_CUTOFF": 30.0})
     log = read_ulog(tmp_path / "c.ulg", quad)
@@ -276,7 +277,7 @@ def test_ulog_faster_filtered_gyro_is_read_with_its_cutoff(tmp_path: Path,
                      **_vector_row("xyz", fi)} for ti, fi in zip(slow, f, strict=True)]
     topics = {"sensor_combined": _combined_rows(slow, 0), "vehicle_angular_velocity": velocity,
               "vehicle_acceleration": acceleration, **_ulog_motor_topics(slow[::10])}
-    write_ulog(tmp_path / "f.ulg", _ULOG, topics, parameters={
+    write_ulog(tmp_path / "f.ulg", ULOG_FORMATS, topics, parameters={
         "IMU_INTEG_RATE": 100, "IMU_GYRO_CUTOFF": 40.0, "IMU_ACCEL_CUTOFF": 30.0})
     log = read_ulog(tmp_path / "f.ulg", quad)
     _check(log.gyro, 1e-6, 0, "vehicle_angular_velocity")
