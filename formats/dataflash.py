@@ -56,6 +56,33 @@ the autopilot's motor i + 1.
   output channels.
 
 Modes: ``MODE`` at each change (``Mode``, ``ModeNum``, ``Rsn`` the reason).
+
+IMU, of instance 0 (the first IMU), body FRD, gyro in rad/s, accelerometer the specific
+force in m/s² (AccZ ≈ −9.81 level at rest), the first present of:
+
+1. ``GYR`` / ``ACC`` ``"QBQfff" TimeUS,I,SampleUS,GyrX..`` (raw IMU logging, LOG_BITMASK
+   IMU_RAW, at the sensor rate; older logs: ``GYR1``/``ACC1``, one name per instance), at
+   ``SampleUS``, the sensor's own time. INS_RAW_LOG_OPT bit 2 alone logs them after the
+   low-pass filter; otherwise they are taken before it (with bit 3 the filtered copies are
+   instances ``I + count``, never read).
+2. ``IMU`` ``"QBffffffIIfBBHH" TimeUS,I,GyrX,..,AccZ,EG,EA,T,GH,AH,GHz,AHz`` (3.x: no ``I``;
+   ``IMU2``, ``IMU3`` the other instances), the low-passed samples the attitude controller
+   uses, at 25 Hz (LOG_BITMASK IMU, Copter's 25 Hz loop) or the loop rate (IMU_FAST,
+   ``Copter::loop_rate_logging``).
+3. The batch sampler (INS_LOG_BAT_MASK): ``ISBH`` ``"QHBBHHQf"
+   TimeUS,N,type,instance,mul,smp_cnt,SampleUS,smp_rate`` heads batch ``N`` of
+   ``smp_cnt`` samples of one sensor (``type`` `ISB_ACCEL` or `ISB_GYRO`) sampled at
+   ``smp_rate`` Hz from ``SampleUS``; its ``ISBD`` ``"QHHaaa" TimeUS,N,seqno,x,y,z``
+   messages each carry 32 int16 samples per axis, sample j of ``seqno`` being sample
+   32 seqno + j, in m/s² or rad/s × ``mul`` (``AP_InertialSensor::BatchSampler``). The
+   batches of one sensor come in bursts, with gaps while the others are sampled. Raw
+   samples unless INS_LOG_BAT_OPT bit 1 (post-filter).
+4. Gyro only: ``RATE`` ``R, P, Y`` (deg/s), the AHRS body rates (filtered gyro less the
+   EKF's bias estimate).
+
+Its position is ``PARM`` INS_POS1_X/Y/Z (m, body FRD, from the centre of gravity), its
+filter INS_GYRO_FILTER / INS_ACCEL_FILTER (Hz; `mavsysid.formats.parsed_log.ImuFilter`,
+0 for raw samples).
 """
 
 from __future__ import annotations
@@ -73,7 +100,9 @@ import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import pwm_curve_caveat, rotor_speed_from_pwm
 from mavsysid.formats.parsed_log import (
+    ImuFilter,
     ModeChanges,
+    MotorOutputs,
     ParsedLog,
     PoseSource,
     Series,
@@ -85,8 +114,9 @@ from mavsysid.vehicle.frames import euler_ned_to_quaternion
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["ARDUPILOT_MESSAGES", "FMT_TYPE", "HEADER", "MODE_REASONS", "RCOU_OUTPUTS",
-           "DataFlashFormat", "read_dataflash", "read_dataflash_modes", "write_dataflash"]
+__all__ = ["ARDUPILOT_MESSAGES", "FMT_TYPE", "HEADER", "ISB_ACCEL", "ISB_GYRO", "MODE_REASONS",
+           "RCOU_OUTPUTS", "DataFlashFormat", "read_dataflash", "read_dataflash_modes",
+           "write_dataflash"]
 
 #: The two bytes that start every message.
 HEADER = bytes([0xA3, 0x95])
@@ -110,11 +140,21 @@ ARDUPILOT_MESSAGES: dict[str, DataFlashFormat] = {
     "XKQ": (188, "QBffff", "TimeUS,C,Q1,Q2,Q3,Q4"),
     "ESC": (153, "QBffffcfcf", "TimeUS,Instance,RPM,RawRPM,Volt,Curr,Temp,CTot,MotTemp,Err"),
     "RCOU": (34, "QHHHHHHHHHHHHHH", "TimeUS," + ",".join(f"C{i}" for i in range(1, 15))),
+    "IMU": (57, "QBffffffIIfBBHH", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,"
+                                   "AHz"),
 }
 #: MODE.Rsn (ModeReason) of a mode set by the pilot's radio or by a ground station.
 MODE_REASONS: dict[str, int] = {"RC_COMMAND": 1, "GCS_COMMAND": 2}
 #: Output channels RCOU logs (C1..C14).
 RCOU_OUTPUTS = 14
+
+#: ISBH ``type`` of an accelerometer and of a gyro batch (AP_InertialSensor's
+#: IMU_SENSOR_TYPE).
+ISB_ACCEL, ISB_GYRO = 0, 1
+#: Samples per axis in one ISBD message (int16[32] x, y, z).
+_ISB_SAMPLES = 32
+_GYRO_FIELDS = ["GyrX", "GyrY", "GyrZ"]
+_ACCEL_FIELDS = ["AccX", "AccY", "AccZ"]
 
 #: Per-ESC messages of ArduCopter 3.3–3.6, ESCn = ESC instance n − 1.
 _ESC_TYPES = tuple(f"ESC{i}" for i in range(1, 9))
@@ -263,7 +303,8 @@ _POSE_TYPES = ("VISP", "POS", "ATT", *(name for ekf in (_EKF3, _EKF2, _EKF1) for
     ekf.position, *ekf.position_cores, ekf.attitude, *ekf.attitude_cores, *ekf.status) if name))
 _POSE_HINT = ("no VISP, nor XKF1 with XKQ, NKF1 with NKQ, XKF1, NKF1 or EKF1 with ATT, or POS "
               "with ATT")
-_TYPES = [*_POSE_TYPES, *_MOTOR_TYPES]
+_IMU_TYPES = ("IMU", "GYR", "ACC", "GYR1", "ACC1", "ISBH", "ISBD", "RATE", "PARM")
+_TYPES = [*_POSE_TYPES, *_MOTOR_TYPES, *_IMU_TYPES]
 
 # pose (m = 7) or position and attitude, and where the pose comes from.
 _Pose = tuple[Series | None, Series | None, Series | None, PoseSource]
@@ -411,6 +452,158 @@ def _rcou_channels(rows: list[Any]) -> tuple[np.ndarray, np.ndarray]:
     return _message_times(rows), _field_array(rows, names)
 
 
+# --- IMU ---------------------------------------------------------------------------------
+
+
+def _parameters(found: _Messages) -> dict[str, float]:
+    """The log's ``PARM`` values by name (the last one logged of each)."""
+    return {str(m.Name): float(m.Value) for m in found.get("PARM", [])}
+
+
+def _primary_rows(found: _Messages, name: str, old: str) -> list[Any]:
+    """Rows of instance 0: ``I == 0`` of ``name`` (4.x), else all of ``name`` or ``old``
+    (per-instance message names of older logs, whose first instance has no suffix or 1)."""
+    rows = found.get(name, [])
+    if _has_fields(rows, ["I"]):
+        return [m for m in rows if int(m.I) == 0]
+    return rows or found.get(old, [])
+
+
+def _sample_times(rows: list[Any]) -> np.ndarray:
+    """GYR/ACC sample times, s: ``SampleUS`` (when the sensor sampled) where set."""
+    if _has_fields(rows, ["SampleUS"]):
+        sample = _field_array(rows, ["SampleUS"])[:, 0]
+        return np.where(sample > 0.0, sample, _field_array(rows, ["TimeUS"])[:, 0]) * 1e-6
+    return _message_times(rows)
+
+
+def _raw_option(parameters: Mapping[str, float], name: str, bit: int) -> bool:
+    """Whether option ``bit`` of bitmask parameter ``name`` is set (absent: not set)."""
+    value = parameters.get(name)
+    return value is not None and math.isfinite(value) and (int(value) >> bit) & 1 == 1
+
+
+def _fast_imu(found: _Messages, parameters: Mapping[str, float]
+              ) -> tuple[Series | None, Series | None, bool]:
+    """GYR and ACC instance 0 (raw IMU logging), and whether they are post-filter."""
+    # INS_RAW_LOG_OPT bit 2: post-filter only; bit 3: pre- and post-filter, the post-filter
+    # samples as instance + sensor count, so instance 0 stays the raw one.
+    post = (_raw_option(parameters, "INS_RAW_LOG_OPT", 2)
+            and not _raw_option(parameters, "INS_RAW_LOG_OPT", 3))
+    out = []
+    for name, old, fields in (("GYR", "GYR1", _GYRO_FIELDS), ("ACC", "ACC1", _ACCEL_FIELDS)):
+        rows = _primary_rows(found, name, old)
+        out.append(Series(_sample_times(rows), _field_array(rows, fields),
+                          f"{rows[0].get_type()} {fields[0]}..Z (instance 0)")
+                   if _has_fields(rows, fields) else None)
+    return out[0], out[1], post
+
+
+def _imu_message(found: _Messages) -> tuple[Series | None, Series | None]:
+    """IMU instance 0 (``I == 0``; older logs: ``IMU``, the others ``IMU2``, ``IMU3``)."""
+    rows = _primary_rows(found, "IMU", "IMU")
+    if not _has_fields(rows, [*_GYRO_FIELDS, *_ACCEL_FIELDS]):
+        return None, None
+    t = _message_times(rows)
+    return (Series(t, _field_array(rows, _GYRO_FIELDS), "IMU GyrX..Z (instance 0)"),
+            Series(t, _field_array(rows, _ACCEL_FIELDS), "IMU AccX..Z (instance 0)"))
+
+
+def _batches(found: _Messages) -> dict[int, Series]:
+    """The batch sampler's samples of instance 0 by sensor type (`ISB_ACCEL`, `ISB_GYRO`).
+
+    Each ``ISBH`` header starts a batch of ``smp_cnt`` samples of one sensor taken at
+    ``smp_rate`` from ``SampleUS``; its ``ISBD`` messages (same ``N``) carry 32 samples
+    each per axis as int16, sample j of message ``seqno`` being sample 32 seqno + j, in
+    the sensor's unit × ``mul`` (m/s² or rad/s, body FRD). Batches of one sensor follow
+    each other with gaps while the sampler logs the others.
+    """
+    headers = {int(m.N): m for m in found.get("ISBH", [])
+               if int(m.instance) == 0 and float(m.smp_rate) > 0.0 and int(m.mul) > 0}
+    data: dict[int, list[Any]] = defaultdict(list)
+    for m in found.get("ISBD", []):
+        if int(m.N) in headers:
+            data[int(m.N)].append(m)
+    times: dict[int, list[np.ndarray]] = defaultdict(list)
+    values: dict[int, list[np.ndarray]] = defaultdict(list)
+    for number, rows in sorted(data.items()):
+        head = headers[number]
+        for m in rows:
+            block = np.column_stack([np.asarray(m.x, dtype=float), np.asarray(m.y, dtype=float),
+                                     np.asarray(m.z, dtype=float)]) / float(head.mul)
+            index = _ISB_SAMPLES * int(m.seqno) + np.arange(block.shape[0])
+            keep = index < int(head.smp_cnt)
+            times[int(head.type)].append(float(head.SampleUS) * 1e-6
+                                         + index[keep] / float(head.smp_rate))
+            values[int(head.type)].append(block[keep])
+    return {kind: Series(np.concatenate(times[kind]), np.concatenate(values[kind]),
+                         f"ISBD batch samples ({'gyro' if kind == ISB_GYRO else 'accel'}, "
+                         "instance 0)") for kind in times}
+
+
+def _rate_message(found: _Messages) -> Series | None:
+    """RATE R, P, Y: the AHRS body rates (bias-corrected filtered gyro), deg/s → rad/s."""
+    rows = found.get("RATE", [])
+    if not _has_fields(rows, ["R", "P", "Y"]):
+        return None
+    return Series(_message_times(rows), np.radians(_field_array(rows, ["R", "P", "Y"])),
+                  "RATE R, P, Y (AHRS body rates)")
+
+
+def _imu_filter(parameters: Mapping[str, float], gyro_raw: bool, accel_raw: bool
+                ) -> ImuFilter | None:
+    """INS_GYRO_FILTER / INS_ACCEL_FILTER as they apply to the chosen samples."""
+    stated = [name for name in ("INS_GYRO_FILTER", "INS_ACCEL_FILTER") if name in parameters]
+    if not stated and not (gyro_raw or accel_raw):
+        return None
+    gyro = 0.0 if gyro_raw else parameters.get("INS_GYRO_FILTER")
+    accel = 0.0 if accel_raw else parameters.get("INS_ACCEL_FILTER")
+    source = ", ".join(f"PARM {name}" for name in stated) or "raw samples"
+    return ImuFilter(gyro, accel, source)
+
+
+def _imu_position(parameters: Mapping[str, float]) -> tuple[float, float, float] | None:
+    """INS_POS1_X/Y/Z (m, body FRD), when all three are logged."""
+    names = ("INS_POS1_X", "INS_POS1_Y", "INS_POS1_Z")
+    if not all(name in parameters for name in names):
+        return None
+    x, y, z = (parameters[name] for name in names)
+    return (x, y, z)
+
+
+def _imu(found: _Messages) -> tuple[Series | None, Series | None, ImuFilter | None,
+                                    tuple[float, float, float] | None]:
+    """Gyro and accelerometer of the primary IMU, their filter and the IMU's position.
+
+    Of each sensor the first present of: GYR/ACC (raw logging at the sensor rate), IMU
+    (the filtered samples the attitude controller uses, at 25 Hz or the loop rate), the
+    batch sampler (bursts at the sensor rate, with gaps), RATE (gyro only: the AHRS body
+    rates).
+    """
+    parameters = _parameters(found)
+    fast_gyro, fast_accel, post = _fast_imu(found, parameters)
+    imu_gyro, imu_accel = _imu_message(found)
+    batches = _batches(found)
+    batch_raw = not _raw_option(parameters, "INS_LOG_BAT_OPT", 1)  # bit 1: post-filter
+    kinds = []
+    for fast, imu, batch in ((fast_gyro, imu_gyro, batches.get(ISB_GYRO)),
+                             (fast_accel, imu_accel, batches.get(ISB_ACCEL))):
+        if fast is not None:
+            kinds.append((fast, not post))
+        elif imu is not None:
+            kinds.append((imu, False))
+        elif batch is not None:
+            kinds.append((batch, batch_raw))
+        else:
+            kinds.append((None, False))
+    (gyro, gyro_raw), (accel, accel_raw) = kinds
+    if gyro is None:
+        gyro = _rate_message(found)
+    if gyro is None and accel is None:
+        return None, None, None, _imu_position(parameters)
+    return gyro, accel, _imu_filter(parameters, gyro_raw, accel_raw), _imu_position(parameters)
+
+
 # --- reading -----------------------------------------------------------------------------
 
 
@@ -428,17 +621,17 @@ def _collect(path: Path) -> _Messages:
     return found
 
 
-def _rcou_rotors(rows: list[Any], vehicle: VehicleConfig) -> Series | None:
-    """RCOU channels 1..k PWM through the motor curve; None if no channel ever outputs."""
+def _rcou_outputs(rows: list[Any]) -> MotorOutputs | None:
+    """RCOU PWM (µs) of the channels 1..k that drive motors; None if none ever outputs."""
     t, pwm = _rcou_channels(rows)
     count = motor_output_count(pwm)
     if count == 0:
         return None
-    return Series(t, rotor_speed_from_pwm(pwm[:, :count], vehicle), "RCOU PWM")
+    return MotorOutputs(Series(t, pwm[:, :count], "RCOU PWM"), "pwm")
 
 
 def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
-    """Read the pose and rotor speeds of an ArduPilot DataFlash log.
+    """Read the pose, rotor speeds, motor outputs and IMU of an ArduPilot DataFlash log.
 
     Parameters
     ----------
@@ -450,8 +643,8 @@ def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     Returns
     -------
     ParsedLog
-        NED/FRD, rad/s, ArduPilot's motor numbering, on the autopilot's clock (s since
-        boot).
+        NED/FRD, rad/s, m/s², ArduPilot's motor numbering, on the autopilot's clock (s
+        since boot).
 
     Raises
     ------
@@ -461,13 +654,15 @@ def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     found = _collect(path)
     with parsing(path, "an ArduPilot DataFlash log with the usual message fields"):
         pose, position, attitude, pose_source = _pose(found)
-        rcou = _rcou_rotors(found["RCOU"], vehicle) if found.get("RCOU") else None
+        outputs = _rcou_outputs(found["RCOU"]) if found.get("RCOU") else None
         escs = _esc_rotors(path, found)
+        gyro, accel, imu_filter, imu_position = _imu(found)
         notes = []
         if escs is not None:
             rotors = escs
-        elif rcou is not None:
-            rotors = (rcou,)
+        elif outputs is not None:
+            rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
+                                                                    vehicle), "RCOU PWM"),)
             notes.append(f"{path}: no ESC rpm; rotor speeds are RCOU motor outputs "
                          f"{pwm_curve_caveat(vehicle)}")
         else:
@@ -475,7 +670,9 @@ def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
                                  "RPM, no RCOU)")
     return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,
                      pose_source=pose_source, pose_hint=_POSE_HINT, rotors=rotors,
-                     rotor_notes=tuple(notes))
+                     rotor_notes=tuple(notes), gyro=gyro, accel=accel,
+                     imu_position=imu_position, imu_filter=imu_filter, motor_outputs=outputs,
+                     esc_speeds=escs or ())
 
 
 def read_dataflash_modes(path: Path) -> ModeChanges | None:

@@ -1,5 +1,9 @@
 """Recording a flight: ``pose.csv``, ``truth.csv`` (simulated flights) and ``meta.json``.
 
+With an IMU, ``pose.csv`` holds what it measured and ``truth.csv`` the true (noise- and
+bias-free) gyro and specific force at the IMU, both in the pose log's IMU columns (body
+FLU).
+
 Every row reaches the OS as soon as it is recorded, and ``meta.json`` is written at the
 start (status ``recording``) and rewritten at the end (``complete`` or ``aborted``), so an
 interrupted flight keeps everything recorded up to the interruption.
@@ -63,12 +67,16 @@ class FlightRecorder:
         The vehicle; its full TOML is stored in the metadata.
     rotor_count : int
         k, the number of rotor-speed columns.
+    imu : bool
+        Record an IMU: every `record` then takes ``imu`` (and, simulated, ``true_imu``).
     """
 
-    def __init__(self, directory: Path, config: VehicleConfig, rotor_count: int) -> None:
+    def __init__(self, directory: Path, config: VehicleConfig, rotor_count: int,
+                 imu: bool = False) -> None:
         self.directory = Path(directory)
         self.config = config
         self.rotor_count = rotor_count
+        self.imu = imu
         self._meta: dict[str, Any] = {}
         self._pose: PoseLogWriter | None = None
         self._truth: PoseLogWriter | None = None
@@ -102,24 +110,29 @@ class FlightRecorder:
                 "position_sigma_m": self.config.noise.position_sigma,
                 "attitude_sigma_rad": self.config.noise.attitude_sigma,
                 "rotor_speed_sigma_rad_s": self.config.noise.rotor_speed_sigma,
+                **({"gyro_sigma_rad_s": self.config.noise.gyro_sigma,
+                    "accel_sigma_m_s2": self.config.noise.accel_sigma} if self.imu else {}),
             },
             "files": {"pose": "pose.csv"},
             **meta,
             "status": "recording",
             "samples": 0,
         }
-        self._pose = PoseLogWriter(self.pose_path, self.rotor_count, REFERENCE_COLUMNS)
+        self._pose = PoseLogWriter(self.pose_path, self.rotor_count, REFERENCE_COLUMNS,
+                                   imu=self.imu)
         if meta.get("simulated"):
             self._meta["files"]["truth"] = "truth.csv"
             self._truth = PoseLogWriter(
-                self.directory / "truth.csv", self.rotor_count, TRUTH_COLUMNS + self._cmd_columns
-            )
+                self.directory / "truth.csv", self.rotor_count, TRUTH_COLUMNS + self._cmd_columns,
+                imu=self.imu)
         write_meta(self.directory / "meta.json", self._meta)
 
     def record(
         self, t: float, position: np.ndarray, quaternion: np.ndarray, rotor_speeds: np.ndarray,
         reference: np.ndarray, true_state: np.ndarray | None = None,
         true_rotor_speeds: np.ndarray | None = None, commands: np.ndarray | None = None,
+        imu: tuple[np.ndarray, np.ndarray] | None = None,
+        true_imu: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """Record one sample: measured pose and rotor speeds, reference, and the truth.
 
@@ -144,15 +157,21 @@ class FlightRecorder:
             True (lagged) rotor speeds, rad/s.
         commands : ndarray, shape (k,), optional
             Commanded rotor speeds, rad/s.
+        imu : (ndarray, ndarray), optional
+            With ``imu``: the measured gyro (rad/s) and specific force (m/s²), body FLU.
+        true_imu : (ndarray, ndarray), optional
+            With ``imu`` and a truth: the true gyro and specific force at the IMU.
         """
         assert self._pose is not None, "start() first"
         ref = dict(zip(REFERENCE_COLUMNS, (*reference[0:3], reference[9]), strict=True))
-        self._pose.write(t, position, quaternion, rotor_speeds, ref)
+        gyro, accel = imu if imu is not None else (None, None)
+        self._pose.write(t, position, quaternion, rotor_speeds, ref, gyro=gyro, accel=accel)
         if self._truth is not None and true_state is not None:
             extra = dict(zip(TRUTH_COLUMNS, (*true_state[VEL], *true_state[RATE]), strict=True))
             extra.update(zip(self._cmd_columns, commands, strict=True))
+            gyro, accel = true_imu if true_imu is not None else (None, None)
             self._truth.write(t, true_state[POS], true_state[ATT] / np.linalg.norm(
-                true_state[ATT]), true_rotor_speeds, extra)
+                true_state[ATT]), true_rotor_speeds, extra, gyro=gyro, accel=accel)
 
     def finish(self, status: str, summary: dict[str, Any] | None = None) -> None:
         """Close the logs and rewrite the metadata with the final status.

@@ -3,7 +3,10 @@
 A pose log (docs/architecture.md, "Pose log") is CSV text: a header row, then one row per sample
 with ``t`` (s, strictly increasing), ``x, y, z`` (m, world ENU), ``qw, qx, qy, qz``
 (Hamilton quaternion [w, x, y, z], body → world), ``n1 … nk`` (rad/s, actual rotor
-speeds in the vehicle config's rotor order) and optionally more columns, which readers
+speeds in the vehicle config's rotor order), optionally the IMU on the same rows
+(``gyro_x, gyro_y, gyro_z``: body rates, rad/s, body FLU; ``acc_x, acc_y, acc_z``:
+specific force as an accelerometer reads it, m/s², body FLU, [0, 0, +9.81] level at
+rest), each sensor's three columns together, and optionally more columns, which readers
 keep as extras. Readers find columns by header name, so their order is free.
 
 - `read_pose_log` reads and fully checks one; `PoseLogWriter` writes one row by row, every
@@ -34,13 +37,19 @@ from mavsysid.formats.parsed_log import Series
 from mavsysid.errors import InputError, LogFormatError
 
 __all__ = [
-    "POSE_COLUMNS", "QUATERNION_TOLERANCE", "ROTOR_COLUMN", "PoseLog", "PoseLogWriter",
+    "ACCEL_COLUMNS", "GYRO_COLUMNS", "IMU_COLUMNS", "POSE_COLUMNS", "QUATERNION_TOLERANCE",
+    "ROTOR_COLUMN", "PoseLog", "PoseLogWriter",
     "TruncatedLogWarning", "check_positive_count", "parse_plain_rows", "read_external_pose",
     "read_pose_log", "read_text_file", "rotor_columns", "write_pose_log",
 ]
 
 #: Required leading columns of a pose log, in the order the writer emits them.
 POSE_COLUMNS: tuple[str, ...] = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
+
+#: Optional IMU columns: body rates (rad/s) and specific force (m/s²), body FLU.
+GYRO_COLUMNS: tuple[str, ...] = ("gyro_x", "gyro_y", "gyro_z")
+ACCEL_COLUMNS: tuple[str, ...] = ("acc_x", "acc_y", "acc_z")
+IMU_COLUMNS: tuple[str, ...] = GYRO_COLUMNS + ACCEL_COLUMNS
 
 #: Beyond this a quaternion is not a rotation that lost digits but a wrong column or unit.
 QUATERNION_TOLERANCE = 1e-3
@@ -120,6 +129,11 @@ class PoseLog:
         Further columns of the file (setpoints, velocities, …), in file order.
     path : Path or None
         The file the log was read from.
+    gyro : ndarray, shape (N, 3), or None
+        Body rates, rad/s, body FLU (columns ``gyro_x, gyro_y, gyro_z``); None without.
+    accel : ndarray, shape (N, 3), or None
+        Specific force, m/s², body FLU, as an accelerometer reads it: [0, 0, +9.81] level
+        at rest (columns ``acc_x, acc_y, acc_z``); None without.
     """
 
     t: np.ndarray
@@ -128,6 +142,8 @@ class PoseLog:
     rotor_speeds: np.ndarray
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     path: Path | None = None
+    gyro: np.ndarray | None = None
+    accel: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         t = _frozen(self.t, (None,), "t", "(N,)")
@@ -143,6 +159,10 @@ class PoseLog:
             "extra": {str(c): _frozen(v, (n,), f"extra[{c!r}]", f"(N,), N = {n}")
                       for c, v in self.extra.items()},
             "path": None if self.path is None else Path(self.path),
+            "gyro": None if self.gyro is None else _frozen(self.gyro, (n, 3), "gyro",
+                                                           f"(N, 3), N = {n}"),
+            "accel": None if self.accel is None else _frozen(self.accel, (n, 3), "accel",
+                                                             f"(N, 3), N = {n}"),
         }
         for name, value in values.items():
             object.__setattr__(self, name, value)
@@ -173,7 +193,8 @@ class PoseLog:
         i, j = np.searchsorted(self.t, t0, "left"), np.searchsorted(self.t, t1, "right")
         return PoseLog(self.t[i:j], self.position[i:j], self.quaternion[i:j],
                        self.rotor_speeds[i:j], {c: v[i:j] for c, v in self.extra.items()},
-                       self.path)
+                       self.path, None if self.gyro is None else self.gyro[i:j],
+                       None if self.accel is None else self.accel[i:j])
 
 
 def read_text_file(path: Path, encoding: str = "utf-8") -> str:
@@ -256,12 +277,14 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
     Returns
     -------
     PoseLog
-        Quaternions renormalised (norm errors up to 1e-3 are accepted).
+        Quaternions renormalised (norm errors up to 1e-3 are accepted); the IMU columns,
+        where present, as ``gyro`` and ``accel``.
 
     Raises
     ------
     LogFormatError
-        One line naming the file, and the line number and column where they apply.
+        One line naming the file, and the line number and column where they apply (an
+        IMU sensor with only some of its three columns too).
 
     Warns
     -----
@@ -288,7 +311,8 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
     if data is None:
         data = _parse_body(path, body, names)
     q = _checked_quaternions(path, data, body, names, cols)
-    known = set(cols.values())
+    imu = _imu_columns(path, names)
+    known = set(cols.values()) | {j for group in imu.values() for j in group}
     return PoseLog(
         t=data[:, cols["t"]],
         position=data[:, [cols[c] for c in POSE_COLUMNS[1:4]]],
@@ -296,7 +320,23 @@ def read_pose_log(path: str | Path, rotor_count: int | None = None) -> PoseLog:
         rotor_speeds=data[:, [cols[c] for c in cols if c not in POSE_COLUMNS]],
         extra={names[j]: data[:, j] for j in range(ncol) if j not in known},
         path=path,
+        gyro=data[:, imu["gyro"]] if "gyro" in imu else None,
+        accel=data[:, imu["accel"]] if "accel" in imu else None,
     )
+
+
+def _imu_columns(path: Path, names: list[str]) -> dict[str, list[int]]:
+    """Header indices of each IMU sensor present ("gyro", "accel"): all three or none."""
+    found = {}
+    for sensor, columns in (("gyro", GYRO_COLUMNS), ("accel", ACCEL_COLUMNS)):
+        present = [c for c in columns if c in names]
+        if present and len(present) < 3:
+            missing = ", ".join(c for c in columns if c not in names)
+            raise LogFormatError(f"{path}: IMU column(s) {', '.join(present)} without "
+                                 f"{missing}; a sensor's three columns go together")
+        if present:
+            found[sensor] = [names.index(c) for c in columns]
+    return found
 
 
 def _check_rows(path: Path, body: list[str], ncol: int, newline_at_end: bool) -> None:
@@ -462,6 +502,8 @@ def _parse_fields(path: Path, lines: list[str], ncol: int, index: list[int]) -> 
 # Fixed point per column group, finer than any sensor: t 1e-6 s, position 1e-7 m,
 # quaternion 1e-9, rotor speed 1e-4 rad/s. Extras have unknown units: 10 significant digits.
 _FMT_T, _FMT_POS, _FMT_QUAT, _FMT_ROTOR, _FMT_EXTRA = "%.6f", "%.7f", "%.9f", "%.4f", "%.10g"
+# IMU: 1e-7 rad/s, 1e-7 m/s², far below any MEMS sensor's resolution.
+_FMT_IMU = "%.7f"
 _CHUNK_ROWS = 20_000
 _BAD_NAME_RE = re.compile(r"[\s,\"']")
 
@@ -476,10 +518,13 @@ class PoseLogWriter:
     rotor_count : int
         Number of rotors k (columns ``n1 … nk``).
     extra_columns : iterable of str
-        Further columns, written after the rotor speeds.
+        Further columns, written after the rotor speeds (and the IMU).
     overwrite : bool, keyword-only
         Replace an existing file; otherwise that is an `InputError`, so that a new
         recording never destroys a flown one.
+    imu : bool, keyword-only
+        Write the IMU columns (`IMU_COLUMNS`) after the rotor speeds: every row then takes
+        a ``gyro`` and an ``accel``.
 
     Rows are flushed as written, to survive a crash of this process; `close` also
     ``fsync``s. Each row is checked first (shapes, finite values, unit quaternion, ``t``
@@ -488,10 +533,10 @@ class PoseLogWriter:
     """
 
     def __init__(self, path: str | Path, rotor_count: int, extra_columns: Iterable[str] = (),
-                 *, overwrite: bool = False) -> None:
+                 *, overwrite: bool = False, imu: bool = False) -> None:
         check_positive_count(rotor_count, "rotor_count")
         extras = tuple(extra_columns)
-        taken = set(POSE_COLUMNS)
+        taken = set(POSE_COLUMNS) | set(IMU_COLUMNS)
         for c in extras:
             if not isinstance(c, str) or not c or _BAD_NAME_RE.search(c):
                 raise ValueError(f"extra column name {c!r} must be non-empty text without "
@@ -500,8 +545,11 @@ class PoseLogWriter:
                 raise ValueError(f"extra column name {c!r} is reserved or repeated")
             taken.add(c)
         self.path, self.rotor_count, self.extra_columns = Path(path), rotor_count, extras
-        self.columns = POSE_COLUMNS + rotor_columns(rotor_count) + extras
-        fmts = [_FMT_T, *[_FMT_POS] * 3, *[_FMT_QUAT] * 4, *[_FMT_ROTOR] * rotor_count]
+        self.imu = bool(imu)
+        imu_columns = IMU_COLUMNS if self.imu else ()
+        self.columns = POSE_COLUMNS + rotor_columns(rotor_count) + imu_columns + extras
+        fmts = [_FMT_T, *[_FMT_POS] * 3, *[_FMT_QUAT] * 4, *[_FMT_ROTOR] * rotor_count,
+                *[_FMT_IMU] * len(imu_columns)]
         self._fmt = ",".join(fmts + [_FMT_EXTRA] * len(extras)) + "\n"
         self.rows_written = 0
         self._last_t = -math.inf  # as written, i.e. rounded to 1e-6 s
@@ -520,7 +568,8 @@ class PoseLogWriter:
         return self._file.closed
 
     def write(self, t: float, position: Any, quaternion: Any, rotor_speeds: Any,
-              extra: Mapping[str, float] | None = None) -> None:
+              extra: Mapping[str, float] | None = None, *, gyro: Any = None,
+              accel: Any = None) -> None:
         """Write one sample: t (s), position (3,) m, quaternion (4,) [w,x,y,z], speeds (k,) rad/s.
 
         ``extra`` maps every name of ``extra_columns`` to a float.
@@ -537,17 +586,20 @@ class PoseLogWriter:
             Rotor speeds, rad/s.
         extra : Mapping of str to float, optional
             One value per extra column.
+        gyro, accel : array_like, shape (3,), keyword-only
+            With ``imu``: body rates (rad/s) and specific force (m/s²), body FLU.
         """
         self._check_open()
         pos, quat, rot = (np.asarray(v, dtype=np.float64)
                           for v in (position, quaternion, rotor_speeds))
+        imu = self._imu_values(gyro, accel, 1)
         ex = {} if extra is None else extra
         if (np.ndim(t) == 0 and pos.shape == (3,) and quat.shape == (4,)
                 and rot.shape == (self.rotor_count,) and ex.keys() == set(self.extra_columns)
                 and all(isinstance(v, float | int) or np.ndim(v) == 0 for v in ex.values())):
             # Fast path on plain floats: a recorder calls this at every sample.
             values = [float(t), *pos.tolist(), *quat.tolist(), *rot.tolist(),
-                      *(float(ex[c]) for c in self.extra_columns)]
+                      *imu.ravel().tolist(), *(float(ex[c]) for c in self.extra_columns)]
             t_out = round(values[0], 6)
             if (all(map(math.isfinite, values)) and t_out > self._last_t
                     and abs(math.hypot(*values[4:8]) - 1.0) <= QUATERNION_TOLERANCE):
@@ -561,10 +613,29 @@ class PoseLogWriter:
                 raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
         # The block validator says what is wrong; should it find nothing, the row is written.
         self.write_rows(np.reshape(np.asarray(t, dtype=np.float64), (1,)), pos[None],
-                        quat[None], rot[None], {c: np.ravel(v) for c, v in ex.items()})
+                        quat[None], rot[None], {c: np.ravel(v) for c, v in ex.items()},
+                        gyro=None if gyro is None else imu[:, :3],
+                        accel=None if accel is None else imu[:, 3:])
+
+    def _imu_values(self, gyro: Any, accel: Any, n: int) -> np.ndarray:
+        """The IMU block, shape (n, 6) (n, 0 without ``imu``), or a ValueError."""
+        if not self.imu:
+            if gyro is not None or accel is not None:
+                raise ValueError("gyro and accel need a writer made with imu=True")
+            return np.empty((n, 0))
+        if gyro is None or accel is None:
+            raise ValueError("a writer made with imu=True needs gyro and accel on every row")
+        block = [np.asarray(v, dtype=np.float64).reshape(-1, 3) if np.size(v) == 3 * n
+                 else np.asarray(v, dtype=np.float64) for v in (gyro, accel)]
+        for name, value in zip(("gyro", "accel"), block, strict=True):
+            if value.shape != (n, 3):
+                raise ValueError(f"{name} must have shape ({n}, 3) (or (3,) for one row), "
+                                 f"got {value.shape}")
+        return np.hstack(block)
 
     def write_rows(self, t: Any, position: Any, quaternion: Any, rotor_speeds: Any,
-                   extra: Mapping[str, Any] | None = None) -> None:
+                   extra: Mapping[str, Any] | None = None, *, gyro: Any = None,
+                   accel: Any = None) -> None:
         """Write N samples: t (N,) s, position (N, 3) m, quaternion (N, 4), speeds (N, k) rad/s.
 
         ``extra`` maps every name of ``extra_columns`` to an array of shape (N,).
@@ -581,6 +652,8 @@ class PoseLogWriter:
             Rotor speeds, rad/s.
         extra : Mapping of str to array_like, optional
             One array of shape (N,) per extra column.
+        gyro, accel : array_like, shape (N, 3), keyword-only
+            With ``imu``: body rates (rad/s) and specific force (m/s²), body FLU.
         """
         self._check_open()
         t = np.asarray(t, dtype=np.float64)
@@ -595,6 +668,7 @@ class PoseLogWriter:
             if cols[-1].shape != shape:
                 raise ValueError(f"{name} must have shape {shape} for {n} sample(s) of a "
                                  f"{k}-rotor log, got {cols[-1].shape}")
+        cols.append(self._imu_values(gyro, accel, n))
         extra = extra or {}
         if extra.keys() != set(self.extra_columns):
             raise ValueError(f"extra values must be exactly {list(self.extra_columns)}, "
@@ -603,15 +677,17 @@ class PoseLogWriter:
             cols.append(np.asarray(extra[c], dtype=np.float64).reshape(-1, 1))
             if cols[-1].shape != (n, 1):
                 raise ValueError(f"extra[{c!r}] must have shape ({n},), got {np.shape(extra[c])}")
-        block = np.hstack(cols)
-        if n == 0:
-            return
+        if n:
+            self._write_block(np.hstack(cols), t)
+
+    def _write_block(self, block: np.ndarray, t: np.ndarray) -> None:
+        """Check a block of rows (finite, unit quaternions, t increasing) and write it."""
         bad = ~np.isfinite(block)
         if bad.any():
             i, j = np.argwhere(bad)[0]
             raise ValueError(f"{self.columns[j]} of sample {i} is {block[i, j]}; "
                              "a pose log holds finite values only")
-        norm_err = np.abs(np.linalg.norm(cols[2], axis=1) - 1.0)
+        norm_err = np.abs(np.linalg.norm(block[:, 4:8], axis=1) - 1.0)
         if norm_err.max() > QUATERNION_TOLERANCE:
             i = int(np.argmax(norm_err))
             raise ValueError(f"quaternion of sample {i} has norm {1 + norm_err[i]:.6g}, not 1")
@@ -623,10 +699,10 @@ class PoseLogWriter:
             raise ValueError(f"t must increase by at least 1e-6 s: sample {i} has "
                              f"t = {float(t[i])!r} after {before!r}")
         # One %-format per chunk runs in C with no Python loop per row; chunks bound memory.
-        for i in range(0, n, _CHUNK_ROWS):
+        for i in range(0, t.shape[0], _CHUNK_ROWS):
             part = block[i:i + _CHUNK_ROWS]
             self._file.write((self._fmt * len(part)) % tuple(part.ravel().tolist()))
-        self._emit("", n, float(np.round(t[-1], 6)))
+        self._emit("", t.shape[0], float(np.round(t[-1], 6)))
 
     def _check_open(self) -> None:
         if self._file.closed:
@@ -666,6 +742,10 @@ def write_pose_log(path: str | Path, log: PoseLog, *, overwrite: bool = False) -
     overwrite : bool
         Replace an existing file (else an existing file is an error).
     """
-    with PoseLogWriter(path, log.rotor_count, log.extra, overwrite=overwrite) as w:
-        w.write_rows(log.t, log.position, log.quaternion, log.rotor_speeds, log.extra)
+    imu = log.gyro is not None or log.accel is not None
+    if imu and (log.gyro is None or log.accel is None):
+        raise ValueError("a pose log holds the gyro and the accelerometer together")
+    with PoseLogWriter(path, log.rotor_count, log.extra, overwrite=overwrite, imu=imu) as w:
+        w.write_rows(log.t, log.position, log.quaternion, log.rotor_speeds, log.extra,
+                     gyro=log.gyro, accel=log.accel)
     return w.path

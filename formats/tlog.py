@@ -15,9 +15,23 @@ Messages read (MAVLink common and ardupilotmega dialects):
   is motor output i + 1), else the SERVO_OUTPUT_RAW port 0 channels that move (the
   motors), PWM through the motor curve (a note says so).
 - Modes: the autopilot's HEARTBEAT custom mode, named by pymavlink.
+- IMU (body FRD; gyro rad/s, accelerometer specific force: z ≈ −g level at rest), of the
+  primary IMU, the first present of: HIGHRES_IMU (``id`` 0; SI floats at ``time_usec``,
+  PX4 sends it; rows whose ``fields_updated`` does not flag the sensor are skipped),
+  SCALED_IMU (mG and mrad/s at ``time_boot_ms``), RAW_IMU (``id`` 0) of an ArduPilot
+  autopilot, which fills it with the same mG and mrad/s of its first IMU
+  (``GCS_MAVLINK::send_raw_imu``; another autopilot's RAW_IMU holds raw sensor counts
+  and is not read), SCALED_IMU2 / SCALED_IMU3 (the second and third IMU, a note says
+  so); the gyro, failing all of those, from ATTITUDE ``rollspeed, pitchspeed,
+  yawspeed`` (the AHRS body rates). mG is 1e-3 × `STANDARD_GRAVITY`. The IMU's position
+  and filter are the autopilot's parameters where the tlog holds their PARAM_VALUE
+  (ArduPilot INS_POS1_X/Y/Z and INS_GYRO_FILTER / INS_ACCEL_FILTER, which ArduPilot's
+  IMU messages and ATTITUDE rates went through; PX4 EKF2_IMU_POS_X/Y/Z).
 
 Time base: the autopilot's clock (s since boot), because the pose messages carry it
-(``time_boot_ms``). ESC_TELEMETRY and ATT_POS_MOCAP carry no autopilot time (the mocap
+(``time_boot_ms``), as do the IMU messages (``time_boot_ms``, or ``time_usec`` since
+boot; a ``time_usec`` after the year 2001 is a Unix time and is replaced by the receipt
+time mapped as below). ESC_TELEMETRY and ATT_POS_MOCAP carry no autopilot time (the mocap
 ``time_usec`` is the sender's clock), so they are stamped with the tlog's receipt time
 mapped onto the autopilot clock: receipt − time_boot_ms over all autopilot messages
 with a ``time_boot_ms`` is the clock offset plus that message's link latency, and its
@@ -44,7 +58,9 @@ import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import pwm_curve_caveat, rotor_speed_from_pwm
 from mavsysid.formats.parsed_log import (
+    ImuFilter,
     ModeChanges,
+    MotorOutputs,
     ParsedLog,
     PoseSource,
     Series,
@@ -56,7 +72,8 @@ from mavsysid.vehicle.frames import euler_ned_to_quaternion
 
 from mavsysid.errors import InputError, LogFormatError
 
-__all__ = ["ESC_TELEMETRY", "EpochClock", "TlogWriter", "read_tlog"]
+__all__ = ["ESC_TELEMETRY", "IMU_MESSAGES", "STANDARD_GRAVITY", "EpochClock", "TlogWriter",
+           "read_tlog"]
 
 #: ESC telemetry messages → the motor output (0-based) of their first ``rpm`` entry; each
 #: carries four.
@@ -64,7 +81,17 @@ ESC_TELEMETRY: dict[str, int] = {"ESC_TELEMETRY_1_TO_4": 0, "ESC_TELEMETRY_5_TO_
                                  "ESC_TELEMETRY_9_TO_12": 8}
 _CLOCKED = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE", "SYSTEM_TIME",
             "GLOBAL_POSITION_INT")
-_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", *_CLOCKED, *ESC_TELEMETRY]
+#: The IMU messages read, the primary IMU's first (module docstring).
+IMU_MESSAGES = ("HIGHRES_IMU", "SCALED_IMU", "RAW_IMU", "SCALED_IMU2", "SCALED_IMU3")
+#: m/s² per G of the mG unit of SCALED_IMU* and RAW_IMU (ArduPilot's GRAVITY_MSS, PX4's
+#: CONSTANTS_ONE_G).
+STANDARD_GRAVITY = 9.80665
+_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", "PARAM_VALUE", *_CLOCKED,
+          *ESC_TELEMETRY, *IMU_MESSAGES]
+#: HIGHRES_IMU.fields_updated bits of the accelerometer (x, y, z) and the gyro.
+_HIGHRES_ACCEL, _HIGHRES_GYRO = 0b000111, 0b111000
+#: A time_usec beyond this (µs, 2001) is a Unix time, not time since boot.
+_EPOCH_USEC = 1e15
 _POSE_HINT = "no ATT_POS_MOCAP, nor LOCAL_POSITION_NED with ATTITUDE_QUATERNION or ATTITUDE"
 
 # (receipt time s, (system, component), message) per message type.
@@ -232,8 +259,8 @@ def _esc_rotors(path: Path, own: _Messages, offset: float,
     return tuple(series)
 
 
-def _servo_rotors(own: _Messages, vehicle: VehicleConfig) -> Series | None:
-    """Rotor speeds from SERVO_OUTPUT_RAW port 0, channels 1..k, via the motor curve."""
+def _servo_outputs(own: _Messages) -> MotorOutputs | None:
+    """SERVO_OUTPUT_RAW port 0 channels 1..k that drive motors, PWM µs, as logged."""
     rows = [m for _, _, m in own.get("SERVO_OUTPUT_RAW", []) if m.port == 0]
     if not rows:
         return None
@@ -243,7 +270,115 @@ def _servo_rotors(own: _Messages, vehicle: VehicleConfig) -> Series | None:
     if count == 0:
         return None
     t = _unwrap_us(np.array([m.time_usec for m in rows], dtype=float))
-    return Series(t, rotor_speed_from_pwm(pwm[:, :count], vehicle), "SERVO_OUTPUT_RAW PWM")
+    return MotorOutputs(Series(t, pwm[:, :count], "SERVO_OUTPUT_RAW PWM"), "pwm")
+
+
+# --- IMU ---------------------------------------------------------------------------------
+
+
+def _parameters(own: _Messages) -> dict[str, float]:
+    """The autopilot's PARAM_VALUEs in the log, by name (the last of each)."""
+    return {str(m.param_id): float(m.param_value) for _, _, m in own.get("PARAM_VALUE", [])}
+
+
+def _imu_times(rows: list[tuple[float, tuple[int, int], Any]], offset: float) -> np.ndarray:
+    """The rows' autopilot times, s: time_boot_ms, or time_usec since boot (a Unix
+    time_usec: the receipt time mapped onto the autopilot clock)."""
+    m = rows[0][2]
+    if hasattr(m, "time_boot_ms"):
+        return np.array([r[2].time_boot_ms * 1e-3 for r in rows])
+    usec = np.array([r[2].time_usec for r in rows], dtype=float)
+    receipt = np.array([r[0] for r in rows]) - offset
+    return np.where(usec < _EPOCH_USEC, usec * 1e-6, receipt)
+
+
+def _imu_rows(own: _Messages, name: str, autopilot: int | None, mavlink: ModuleType
+              ) -> list[tuple[float, tuple[int, int], Any]]:
+    """The rows of one IMU message that are the primary IMU's and in known units."""
+    rows = own.get(name, [])
+    if name in ("HIGHRES_IMU", "RAW_IMU"):
+        # Their field ``id`` names the IMU (not the message id).
+        rows = [r for r in rows if "id" not in r[2].get_fieldnames() or int(r[2].id or 0) == 0]
+    if name == "RAW_IMU" and autopilot != mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
+        return []
+    return rows
+
+
+def _highres(rows: list[tuple[float, tuple[int, int], Any]], offset: float
+             ) -> tuple[Series | None, Series | None]:
+    """HIGHRES_IMU gyro and accelerometer, each of the rows that flag it updated."""
+    t = _imu_times(rows, offset)
+    flags = np.array([int(m.fields_updated) for _, _, m in rows])
+    values = np.array([[m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc] for _, _, m in rows],
+                      dtype=float)
+    flagged = flags.any()  # a sender that sets no flag at all: every row counts
+    out = []
+    for bits, columns, what in ((_HIGHRES_GYRO, slice(0, 3), "gyro"),
+                                (_HIGHRES_ACCEL, slice(3, 6), "acc")):
+        keep = (flags & bits) != 0 if flagged else np.ones(t.size, dtype=bool)
+        out.append(Series(t[keep], values[keep, columns], f"HIGHRES_IMU x{what}..z{what}")
+                   if keep.any() else None)
+    return out[0], out[1]
+
+
+def _scaled(name: str, rows: list[tuple[float, tuple[int, int], Any]], offset: float
+            ) -> tuple[Series, Series]:
+    """SCALED_IMU* / RAW_IMU (ArduPilot) gyro (mrad/s) and accelerometer (mG), in SI."""
+    t = _imu_times(rows, offset)
+    values = np.array([[m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc] for _, _, m in rows],
+                      dtype=float) * 1e-3
+    return (Series(t, values[:, :3], f"{name} xgyro..zgyro"),
+            Series(t, values[:, 3:] * STANDARD_GRAVITY, f"{name} xacc..zacc"))
+
+
+def _imu(own: _Messages, offset: float, mavlink: ModuleType
+         ) -> tuple[Series | None, Series | None, list[str]]:
+    """The primary IMU's gyro and accelerometer (module docstring); notes."""
+    beats = [m for _, _, m in own.get("HEARTBEAT", [])]
+    autopilot = int(beats[0].autopilot) if beats else None
+    gyro = accel = None
+    notes = []
+    for name in IMU_MESSAGES:
+        rows = _imu_rows(own, name, autopilot, mavlink)
+        if not rows:
+            continue
+        g, a = _highres(rows, offset) if name == "HIGHRES_IMU" else _scaled(name, rows, offset)
+        if gyro is None and g is not None:
+            gyro, notes = g, notes + ([f"the gyro is {name}'s, not the first IMU's"]
+                                      if name.endswith(("2", "3")) else [])
+        if accel is None and a is not None:
+            accel = a
+    if own.get("RAW_IMU") and not _imu_rows(own, "RAW_IMU", autopilot, mavlink) \
+            and gyro is None:
+        notes.append("RAW_IMU of an autopilot other than ArduPilot holds raw sensor counts; "
+                     "not read")
+    if gyro is None and own.get("ATTITUDE"):
+        rows = own["ATTITUDE"]
+        gyro = Series(np.array([m.time_boot_ms * 1e-3 for _, _, m in rows]),
+                      np.array([[m.rollspeed, m.pitchspeed, m.yawspeed] for _, _, m in rows],
+                               dtype=float), "ATTITUDE rollspeed..yawspeed (AHRS body rates)")
+    return gyro, accel, notes
+
+
+def _imu_settings(own: _Messages, gyro: Series | None, accel: Series | None
+                  ) -> tuple[tuple[float, float, float] | None, ImuFilter | None]:
+    """The IMU's position (m, body FRD) and filter, from the PARAM_VALUEs in the log."""
+    parameters = _parameters(own)
+    position = None
+    for names in (("INS_POS1_X", "INS_POS1_Y", "INS_POS1_Z"),
+                  ("EKF2_IMU_POS_X", "EKF2_IMU_POS_Y", "EKF2_IMU_POS_Z")):
+        if all(name in parameters for name in names):
+            x, y, z = (parameters[name] for name in names)
+            position = (x, y, z)
+            break
+    # ArduPilot's IMU messages and ATTITUDE rates are its filtered samples.
+    ardupilot = [s is not None and not s.label.startswith("HIGHRES") for s in (gyro, accel)]
+    stated = [n for n in ("INS_GYRO_FILTER", "INS_ACCEL_FILTER") if n in parameters]
+    if not stated or not any(ardupilot):
+        return position, None
+    return position, ImuFilter(parameters.get("INS_GYRO_FILTER") if ardupilot[0] else None,
+                               parameters.get("INS_ACCEL_FILTER") if ardupilot[1] else None,
+                               ", ".join(f"PARAM_VALUE {n}" for n in stated))
 
 
 def _modes(own: _Messages, mavutil: ModuleType, offset: float) -> ModeChanges | None:
@@ -257,7 +392,7 @@ def _modes(own: _Messages, mavutil: ModuleType, offset: float) -> ModeChanges | 
 
 
 def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
-    """Read the pose, rotor speeds and modes of a telemetry log.
+    """Read the pose, rotor speeds, motor outputs, IMU and modes of a telemetry log.
 
     Parameters
     ----------
@@ -269,8 +404,8 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     Returns
     -------
     ParsedLog
-        NED/FRD, rad/s, the autopilot's motor numbering, on the autopilot's clock (see
-        the module docstring); with the modes of its HEARTBEATs.
+        NED/FRD, rad/s, m/s², the autopilot's motor numbering, on the autopilot's clock
+        (see the module docstring); with the modes of its HEARTBEATs.
 
     Raises
     ------
@@ -289,16 +424,25 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     rotor_notes = []
     with parsing(path, "a MAVLink telemetry log with the usual message fields"):
         pose, position, attitude, pose_source = _pose(found, own, offset)
+        outputs = _servo_outputs(own)
+        escs: tuple[Series, ...] = ()
         if any(own.get(name) for name in ESC_TELEMETRY):
-            rotors = _esc_rotors(path, own, offset, vehicle.rotor_count)
-        elif (servo := _servo_rotors(own, vehicle)) is not None:
-            rotors = (servo,)
+            rotors = escs = _esc_rotors(path, own, offset, vehicle.rotor_count)
+        elif outputs is not None:
+            rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
+                                                                    vehicle),
+                             "SERVO_OUTPUT_RAW PWM"),)
             rotor_notes.append(f"{path}: no ESC rpm; rotor speeds are motor outputs "
                                f"(SERVO_OUTPUT_RAW) {pwm_curve_caveat(vehicle)}")
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
                                  "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")
         modes = _modes(own, mavutil, offset)
+        gyro, accel, imu_notes = _imu(own, offset, mavutil.mavlink)
+        imu_position, imu_filter = _imu_settings(own, gyro, accel)
+    notes += [f"{path}: {note}" for note in imu_notes]
     return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,
                      pose_source=pose_source, pose_hint=_POSE_HINT, rotors=rotors,
-                     notes=tuple(notes), rotor_notes=tuple(rotor_notes), modes=modes)
+                     notes=tuple(notes), rotor_notes=tuple(rotor_notes), modes=modes,
+                     gyro=gyro, accel=accel, imu_position=imu_position, imu_filter=imu_filter,
+                     motor_outputs=outputs, esc_speeds=escs)

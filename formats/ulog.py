@@ -29,6 +29,16 @@ time) where the topic has it, else ``timestamp``. Frames are NED/FRD.
   (n = 0), and a column that is NaN throughout an unused one. Else ``actuator_outputs``
   ``output[i]`` (taken as PWM in µs) through the vehicle's `[motor]` curve.
 - Modes: ``vehicle_status`` ``nav_state`` (`NAVIGATION_STATES`), ``arming_state``.
+- IMU (body FRD): ``sensor_combined`` ``gyro_rad[3]`` (rad/s; ``gyro_rad_s`` before PX4
+  1.6) at ``timestamp`` and ``accelerometer_m_s2[3]`` (specific force, m/s²: z ≈ −9.81
+  at rest) at ``timestamp + accelerometer_timestamp_relative`` (µs; 0x7fffffff marks no
+  accelerometer sample), the primary IMU's samples averaged over each integration
+  interval (IMU_INTEG_RATE, PX4 1.11 on: no low-pass); ``vehicle_angular_velocity``
+  ``xyz[3]`` (rad/s) and ``vehicle_acceleration`` ``xyz[3]`` (m/s², specific force),
+  bias-corrected and low-passed at IMU_GYRO_CUTOFF / IMU_ACCEL_CUTOFF (Hz), at
+  ``timestamp_sample``. Of each sensor the faster of the two is read, sensor_combined
+  on equal rates. The IMU's position is EKF2_IMU_POS_X/Y/Z (m, body FRD, relative to the
+  centre of gravity), from the log's parameters.
 
 Rates (``src/modules/logger/logged_topics.cpp``): ``vehicle_status`` at 2 Hz and on
 change, ``vehicle_local_position`` at 10 Hz (the default 100 ms interval),
@@ -62,7 +72,9 @@ from mavsysid.formats.motor_curve import (
     rotor_speed_from_throttle,
 )
 from mavsysid.formats.parsed_log import (
+    ImuFilter,
     ModeChanges,
+    MotorOutputs,
     ParsedLog,
     PoseSource,
     Series,
@@ -89,7 +101,8 @@ _CODES = {"int8_t": "b", "uint8_t": "B", "int16_t": "h", "uint16_t": "H", "int32
 Row = Mapping[str, float]
 
 #: vehicle_status.nav_state values of the modes mavsysid flies in (msg/VehicleStatus.msg).
-NAVIGATION_STATES: dict[str, int] = {"POSCTL": 2, "OFFBOARD": 14, "AUTO_LAND": 18}
+NAVIGATION_STATES: dict[str, int] = {"MANUAL": 0, "POSCTL": 2, "AUTO_LOITER": 4, "OFFBOARD": 14,
+                                     "AUTO_TAKEOFF": 17, "AUTO_LAND": 18}
 #: vehicle_status.arming_state of an armed vehicle.
 ARMING_STATE_ARMED = 2
 #: ESC reports in esc_status, motor slots in actuator_motors.
@@ -112,6 +125,10 @@ PX4_TOPICS: dict[str, str] = {
                   "uint8_t esc_connectiontype;esc_report[8] esc;",
     "actuator_motors": "uint64_t timestamp;uint64_t timestamp_sample;"
                        "uint16_t reversible_flags;float[12] control;",
+    "sensor_combined": "uint64_t timestamp;float[3] gyro_rad;uint32_t gyro_integral_dt;"
+                       "int32_t accelerometer_timestamp_relative;float[3] accelerometer_m_s2;"
+                       "uint32_t accelerometer_integral_dt;uint8_t accelerometer_clipping;"
+                       "uint8_t gyro_clipping;",
 }
 
 #: Longest median sample period of esc_status rpm that is used in preference to motor
@@ -125,14 +142,20 @@ _MOTOR_FUNCTIONS = range(101, 113)
 _STOPPED_CONTROL = 1e-6
 
 _ODOMETRY = ("vehicle_mocap_odometry", "vehicle_visual_odometry")
+_IMU_TOPICS = ("sensor_combined", "vehicle_angular_velocity", "vehicle_acceleration")
 _TOPICS = [*_ODOMETRY, "vehicle_local_position", "vehicle_attitude", "esc_status",
-           "actuator_motors", "actuator_outputs"]
+           "actuator_motors", "actuator_outputs", *_IMU_TOPICS]
+#: accelerometer_timestamp_relative of a sensor_combined sample without accelerometer data
+#: (sensor_combined_s::RELATIVE_TIMESTAMP_INVALID).
+_RELATIVE_INVALID = 0x7FFFFFFF
 _POSE_HINT = ("no vehicle_mocap_odometry or vehicle_visual_odometry, nor "
               "vehicle_local_position with vehicle_attitude")
 
 _Topic = dict[str, np.ndarray]
 #: Each topic's instances: topic name → {multi_id: field name → array}, non-empty only.
 _Instances = dict[str, dict[int, _Topic]]
+#: The log's parameters: the initial values, then each change logged in the flight.
+_Parameters = dict[str, float]
 
 
 # --- writing -----------------------------------------------------------------------------
@@ -183,9 +206,19 @@ def _info(key: str, value: str) -> bytes:
     return _message("I", struct.pack("<B", len(field)) + field + encoded)
 
 
+def _parameter(name: str, value: float | int) -> bytes:
+    """A ``P`` message: an int32_t parameter for an int, else a float one."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        key, packed = f"int32_t {name}", struct.pack("<i", value)
+    else:
+        key, packed = f"float {name}", struct.pack("<f", float(value))
+    return _message("P", struct.pack("<B", len(key)) + key.encode() + packed)
+
+
 def write_ulog(path: Path, formats: Mapping[str, str],
                topics: Mapping[str | tuple[str, int], Sequence[Row]],
-               info: Mapping[str, str] | None = None, start_us: int = 0) -> None:
+               info: Mapping[str, str] | None = None, start_us: int = 0,
+               parameters: Mapping[str, float | int] | None = None) -> None:
     """Write a ULog file.
 
     Parameters
@@ -203,6 +236,9 @@ def write_ulog(path: Path, formats: Mapping[str, str],
         ``I`` messages, e.g. ``{"sys_name": "PX4", "ver_sw": "v1.15.0"}``.
     start_us : int
         The header's timestamp, µs.
+    parameters : mapping of str to float or int, optional
+        The parameters at the log's start (``P`` messages; an int is written as PX4's
+        int32 parameters are, a float as a float one), e.g. ``{"EKF2_IMU_POS_X": 0.05}``.
 
     Raises
     ------
@@ -216,6 +252,8 @@ def write_ulog(path: Path, formats: Mapping[str, str],
     out += _message("B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
     for key, value in (info or {}).items():
         out += _info(key, value)
+    for name, value in (parameters or {}).items():
+        out += _parameter(name, value)
     for name, fields in formats.items():
         out += _message("F", f"{name}:{fields}".encode())
     for msg_id, (key, rows) in enumerate(topics.items()):
@@ -231,18 +269,20 @@ def write_ulog(path: Path, formats: Mapping[str, str],
 # --- reading -----------------------------------------------------------------------------
 
 
-def _load(path: Path) -> tuple[_Instances, list[str]]:
-    """Every non-empty instance of each topic used here; and warnings."""
+def _load(path: Path) -> tuple[_Instances, _Parameters, list[str]]:
+    """Every non-empty instance of each topic used here; the parameters; warnings."""
     ULog = import_parser("pyulog", path).ULog
     with parsing(path, "a PX4 ULog file"):
         ulog = ULog(str(path), message_name_filter_list=_TOPICS)
+        parameters = {str(k): float(v) for k, v in ulog.initial_parameters.items()}
+        parameters.update({str(k): float(v) for _, k, v in ulog.changed_parameters})
     topics: _Instances = {}
     for d in ulog.data_list:
         if d.data["timestamp"].size:
             topics.setdefault(d.name, {})[int(d.multi_id)] = d.data
     notes = [f"{path}: pyulog found the file corrupt in places and skipped the damaged "
              "parts"] if ulog.file_corruption else []
-    return topics, notes
+    return topics, parameters, notes
 
 
 def _primary(topics: _Instances, name: str) -> _Topic | None:
@@ -326,8 +366,8 @@ def _motor_control(motors: _Topic) -> np.ndarray:
     return control[:, :count]
 
 
-def _motors(topics: _Instances, vehicle: VehicleConfig) -> Series | None:
-    """actuator_motors relative thrust → n = n_max · sqrt(control), rad/s."""
+def _motor_commands(topics: _Instances) -> MotorOutputs | None:
+    """actuator_motors relative thrust of the instance with the most motors, as logged."""
     found = [(_motor_control(m), m) for _, m in sorted(topics.get("actuator_motors", {}).items())]
     if not found:
         return None
@@ -335,11 +375,16 @@ def _motors(topics: _Instances, vehicle: VehicleConfig) -> Series | None:
     control, motors = max(found, key=lambda pair: pair[0].shape[1])
     if not control.shape[1]:
         return None
-    thrust = np.nan_to_num(control, nan=0.0)  # NaN: motor stopped
+    return MotorOutputs(Series(_time(motors), control, "actuator_motors"), "normalised")
+
+
+def _motors(commands: MotorOutputs, vehicle: VehicleConfig) -> Series:
+    """actuator_motors relative thrust → n = n_max · sqrt(control), rad/s."""
+    thrust = np.nan_to_num(commands.series.values, nan=0.0)  # NaN: motor stopped
     # PX4 logs a disarmed motor as 0 give or take float noise (1e-10): stopped too.
     thrust[np.abs(thrust) < _STOPPED_CONTROL] = 0.0
     speeds = rotor_speed_from_throttle(thrust, vehicle.limits.rotor_speed_max, thrust_expo=0.0)
-    return Series(_time(motors), speeds, "actuator_motors")
+    return Series(commands.series.t, speeds, "actuator_motors")
 
 
 def _driving_outputs(topics: _Instances) -> _Topic | None:
@@ -353,8 +398,8 @@ def _driving_outputs(topics: _Instances) -> _Topic | None:
     return best
 
 
-def _outputs(topics: _Instances, vehicle: VehicleConfig) -> Series | None:
-    """actuator_outputs PWM of outputs 1..k through the vehicle's motor curve, rad/s."""
+def _pwm_outputs(topics: _Instances) -> MotorOutputs | None:
+    """actuator_outputs of outputs 1..k that drive motors (µs, as PX4's PWM driver logs)."""
     outputs = _driving_outputs(topics)
     if outputs is None:
         return None
@@ -362,26 +407,33 @@ def _outputs(topics: _Instances, vehicle: VehicleConfig) -> Series | None:
     count = motor_output_count(slots)
     if not count:
         return None
-    pwm = slots[:, :count]
-    return Series(_time(outputs), rotor_speed_from_pwm(pwm, vehicle), "actuator_outputs PWM")
+    return MotorOutputs(Series(_time(outputs), slots[:, :count], "actuator_outputs PWM"), "pwm")
 
 
-def _commanded(path: Path, topics: _Instances,
+def _motor_outputs(topics: _Instances) -> MotorOutputs | None:
+    """The motor outputs as logged: actuator_motors, else actuator_outputs."""
+    commands = _motor_commands(topics)
+    return commands if commands is not None else _pwm_outputs(topics)
+
+
+def _commanded(outputs: MotorOutputs | None,
                vehicle: VehicleConfig) -> tuple[Series, str] | None:
     """The commanded rotor speeds (actuator_motors, else actuator_outputs) and their note."""
-    if (motors := _motors(topics, vehicle)) is not None:
-        return motors, (f"actuator_motors thrust commands through "
-                        f"{describe_curve(vehicle, pwm=False)}: commanded, not measured")
-    if (outputs := _outputs(topics, vehicle)) is not None:
-        return outputs, f"actuator_outputs PWM {pwm_curve_caveat(vehicle)}"
-    return None
+    if outputs is None:
+        return None
+    if outputs.kind == "normalised":
+        return _motors(outputs, vehicle), (f"actuator_motors thrust commands through "
+                                           f"{describe_curve(vehicle, pwm=False)}: commanded, "
+                                           "not measured")
+    speeds = rotor_speed_from_pwm(outputs.series.values, vehicle)
+    return (Series(outputs.series.t, speeds, "actuator_outputs PWM"),
+            f"actuator_outputs PWM {pwm_curve_caveat(vehicle)}")
 
 
-def _rotors(path: Path, topics: _Instances,
+def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
             vehicle: VehicleConfig) -> tuple[Series, list[str]]:
     """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm."""
-    esc = _esc(topics)
-    commanded = _commanded(path, topics, vehicle)
+    commanded = _commanded(outputs, vehicle)
     if esc is not None:
         esc_period = _period(esc.t)
         faster = commanded is not None and 2.0 * _period(commanded[0].t) <= esc_period
@@ -398,8 +450,87 @@ def _rotors(path: Path, topics: _Instances,
                          "actuator_motors or actuator_outputs)")
 
 
+# --- IMU ---------------------------------------------------------------------------------
+
+
+def _vector(topic: _Topic, names: tuple[str, ...]) -> np.ndarray | None:
+    """The first of the named 3-vector fields the topic has (``name[0..2]``), or None."""
+    for name in names:
+        if f"{name}[0]" in topic:
+            return _columns(topic, [f"{name}[{i}]" for i in range(3)])
+    return None
+
+
+def _combined(topics: _Instances) -> tuple[Series | None, Series | None]:
+    """sensor_combined gyro (at ``timestamp``) and accelerometer (at its relative time)."""
+    combined = _primary(topics, "sensor_combined")
+    if combined is None:
+        return None, None
+    t = combined["timestamp"].astype(float) * 1e-6
+    gyro = _vector(combined, ("gyro_rad", "gyro_rad_s"))
+    accel = _vector(combined, ("accelerometer_m_s2",))
+    gyro_series = None if gyro is None else Series(t, gyro, "sensor_combined gyro_rad")
+    if accel is None:
+        return gyro_series, None
+    relative = combined.get("accelerometer_timestamp_relative")
+    if relative is None:
+        return gyro_series, Series(t, accel, "sensor_combined accelerometer_m_s2")
+    relative = relative.astype(float)
+    valid = relative != _RELATIVE_INVALID
+    return gyro_series, Series(t[valid] + relative[valid] * 1e-6, accel[valid],
+                               "sensor_combined accelerometer_m_s2")
+
+
+def _vehicle_vector(topics: _Instances, name: str) -> Series | None:
+    """vehicle_angular_velocity / vehicle_acceleration ``xyz`` at ``timestamp_sample``."""
+    topic = _primary(topics, name)
+    if topic is None or (xyz := _vector(topic, ("xyz",))) is None:
+        return None
+    return Series(_time(topic), xyz, f"{name} xyz")
+
+
+def _faster(combined: Series | None, filtered: Series | None, cutoff: str,
+            parameters: _Parameters) -> tuple[Series | None, float | None, str | None]:
+    """Of one sensor, the faster series (sensor_combined on ties), the cutoff it went
+    through (Hz, 0 for none, None unknown) and the parameter that says so."""
+    if filtered is not None and (combined is None or _period(filtered.t) < _period(combined.t)):
+        return filtered, parameters.get(cutoff), cutoff if cutoff in parameters else None
+    if combined is None:
+        return None, None, None
+    # PX4 1.11 on (IMU_INTEG_RATE) averages raw samples into sensor_combined, no low-pass.
+    if "IMU_INTEG_RATE" in parameters:
+        return combined, 0.0, "IMU_INTEG_RATE"
+    return combined, None, None
+
+
+def _imu(topics: _Instances, parameters: _Parameters
+         ) -> tuple[Series | None, Series | None, ImuFilter | None]:
+    """Gyro and accelerometer (module docstring) and the low-pass they went through."""
+    gyro_combined, accel_combined = _combined(topics)
+    gyro, gyro_cutoff, gyro_said = _faster(
+        gyro_combined, _vehicle_vector(topics, "vehicle_angular_velocity"), "IMU_GYRO_CUTOFF",
+        parameters)
+    accel, accel_cutoff, accel_said = _faster(
+        accel_combined, _vehicle_vector(topics, "vehicle_acceleration"), "IMU_ACCEL_CUTOFF",
+        parameters)
+    said = [name for name in dict.fromkeys((gyro_said, accel_said)) if name is not None]
+    if not said:
+        return gyro, accel, None
+    source = ", ".join(f"parameter {name}" for name in said)
+    return gyro, accel, ImuFilter(gyro_cutoff, accel_cutoff, source)
+
+
+def _imu_position(parameters: _Parameters) -> tuple[float, float, float] | None:
+    """EKF2_IMU_POS_X/Y/Z (m, body FRD), when all three are in the log."""
+    names = ("EKF2_IMU_POS_X", "EKF2_IMU_POS_Y", "EKF2_IMU_POS_Z")
+    if not all(name in parameters for name in names):
+        return None
+    x, y, z = (parameters[name] for name in names)
+    return (x, y, z)
+
+
 def read_ulog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
-    """Read the pose and rotor speeds of a PX4 ULog file.
+    """Read the pose, rotor speeds, motor outputs and IMU of a PX4 ULog file.
 
     Parameters
     ----------
@@ -412,20 +543,24 @@ def read_ulog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     Returns
     -------
     ParsedLog
-        NED/FRD, rad/s, PX4's motor numbering, on PX4's clock (s since boot).
+        NED/FRD, rad/s, m/s², PX4's motor numbering, on PX4's clock (s since boot).
 
     Raises
     ------
     LogFormatError
         An unreadable file, or neither ESC rpm nor motor outputs.
     """
-    topics, notes = _load(path)
+    topics, parameters, notes = _load(path)
     with parsing(path, "a PX4 ULog file with the usual topic fields"):
         pose, position, attitude, pose_source = _pose(topics)
-        rotors, curve = _rotors(path, topics, vehicle)
+        esc, outputs = _esc(topics), _motor_outputs(topics)
+        rotors, curve = _rotors(path, esc, outputs, vehicle)
+        gyro, accel, imu_filter = _imu(topics, parameters)
     return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,
                      pose_source=pose_source, pose_hint=_POSE_HINT, rotors=(rotors,),
-                     notes=tuple(notes), rotor_notes=tuple(curve))
+                     notes=tuple(notes), rotor_notes=tuple(curve), gyro=gyro, accel=accel,
+                     imu_position=_imu_position(parameters), imu_filter=imu_filter,
+                     motor_outputs=outputs, esc_speeds=() if esc is None else (esc,))
 
 
 def read_ulog_modes(path: Path) -> ModeChanges | None:

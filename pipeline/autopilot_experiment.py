@@ -6,7 +6,9 @@ Each stage is the job its own command runs (`mavsysid.pipeline.plan`,
 `mavsysid.pipeline.stream`, `mavsysid.pipeline.estimate`), so the experiment refuses what
 they refuse, in their words. The flight directory keeps everything: the trajectory file
 (``trajectory.json``) next to the streamer's ``flight.tlog``, ``pose.csv`` and
-``meta.json``, and ``estimate.json`` once θ is estimated. The plan is written first as
+``meta.json``, the vehicle's own log downloaded after landing (``autopilot.bin`` /
+``autopilot.ulg``, with ``StreamSettings.download_log``), and ``estimate.json`` once θ is
+estimated. The plan is written first as
 ``LOG_DIR/trajectory-seedN.json`` (the flight directory is named after it) and stays there
 when the flight is refused.
 """

@@ -1,5 +1,6 @@
 """One ground-station flight: open the session for a trajectory file (plan checks, flight
-directory, connection), fly it and return where it was recorded.
+directory, connection), fly it, download the vehicle's own log of it once landed
+(``StreamSettings.download_log``), and return where it was recorded.
 
 `run_stream` is what ``mavsysid stream`` and the demo call; tests call it directly.
 `restore_flight_parameters` (``mavsysid restore``) puts back the parameters a flight's
@@ -17,7 +18,8 @@ from mavsysid.flight.ground.continuation import Continuation
 from mavsysid.flight.ground.stream_session import StreamSession, StreamSettings, open_session
 from mavsysid.flight.ground.streamer import fly
 
-__all__ = ["RestoreOutcome", "StreamOutcome", "restore_flight_parameters", "run_stream"]
+__all__ = ["RestoreOutcome", "StreamOutcome", "download_into_flight", "restore_flight_parameters",
+           "run_stream"]
 
 
 @dataclass(frozen=True)
@@ -66,7 +68,52 @@ def run_stream(trajectory: str | Path, settings: StreamSettings,
         session.commands.say = say
         say(f"recording into {session.directory}")
         fly(session, say, progress, at_end, continuation)
-    return StreamOutcome(session.directory, session.meta)
+    meta = session.meta
+    if settings.download_log and settings.land and meta.get("status") == "complete":
+        meta = download_into_flight(session.directory, settings, say)
+    return StreamOutcome(session.directory, meta)
+
+
+def download_into_flight(directory: Path, settings: StreamSettings,
+                         say: Callable[[str], None]) -> dict[str, Any]:
+    """Download the landed vehicle's newest log into a flight directory; record it in its
+    ``meta.json`` (``autopilot_log``, and ``files.autopilot_log``), or why it failed.
+
+    Parameters
+    ----------
+    directory : Path
+        The flight directory.
+    settings : StreamSettings
+        The link (connection, signing, speedup, lock-step, heartbeat timeout).
+    say : callable
+        Receives one-line messages; a failed download is a warning, not an error.
+
+    Returns
+    -------
+    dict
+        The flight's ``meta.json`` as written.
+    """
+    from mavsysid.flight.ground.log_download import download_flight_log
+    from mavsysid.formats.flight_dir import read_meta, write_meta
+
+    from mavsysid.errors import MavsysidError
+
+    meta = read_meta(directory / "meta.json")
+    try:
+        log = download_flight_log(settings.connect, directory, settings.signing_key,
+                                  settings.speedup, settings.lockstep,
+                                  settings.heartbeat_timeout, say)
+    except MavsysidError as error:
+        say(f"warning: the vehicle's log was not downloaded: {error}")
+        meta["autopilot_log"] = {"error": str(error)}
+    else:
+        meta["autopilot_log"] = log.summary()
+        meta.setdefault("files", {})["autopilot_log"] = log.path.name
+        state = "" if log.complete else f", incomplete ({log.received} of {log.size} bytes)"
+        say(f"downloaded the vehicle's log {log.log_id} into {log.path} ({log.size / 1e6:.2f} "
+            f"MB in {log.seconds:.1f} s, {log.rate / 1e3:.0f} kB/s{state})")
+    write_meta(directory / "meta.json", meta)
+    return meta
 
 
 @dataclass(frozen=True)

@@ -120,6 +120,7 @@ def _build(values: dict[str, Any], name: str, source: str) -> VehicleConfig:
         autopilot_frame=values["autopilot_frame"],
         box=values["box"],
         allocation=allocation,
+        imu_position=values["imu_position"],
     )
 
 

@@ -21,6 +21,9 @@ layout in angle and spin direction (`mavsysid.vehicle.motor_order.output_to_roto
 
 The optional ``[flight]`` table holds ``box = [x_min, y_min, z_min, x_max, y_max, z_max]``
 (m, world ENU, each min below its max): where the vehicle may be flown.
+
+The optional ``[imu]`` table holds ``position = [x, y, z]`` (m, body FLU): the IMU's
+offset from the centre of gravity.
 """
 
 from __future__ import annotations
@@ -122,6 +125,10 @@ _NOISE: dict[str, tuple[str, str]] = {
     "rotor_speed_sigma": ("rad/s", "nonnegative"),
     "force_density": ("N·√s", "nonnegative"),
     "moment_density": ("N·m·√s", "nonnegative"),
+    "gyro_sigma": ("rad/s", "nonnegative"),
+    "accel_sigma": ("m/s²", "nonnegative"),
+    "gyro_bias_sigma": ("rad/s", "nonnegative"),
+    "accel_bias_sigma": ("m/s²", "nonnegative"),
 }
 _TABLES: dict[str, dict[str, tuple[str, str]]] = {
     "parameters": _PARAMETERS,
@@ -150,6 +157,7 @@ _TOP_LEVEL: dict[str, str] = {
     "effects": "[effects]",
     "autopilot": "[autopilot]",
     "flight": "[flight]",
+    "imu": "[imu]",
 }
 #: Parameters of effects that have a sign by their meaning, ``(effect, parameter) →
 #: "positive" | "nonnegative"``; the rest may be negative. Read by the effect fits too.
@@ -397,6 +405,17 @@ def _flight_box(file: str, doc: Mapping[str, Any]) -> tuple[float, ...] | None:
     return tuple(values)
 
 
+def _imu_position(file: str, doc: Mapping[str, Any]) -> tuple[float, ...] | None:
+    """Validate the optional ``[imu]`` table: ``position``, three numbers (m, body FLU)."""
+    raw = doc.get("imu")
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping) or set(raw) != {"position"}:
+        raise_config_error(file, "[imu]", "a table with only position = [x, y, z] (m, body "
+                           "FLU, from the centre of gravity)", describe_value(raw))
+    return _vector3(file, "[imu].position", raw["position"], "m, body FLU", None)
+
+
 def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     """Check a parsed TOML document key by key and return normalised values.
 
@@ -416,7 +435,8 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
         tuple of 3 floats; ``[limits].allocation`` a string of `ALLOCATION_MODES`);
         ``effects``: list of (effect name, {parameter: float}) in
         file order; ``autopilot_frame``: the ``[autopilot] frame`` name or None;
-        ``box``: the ``[flight] box`` (6 floats, m) or None.
+        ``box``: the ``[flight] box`` (6 floats, m) or None; ``imu_position``: the
+        ``[imu] position`` (3 floats, m) or None.
 
     Raises
     ------
@@ -437,4 +457,4 @@ def validate_document(file: str, doc: Mapping[str, Any]) -> dict[str, Any]:
     return {"name": doc.get("name"), "mass": mass, "rotors": rotors, **tables,
             "effects": _effects(file, doc),
             "autopilot_frame": _autopilot_frame(file, doc, rotors),
-            "box": _flight_box(file, doc)}
+            "box": _flight_box(file, doc), "imu_position": _imu_position(file, doc)}

@@ -68,6 +68,9 @@ def vehicle_to_toml(config: VehicleConfig) -> str:
     if config.box is not None:
         lines += ["", "# Flight box, m, world ENU: x_min, y_min, z_min, x_max, y_max, z_max.",
                   "[flight]", f"box = {_toml_value(tuple(config.box))}"]
+    if config.imu_position is not None:
+        lines += ["", "# The IMU's offset from the centre of gravity, m, body FLU.", "[imu]",
+                  f"position = {_toml_value(tuple(config.imu_position))}"]
     # The tables are flat tables of floats (J a float triple): writing every field
     # keeps fields added to the dataclasses later saved without touching this function.
     for table, section in (("parameters", config.parameters), ("limits", config.limits),

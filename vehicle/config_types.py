@@ -27,8 +27,12 @@ from mavsysid.vehicle.parameters import (
 )
 
 __all__ = [
+    "ACCEL_BIAS_SIGMA",
+    "ACCEL_SIGMA",
     "ALLOCATION_MODES",
     "ANGULAR_NOISE_DENSITY",
+    "GYRO_BIAS_SIGMA",
+    "GYRO_SIGMA",
     "LINEAR_NOISE_DENSITY",
     "PARAMETER_NAMES",
     "PARAMETER_UNITS",
@@ -53,6 +57,22 @@ ALLOCATION_MODES: tuple[str, ...] = ("pseudo_inverse", "exact")
 LINEAR_NOISE_DENSITY = 0.02
 #: Default unmodelled angular acceleration noise density, rad/s²·√s.
 ANGULAR_NOISE_DENSITY = 0.02
+
+# IMU noise defaults, typical of the real PX4 logs of ../shared/real-logs (a Pixhawk
+# AUAV-X2.1, a Pixhawk 4 Pro, a Cube Orange, PX4 SITL; bench/imu_noise_real_logs.py): the
+# white noise of a logged sample, the σ of the samples minus their 15 Hz low-pass, is
+# 0.0005–0.005 rad/s (gyro) and 0.007–0.036 m/s² (accelerometer) in four of them, at rest
+# and in flight, up to 0.046 rad/s and 0.086 m/s² in the fifth; a constant bias shows at
+# rest as a mean gyro of 0–0.007 rad/s per axis and a |specific force| up to 0.19 m/s²
+# off g (docs/architecture.md, "Noise defaults").
+#: Gyro white noise σ per logged sample, rad/s.
+GYRO_SIGMA = 0.005
+#: Accelerometer white noise σ per logged sample, m/s².
+ACCEL_SIGMA = 0.04
+#: σ of a gyro's constant bias per axis, rad/s.
+GYRO_BIAS_SIGMA = 0.005
+#: σ of an accelerometer's constant bias per axis, m/s².
+ACCEL_BIAS_SIGMA = 0.1
 
 
 @dataclass(frozen=True)
@@ -177,6 +197,15 @@ class NoiseConfig:
         White-noise density of the unmodelled body force, N·√s (continuous time).
     moment_density : float
         White-noise density of the unmodelled body moment, N·m·√s.
+    gyro_sigma : float
+        IMU gyro white noise σ of each logged sample, rad/s, per axis.
+    accel_sigma : float
+        IMU accelerometer white noise σ of each logged sample, m/s², per axis.
+    gyro_bias_sigma : float
+        σ of the gyro's constant bias, rad/s, per axis (what remains after the
+        autopilot's calibration).
+    accel_bias_sigma : float
+        σ of the accelerometer's constant bias, m/s², per axis.
     """
 
     position_sigma: float = 0.0005
@@ -184,6 +213,10 @@ class NoiseConfig:
     rotor_speed_sigma: float = 0.0
     force_density: float = 0.0
     moment_density: float = 0.0
+    gyro_sigma: float = GYRO_SIGMA
+    accel_sigma: float = ACCEL_SIGMA
+    gyro_bias_sigma: float = GYRO_BIAS_SIGMA
+    accel_bias_sigma: float = ACCEL_BIAS_SIGMA
 
 
 @dataclass(frozen=True)
@@ -222,6 +255,9 @@ class VehicleConfig:
         controllers that fly a plan realise (autopilot mixers, mavsysid's simulators);
         "exact" only for a vehicle whose controller allocates over the null space. Kept
         out of `Limits`, whose fields are numbers (the trajectory file copies them).
+    imu_position : tuple of 3 float or None
+        ``[imu] position``: the IMU's offset from the centre of gravity, m, body FLU (the
+        lever arm between the accelerometer and the CoG). None: not stated.
     extra_quantities : tuple of EstimatedQuantity
         Nuisance quantities estimated beside θ, each with its prior and the term by which
         it enters the model (`mavsysid.vehicle.parameters`); the estimator adds those a
@@ -240,6 +276,7 @@ class VehicleConfig:
     autopilot_frame: str | None = None
     box: tuple[float, ...] | None = None
     allocation: str = "pseudo_inverse"
+    imu_position: tuple[float, float, float] | None = None
     extra_quantities: tuple[EstimatedQuantity, ...] = ()
 
     @property

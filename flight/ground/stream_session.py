@@ -115,6 +115,9 @@ class StreamSettings:
         Connect and run every check, list the box, the fence and the parameters the flight
         would change, and stop there: nothing armed, no parameter written, no fence
         uploaded.
+    download_log : bool
+        After a completed flight that landed, download the vehicle's own log of it
+        (`mavsysid.flight.ground.log_download`) into the flight directory.
     """
 
     connect: str
@@ -143,6 +146,7 @@ class StreamSettings:
     set_limits: bool = False
     lockstep: bool = False
     dry_run: bool = False
+    download_log: bool = False
 
 
 def _embedded_config(plan: TrajectoryFile, source: str) -> VehicleConfig:
@@ -241,7 +245,9 @@ class StreamSession:
         self._made_root = not Path(settings.log_dir).exists()
         self.directory = stream_flight_dir(Path(settings.log_dir), Path(path).stem)
         self.history = SetpointHistory()
-        self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history)
+        # The streamer says whether the vehicle sends its IMU, once the telemetry streams.
+        self.recorder = TelemetryRecorder(self.directory / "pose.csv", config, self.history,
+                                          imu=None)
         self.meta: dict[str, Any] = self._initial_meta(path)
         self._outcome: tuple[str, str | None] | None = None
         # Before any thread starts: they inherit the policy (see realtime's docstring).
@@ -396,6 +402,8 @@ class StreamSession:
         else:
             self.meta["reason"] = reason
         self.meta["tracking"] = self.recorder.tracking_summary()
+        if self.recorder.writes_imu:
+            self.meta.setdefault("imu", {}).update(self.recorder.imu_summary())
         self.meta.setdefault("telemetry_rates_hz", {})["flight"] = {
             k: round(v, 3) for k, v in sorted(self.recorder.rates().items())}
         if self.recorder.skipped:

@@ -3,8 +3,11 @@
 1. Check the plan (vehicle name, every 100 Hz sample inside the box), create the flight
    directory, connect, wait for the vehicle's heartbeat and tell ArduPilot from PX4.
 2. Ask for LOCAL_POSITION_NED, ATTITUDE_QUATERNION and ESC rpm at the telemetry rate
-   (SET_MESSAGE_INTERVAL), wait for a usable local position, measure the rates achieved,
-   and check the vehicle (airframe, health, rates): refuse, or warn.
+   and for the IMU at the rate the link carries (SET_MESSAGE_INTERVAL,
+   `mavsysid.flight.ground.imu_telemetry`), wait for a usable local position, measure the
+   rates achieved (the pose log carries the IMU if it came), and check the vehicle
+   (airframe, health, rates): refuse, or warn. With the log download on, ArduPilot logs
+   its IMU at the loop rate for the flight (LOG_BITMASK IMU_FAST, restored after).
 3. ArduPilot: GUIDED, arm, NAV_TAKEOFF to the start altitude. PX4: stream a hold
    setpoint, then OFFBOARD, arm, and climb with setpoints.
 4. Fly to the trajectory's start with a smooth move and settle there; stream the
@@ -38,6 +41,8 @@ from mavsysid.flight.ground.flight_safety import (
     install_safety,
     restore_parameters,
 )
+from mavsysid.flight.ground.imu_telemetry import request_imu
+from mavsysid.flight.ground.log_download import log_imu_fast
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
 from mavsysid.flight.ground.preflight import check_vehicle
 from mavsysid.flight.ground.rotor_watch import RotorWatch
@@ -144,6 +149,8 @@ class _Flight:
                 self.say(f"warning: the vehicle did not accept {name} at {rate:g} Hz: {why}")
         # Motor outputs for the log, a fallback for missing ESC rpm; a refusal is no matter.
         self.commands.set_message_interval("SERVO_OUTPUT_RAW", rate)
+        imu, imu_rate, refused = request_imu(self.commands.set_message_interval,
+                                             self.link.vehicle.autopilot, self.link.connect)
         # Health as it changes: the pre-arm wait judges the latest SYS_STATUS, and a vehicle
         # that sends none unasked (ArduPilot on a fresh link) would leave it judging one
         # stale reply for the whole wait.
@@ -151,8 +158,13 @@ class _Flight:
         self.commands.wait_position(self.settings.position_timeout)
         achieved = self._measure_rates(2.0)
         shown = ", ".join(f"{n} {achieved.get(n, 0.0):.1f} Hz" for n in names)
-        self.say(f"telemetry (asked {rate:g} Hz): {shown}")
+        self.say(f"telemetry (asked {rate:g} Hz): {shown}; {imu} {achieved.get(imu, 0.0):.1f} "
+                 f"Hz (asked {imu_rate:g} Hz{f', refused: {refused}' if refused else ''})")
         self.s.note_rates(achieved)
+        self.recorder.use_imu(achieved.get(imu, 0.0) > 0.0)
+        self.s.note("imu", {"message": imu, "requested_hz": imu_rate, "refused": refused,
+                            "preflight_hz": achieved.get(imu, 0.0),
+                            "in_pose_csv": bool(self.recorder.writes_imu)})
         if self.s.last_sys_status is None:
             self.commands.request_message("SYS_STATUS")
             self.link.poll(1.0)
@@ -164,6 +176,8 @@ class _Flight:
             self.say(f"warning: {warning}")
         report.raise_if_refused()
         check_session_limits(self.s, self.say)  # before anything is changed
+        if self.settings.download_log and self.link.vehicle.autopilot is Autopilot.ARDUPILOT:
+            log_imu_fast(self.s.parameters, self.say)  # recorded with the fence's changes
         install_safety(self.s, self._pose().position, self.say)
         self.say(before_arming(self.s, self._pose().position))
         self.link.watch_silence = True  # telemetry streams: a second of silence is a loss

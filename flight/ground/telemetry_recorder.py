@@ -9,6 +9,11 @@ vehicle's clock), carrying:
 - the latest ESC rpm received before it (ESC_TELEMETRY_1_TO_4 / _5_TO_8, ESC i = rotor
   i, rpm → rad/s). ESC telemetry carries no timestamp, and an autopilot sends it in the
   same tick just before the LOCAL_POSITION_NED, so it takes that row's stamp;
+- with the IMU (``imu``), the latest IMU sample received before it (RAW_IMU, HIGHRES_IMU
+  or SCALED_IMU, `mavsysid.flight.ground.imu_telemetry`) in the IMU columns, body FLU;
+  the samples between rows are in ``flight.tlog``. Whether the vehicle sends its IMU is
+  known only once the telemetry streams: until `use_imu` says so, rows are held in
+  memory (the ground rows before take-off), then written;
 - the target in effect at the vehicle at that time (``x_ref, y_ref, z_ref, yaw_ref``
   ENU, ``ref_active`` 1/0, ``t_traj`` its trajectory time or −1): the last setpoint
   sent before the row's time mapped onto the streamer's clock, advanced from the time
@@ -31,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from mavsysid.flight.ground.imu_telemetry import ImuTelemetry
 from mavsysid.flight.ground.setpoints import Setpoint
 from mavsysid.formats.poselog import PoseLogWriter
 from mavsysid.formats.tlog import ESC_TELEMETRY
@@ -67,6 +73,9 @@ STAMPING = {
                  "time with its own velocity and acceleration (p + v dt + a dt^2/2, as the "
                  "autopilot extrapolates); ref_active 0 and the measured pose when none "
                  "was in effect; t_traj = trajectory time of that target, -1 outside",
+    "imu": "the latest RAW_IMU (ArduPilot, mG and mrad/s), HIGHRES_IMU or SCALED_IMU "
+           "received before the row's LOCAL_POSITION_NED, FRD -> FLU; its own time_usec / "
+           "time_boot_ms is not the row's (meta.json imu.lag_s: row time minus IMU time)",
 }
 
 
@@ -156,11 +165,15 @@ class TelemetryRecorder:
         The vehicle: its rotor count k.
     history : SetpointHistory
         The setpoints sent, for the reference columns.
+    imu : bool or None
+        Write the IMU columns (True), not (False), or decide later (None: rows are held
+        until `use_imu`).
 
     Use `on_message` as a `MavlinkLink` listener.
     """
 
-    def __init__(self, path: Path, config: VehicleConfig, history: SetpointHistory) -> None:
+    def __init__(self, path: Path, config: VehicleConfig, history: SetpointHistory,
+                 imu: bool | None = False) -> None:
         self.config = config
         self.history = history
         self.offset = ClockOffset()
@@ -176,12 +189,47 @@ class TelemetryRecorder:
         self._has_att_q = False
         self._last_t = -math.inf
         self._track_sq, self._track_n, self._track_max = 0.0, 0, 0.0
-        self._writer = PoseLogWriter(path, self._k, EXTRA_COLUMNS)
+        self.imu = ImuTelemetry()
+        self._path = path
+        self._writer: PoseLogWriter | None = None
+        self._held: list[tuple[Any, ...]] = []
+        self._lags: list[float] = []
+        if imu is not None:
+            self.use_imu(imu)
 
     @property
     def rows(self) -> int:
         """Rows written so far."""
-        return self._writer.rows_written
+        return 0 if self._writer is None else self._writer.rows_written
+
+    @property
+    def writes_imu(self) -> bool | None:
+        """Whether the rows carry the IMU (None: not decided yet)."""
+        return None if self._writer is None else self._writer.imu
+
+    def use_imu(self, enabled: bool) -> None:
+        """Decide whether the rows carry the IMU; write the rows held until now (those
+        before the first IMU sample are left out with the IMU). Once only.
+
+        Parameters
+        ----------
+        enabled : bool
+            The vehicle sends its IMU: the rows carry it.
+        """
+        if self._writer is not None:
+            return
+        self._writer = PoseLogWriter(self._path, self._k, EXTRA_COLUMNS, imu=enabled)
+        held, self._held = self._held, []
+        for row in held:
+            self._write(*row)
+
+    def imu_summary(self) -> dict[str, Any]:
+        """The IMU in the rows: message, samples received, row time minus IMU time (s)."""
+        latest = self.imu.latest
+        lags = np.array(self._lags) if self._lags else np.zeros(1)
+        return {"message": None if latest is None else latest.message,
+                "samples_received": self.imu.count, "rows": len(self._lags),
+                "lag_s": {"mean": float(lags.mean()), "max": float(lags.max())}}
 
     def on_message(self, msg: Any, t_receipt: float) -> None:
         """Handle one message from the vehicle received at ``t_receipt`` (streamer s)."""
@@ -191,6 +239,8 @@ class TelemetryRecorder:
         self.last_seen[kind] = t_receipt
         if kind in _CLOCKED:
             self.offset.add(t_receipt, msg.time_boot_ms * 1e-3)
+        if self.imu.on_message(msg):
+            return
         if kind == "LOCAL_POSITION_NED":
             self._row(msg)
         elif kind == "ATTITUDE_QUATERNION":
@@ -232,9 +282,25 @@ class TelemetryRecorder:
                 self._track_n += 1
                 self._track_max = max(self._track_max, error)
         extra = dict(zip(EXTRA_COLUMNS, (*velocity, *ref_values), strict=True))
-        self._writer.write(t, position, q / np.linalg.norm(q), self._rotors, extra)
+        row = (t, position, q / np.linalg.norm(q), self._rotors.copy(), extra, self.imu.latest)
+        if self._writer is None:
+            self._held.append(row)
+        else:
+            self._write(*row)
         self._last_t = round(t, 6)
         self.latest = PoseSample(t, position, velocity, yaw, error, ref)
+
+    def _write(self, t: float, position: np.ndarray, q: np.ndarray, rotors: np.ndarray,
+               extra: dict[str, float], imu: Any) -> None:
+        assert self._writer is not None
+        if not self._writer.imu:
+            self._writer.write(t, position, q, rotors, extra)
+            return
+        if imu is None:
+            self.skipped["before the first IMU sample"] += 1
+            return
+        self._writer.write(t, position, q, rotors, extra, gyro=imu.gyro, accel=imu.accel)
+        self._lags.append(t - imu.t)
 
     def rates(self) -> dict[str, float]:
         """Achieved rate of each message type so far, Hz, from receipt times."""
@@ -258,5 +324,8 @@ class TelemetryRecorder:
         return self._esc_seen
 
     def close(self) -> None:
-        """Flush, fsync and close the pose log. Harmless twice."""
+        """Write any rows held (without the IMU if still undecided); flush, fsync and
+        close the pose log. Harmless twice."""
+        self.use_imu(False)
+        assert self._writer is not None
         self._writer.close()

@@ -11,7 +11,11 @@ flight uses; the topics themselves (fields, units, frames) are `mavsysid.formats
   interval) and ``vehicle_attitude`` (q, NED/FRD) at the high-rate profile's full rate;
 - ``vehicle_mocap_odometry`` (position, q) at 30 Hz when the flight had motion capture;
 - ``esc_status`` (``esc[i].esc_rpm``) and ``actuator_motors`` (relative thrust
-  ``control[i]``, NaN for unused motors), both high-rate topics.
+  ``control[i]``, NaN for unused motors), both high-rate topics;
+- ``sensor_combined`` (``gyro_rad``, ``accelerometer_m_s2``, body FRD) at IMU_INTEG_RATE
+  (250 Hz by default, logged at full rate): the IMU's samples, which PX4 averages over
+  each integration interval without a low-pass, with the parameters IMU_INTEG_RATE and,
+  when the flight states the IMU's position, EKF2_IMU_POS_X/Y/Z (m, body FRD).
 
 ESC i and motor control i are PX4's motor i + 1, mapped to the config's rotors by
 ``motor_order``. Timestamps are µs since boot; the flight starts ``boot_time`` after boot.
@@ -41,7 +45,7 @@ from mavsysid.formats.ulog import (
     write_ulog,
 )
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
-from mavsysid.vehicle.frames import enu_to_ned, quaternion_enu_to_ned
+from mavsysid.vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ned
 
 Stamp = Callable[[float], int]  # flight time, s → log time, µs since boot
 
@@ -56,6 +60,8 @@ class PX4LogSettings:
     ----------
     local_position_rate, attitude_rate, mocap_rate, esc_rate, motors_rate : float
         Hz of each topic (at most the flight's own rate is met).
+    imu_rate : float
+        Hz of sensor_combined (IMU_INTEG_RATE).
     motion_capture : bool
         Write ``vehicle_mocap_odometry`` (motion capture forwarded to PX4).
     boot_time : float
@@ -67,15 +73,22 @@ class PX4LogSettings:
     mocap_rate: float = 30.0
     esc_rate: float = 100.0
     motors_rate: float = 100.0
+    imu_rate: float = 250.0
     motion_capture: bool = False
     boot_time: float = 30.0
 
 
+#: The simulated vehicle's PX4 mode names → vehicle_status nav_state names.
+_NAV_STATE_OF_MODE = {"HOLD": "AUTO_LOITER", "LAND": "AUTO_LAND", "TAKEOFF": "AUTO_TAKEOFF"}
+
+
 def _status_rows(flight: LoggedFlight, stamp: Stamp) -> list[Row]:
     """vehicle_status at 2 Hz and at each mode change, from take-off to landed."""
-    p = flight.phases
-    changes = [(p.takeoff, "POSCTL"), (p.calibration_start, "OFFBOARD"),
-               (p.calibration_end, "AUTO_LAND")]
+    changes = [(t, _NAV_STATE_OF_MODE.get(name, name))
+               for t, name in flight.modes(("POSCTL", "OFFBOARD", "AUTO_LAND"))]
+    changes = [(t, name) for t, name in changes if name in NAVIGATION_STATES]
+    if not changes:
+        return []
     times = np.union1d(np.arange(flight.t[0], flight.t[-1], 0.5), [t for t, _ in changes])
     rows = []
     for t in times:
@@ -132,6 +145,26 @@ def _motor_topics(flight: LoggedFlight, order: np.ndarray, rotor_speed_max: floa
     return {"esc_status": esc, "actuator_motors": motors}
 
 
+def _imu_topics(flight: LoggedFlight, s: PX4LogSettings, stamp: Stamp
+                ) -> tuple[dict[str, list[Row]], dict[str, float | int]]:
+    """sensor_combined at the IMU rate (FRD), and the parameters that describe it."""
+    if flight.gyro is None or flight.accel is None:
+        return {}, {}
+    i = sample_indices(flight.t, s.imu_rate, phase=0.0005)
+    gyro, accel = flu_to_frd(flight.gyro[i]), flu_to_frd(flight.accel[i])
+    dt = round(1e6 / s.imu_rate)
+    rows = [{"timestamp": stamp(t), "gyro_integral_dt": dt, "accelerometer_integral_dt": dt,
+             **{f"gyro_rad[{c}]": gyro[j, c] for c in range(3)},
+             **{f"accelerometer_m_s2[{c}]": accel[j, c] for c in range(3)}}
+            for j, t in enumerate(flight.t[i])]
+    parameters: dict[str, float | int] = {"IMU_INTEG_RATE": round(s.imu_rate)}
+    if flight.imu_position is not None:
+        frd = flu_to_frd(np.asarray(flight.imu_position, dtype=float)).tolist()
+        parameters.update(zip(("EKF2_IMU_POS_X", "EKF2_IMU_POS_Y", "EKF2_IMU_POS_Z"), frd,
+                              strict=True))
+    return {"sensor_combined": rows}, parameters
+
+
 def write_px4_log(path: Path, flight: LoggedFlight, rotor_speed_max: float,
                   motor_order: Sequence[int], settings: PX4LogSettings | None = None) -> Path:
     """Write ``flight`` as PX4 would log it.
@@ -165,12 +198,13 @@ def write_px4_log(path: Path, flight: LoggedFlight, rotor_speed_max: float,
 
     stamp = microsecond_stamp(settings.boot_time)
 
+    imu, parameters = _imu_topics(flight, settings, stamp)
     topics = {"vehicle_status": _status_rows(flight, stamp),
               **_pose_topics(flight, settings, stamp),
-              **_motor_topics(flight, order, rotor_speed_max, settings, stamp)}
+              **_motor_topics(flight, order, rotor_speed_max, settings, stamp), **imu}
     formats = {name: fields for name, fields in PX4_TOPICS.items()
                if name in topics or name == "esc_report"}
     write_ulog(path, formats, topics, info={"sys_name": "PX4", "ver_sw": "v1.15.0",
                                             "sys_mcu": "mavsysid simulation"},
-               start_us=round(settings.boot_time * 1e6))
+               start_us=round(settings.boot_time * 1e6), parameters=parameters)
     return path

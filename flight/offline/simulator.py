@@ -4,9 +4,12 @@ The truth integrates the model's own dynamics kernel (`mavsysid.vehicle.dynamics
 with first-order motor lag on the rotor speeds (the config's `[motor].time_constant`)
 and any `TruthEffect` objects (`mavsysid.flight.offline.truth_step`). The controller runs
 at its own rate with perfect state feedback, holding its commands between ticks. At the
-log rate the simulator records what a motion-capture system and ESC telemetry would
-report: pose with noise (`mavsysid.flight.offline.sensor_noise`), and the actual (lagged)
-rotor speeds, into ``pose.csv``; and the true state into ``truth.csv``.
+log rate the simulator records what a motion-capture system, ESC telemetry and the
+vehicle's IMU would report: pose with noise (`mavsysid.flight.offline.sensor_noise`), the
+actual (lagged) rotor speeds, and the gyro and specific force with noise and constant
+biases (`mavsysid.flight.offline.imu_sensor`), into ``pose.csv``; and the true state and
+the true IMU reading into ``truth.csv`` (the IMU's biases and position into
+``meta.json``'s truth).
 
 Model effects (`mavsysid.vehicle.model_effects`) act on the truth in two ways: the vehicle
 config's ``[effects.NAME]`` tables are known physics, always simulated (meta.json
@@ -39,6 +42,7 @@ from mavsysid.flight.offline.effects import (
     effect_metadata,
     motor_time_constant,
 )
+from mavsysid.flight.offline.imu_sensor import ImuSensor
 from mavsysid.flight.offline.sensor_noise import SensorNoise
 from mavsysid.flight.offline.truth_step import advance_truth, summed_effect_wrench
 from mavsysid.formats.flight_log import FlightRecorder
@@ -66,9 +70,15 @@ class SimulationSettings:
     motor_lag : bool
         Apply the config's motor time constant on the truth side.
     sensor_noise : bool
-        Add the config's motion-capture and rotor-speed noise to the log.
+        Add the config's motion-capture, rotor-speed and IMU noise (and IMU biases) to
+        the log.
     seed : int
         Seed of the noise generator.
+    imu : bool
+        Record the IMU (gyro and accelerometer columns of ``pose.csv``).
+    imu_position : tuple of 3 float or None
+        The IMU's true offset from the centre of gravity, m, body FLU; None: the config's
+        ``[imu] position``, else the centre of gravity.
     """
 
     physics_rate: float = 1000.0
@@ -77,6 +87,8 @@ class SimulationSettings:
     motor_lag: bool = True
     sensor_noise: bool = True
     seed: int = 0
+    imu: bool = True
+    imu_position: tuple[float, float, float] | None = None
 
     def steps(self) -> tuple[int, int]:
         """(physics steps per control tick, control ticks per log sample)."""
@@ -149,6 +161,8 @@ class _Truth:
     args: tuple
     tick_effects: list[TruthEffect]
     step_effects: list[TruthEffect]
+    #: The extra body force and torque of the effects in the last physics step (N, N·m).
+    wrench: tuple[np.ndarray, np.ndarray] = (_ZERO, _ZERO)
 
     def advance(self, t: float, steps: int) -> None:
         """One control tick from time ``t``: ``steps`` physics steps under the effects.
@@ -159,13 +173,14 @@ class _Truth:
         held = _ZERO, _ZERO
         if self.tick_effects:
             held = summed_effect_wrench(self.tick_effects, t, self.y)
+        self.wrench = held
         if not self.step_effects:
             advance_truth(self.y, self.n_cmd, self.dt, steps, self.tau, *self.args, *held)
             return
         for j in range(steps):
             force, torque = summed_effect_wrench(self.step_effects, t + j * self.dt, self.y)
-            advance_truth(self.y, self.n_cmd, self.dt, 1, self.tau, *self.args,
-                          force + held[0], torque + held[1])
+            self.wrench = (force + held[0], torque + held[1])
+            advance_truth(self.y, self.n_cmd, self.dt, 1, self.tau, *self.args, *self.wrench)
 
 
 @dataclass
@@ -200,6 +215,7 @@ class Simulator:
         )
         if self.controller is None:
             self.controller = GeometricController(self.config)
+        self.imu: ImuSensor | None = None
         self.truth_effects: list[TruthEffect] = [*config_truth_effects(self.config),
                                                  *self.effects]
 
@@ -234,10 +250,11 @@ class Simulator:
         block = max(per_log, round(_REFERENCE_BLOCK_S * s.control_rate) // per_log * per_log)
         truth = self._start(trajectory)
         noise = SensorNoise(cfg, s.seed, enabled=s.sensor_noise)
+        self.imu = ImuSensor(cfg, s.seed, s.sensor_noise, s.imu_position) if s.imu else None
         log = _LogBuffers(n_control // per_log + 1, cfg.rotor_count)
         recorder = None
         if directory is not None:
-            recorder = FlightRecorder(directory, cfg, cfg.rotor_count)
+            recorder = FlightRecorder(directory, cfg, cfg.rotor_count, imu=s.imu)
             recorder.start(self._metadata(trajectory, description))
         self._warm_up(trajectory, truth)
         saturated = 0
@@ -253,7 +270,7 @@ class Simulator:
                     row = i // per_log
                     log.store(row, t, truth.y, truth.n_cmd, ref[0:3])
                     if recorder is not None:
-                        self._record(recorder, noise, t, truth.y, truth.n_cmd, ref)
+                        self._record(recorder, noise, row, t, truth, ref)
                     if progress is not None and row % int(s.log_rate) == 0:
                         progress(t, trajectory.duration)
                 if i == n_control:
@@ -310,19 +327,25 @@ class Simulator:
         return motor_time_constant(self.truth_effects, default)
 
     def _record(
-        self, recorder: FlightRecorder, noise: SensorNoise, t: float, y: np.ndarray,
-        n_cmd: np.ndarray, reference: np.ndarray,
+        self, recorder: FlightRecorder, noise: SensorNoise, row: int, t: float, truth: _Truth,
+        reference: np.ndarray,
     ) -> None:
-        """Write what the sensors would report, and the truth, at one log time."""
-        x = y[:STATE_DIM]
-        n = y[STATE_DIM:]
+        """Write what the sensors would report, and the truth, at log sample ``row``."""
+        x = truth.y[:STATE_DIM]
+        n = truth.y[STATE_DIM:]
+        n_cmd = truth.n_cmd
         position, quaternion = x[POS].copy(), x[ATT].copy()
         logged_n = n.copy()
         for effect in self.truth_effects:
             position, quaternion = effect.measure_pose(t, position, quaternion)
             logged_n = effect.logged_rotor_speeds(t, logged_n, n_cmd)
         position, quaternion, logged_n = noise.apply(position, quaternion, logged_n)
-        recorder.record(t, position, quaternion, logged_n, reference, x, n, n_cmd)
+        measured = true_imu = None
+        if self.imu is not None:
+            true_imu = self.imu.ideal(x, n, self.true_theta, *truth.wrench)
+            measured = self.imu.measure(*true_imu, sample=row)
+        recorder.record(t, position, quaternion, logged_n, reference, x, n, n_cmd,
+                        imu=measured, true_imu=true_imu)
 
     def _metadata(self, trajectory: Trajectory, description: dict | None) -> dict:
         s = self.settings
@@ -338,6 +361,7 @@ class Simulator:
                     (float(v) for v in self.true_theta), strict=True,
                 )),
                 "motor_time_constant_s": self._motor_time_constant(),
+                **({"imu": self.imu.truth()} if self.imu is not None else {}),
                 # Hidden from the model: what a diagnosis should find. Estimation reads
                 # only truth.parameters, and only to report errors.
                 "effects": [effect_metadata(e) for e in self.truth_effects if e.hidden],

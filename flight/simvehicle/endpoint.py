@@ -2,8 +2,10 @@
 
 One thread does everything, in sim-time ticks of 2 ms paced by `mavsysid.flight.simvehicle.clock`:
 drain the link without blocking and act on what came (commands → COMMAND_ACK,
-setpoints, parameters, stream requests), run the autopilot's timeouts and failsafes,
-send the telemetry that is due, and advance the physics by one tick. Falling behind
+setpoints, parameters, stream requests, log downloads), run the autopilot's timeouts and
+failsafes, send the telemetry that is due, record the tick in the vehicle's own flight
+log (`mavsysid.flight.simvehicle.onboard_log`, served over the log protocol), and advance
+the physics by one tick. Falling behind
 runs ticks back to back until caught up, so sim time stays wall time × speedup. With
 ``lockstep`` the loop also sends lock-step frames and reads the link only while a frame
 waits for the ground station's acknowledgement, into an inbox that the tick after the
@@ -31,10 +33,12 @@ from mavsysid.flight.offline.effects import (
     hidden_effect,
     motor_time_constant,
 )
+from mavsysid.flight.offline.imu_sensor import ImuSensor
 from mavsysid.flight.simvehicle.autopilot import SimAutopilot
 from mavsysid.flight.simvehicle.clock import SimClock, is_lockstep_stamp
 from mavsysid.flight.simvehicle.commands import CommandHandler
 from mavsysid.flight.simvehicle.link import COMPONENT_ID, SYSTEM_ID, mavlink, open_link
+from mavsysid.flight.simvehicle.onboard_log import LogService, OnboardLog
 from mavsysid.flight.simvehicle.params import ParameterProtocol, default_parameters
 from mavsysid.flight.simvehicle.physics import CONTROL_DT_US, SimVehicle, TruthLog
 from mavsysid.flight.simvehicle.services import (
@@ -79,15 +83,17 @@ class SimEndpoint:
         if s.signing_key is not None:
             self.link.setup_signing(s.signing_key, sign_outgoing=True,
                                     allow_unsigned_callback=self._reject)
+        imu = ImuSensor(config, s.seed, s.sensor_noise)
         try:
             truth = None if s.truth_log is None else TruthLog(
-                s.truth_log, config, self._meta(connect, true_theta), s.seed, s.sensor_noise)
+                s.truth_log, config, self._meta(connect, true_theta, imu), s.seed,
+                s.sensor_noise)
         except BaseException:
             self.link.close()
             raise
         self.vehicle = SimVehicle(config, true_theta, s.start, seed=s.seed,
                                   sensor_noise=s.sensor_noise, truth_log=truth,
-                                  effects=[hidden_effect(e) for e in s.hidden_effects])
+                                  effects=[hidden_effect(e) for e in s.hidden_effects], imu=imu)
         self.params = default_parameters(s.autopilot, config)
         self.autopilot = SimAutopilot(self.vehicle, s.autopilot, self.params, s.ekf_delay,
                                       deny_arm=s.deny_arm)
@@ -97,6 +103,9 @@ class SimEndpoint:
         self.param_protocol = ParameterProtocol(self.params,
                                                 bytewise=s.autopilot is Autopilot.PX4)
         self.missions = MissionProtocol(self.autopilot.fence)
+        self.onboard_log = OnboardLog(config, s.autopilot,
+                                      lambda name: self.params.get(name, 0.0))
+        self.log_service = LogService(self.onboard_log, lambda: self.autopilot.armed)
         self.clock = SimClock(CONTROL_DT_US * 1e-6, s.speedup, lockstep=s.lockstep)
         self._inbox: deque[Any] = deque()  # read while held for a lock-step ack
         self.received = self.sent = 0
@@ -116,6 +125,8 @@ class SimEndpoint:
             "TIMESYNC": lambda m: self._send(timesync_reply(m, self.vehicle.time_us * 1000)),
             **dict.fromkeys(MISSION_MESSAGES, self._on_mission),
             "FILE_TRANSFER_PROTOCOL": lambda m: self._send(ftp_refusal(m)),
+            **dict.fromkeys(("LOG_REQUEST_LIST", "LOG_REQUEST_DATA", "LOG_REQUEST_END",
+                             "LOG_ERASE"), self._on_log),
         }
 
     # --- control from other threads -------------------------------------------------------
@@ -187,6 +198,9 @@ class SimEndpoint:
             self._send(M.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
         for msg_id in self.scheduler.due(t_us):
             self._send(self.builder.build(msg_id))
+        for msg in self.log_service.due():
+            self._send(msg)
+        self.onboard_log.record(t, ap.armed, ap.mode, v)
         if self.clock.frame_due(t_us) and not self._silent:
             # Last of the tick: the frame says "everything up to t_us has been sent".
             self._send(M.MAVLink_system_time_message(t_us, t_us // 1000))
@@ -282,6 +296,10 @@ class SimEndpoint:
         for reply in self.param_protocol.handle(msg):
             self._send(reply)
 
+    def _on_log(self, msg) -> None:
+        for reply in self.log_service.handle(msg):
+            self._send(reply)
+
     def _on_mission(self, msg) -> None:
         for reply in self.missions.handle(msg):
             self._send(reply)
@@ -326,7 +344,7 @@ class SimEndpoint:
                           rejected=self.rejected(),
                           truth_log=None if log is None else log.recorder.directory)
 
-    def _meta(self, connect: str, true_theta: np.ndarray) -> dict[str, Any]:
+    def _meta(self, connect: str, true_theta: np.ndarray, imu: ImuSensor) -> dict[str, Any]:
         s = self.settings
         effects = [*config_truth_effects(self.config),
                    *(hidden_effect(e) for e in s.hidden_effects)]
@@ -345,6 +363,7 @@ class SimEndpoint:
                 "motor_time_constant_s": motor_time_constant(
                     effects, self.config.motor.time_constant),
                 "effects": [effect_metadata(e) for e in effects if e.hidden],
+                "imu": imu.truth(),
             },
             "model_effects": [effect_metadata(e) for e in effects if not e.hidden],
         }

@@ -131,7 +131,10 @@ def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> Parameter
             ("ARMING_CHECK", 1, i32),
             ("MOT_THST_EXPO", config.motor.thrust_expo, _REAL32), ("BATT_CAPACITY", 5000, i32),
             ("SR0_EXT_STAT", 1, i16), ("SR0_POSITION", 3, i16), ("SR0_EXTRA1", 4, i16),
-            ("SR0_EXTRA3", 1, i16),
+            ("SR0_EXTRA3", 1, i16), ("SR0_RAW_SENS", 0, i16),
+            # Copter's DEFAULT_LOG_BITMASK; IMU_FAST (bit 18) logs the IMU at the loop rate
+            # (mavsysid.flight.simvehicle.onboard_log).
+            ("LOG_BITMASK", 176126, i32), ("LOG_DISARMED", 0, i8),
         ])
     return ParameterTable([
         ("MAV_SYS_ID", 1, i32), ("COM_OF_LOSS_T", 1.0, _REAL32), ("COM_OBL_RC_ACT", 0, i32),

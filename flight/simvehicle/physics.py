@@ -9,6 +9,10 @@ published pose carries motion-capture-like noise
 (`mavsysid.flight.offline.sensor_noise.SensorNoise`), drawn once per tick.
 The truth log samples the true state at 200 Hz of sim time, between the two physics
 steps of a tick when needed (control runs at 500 Hz, so 5 ms falls mid-tick).
+The vehicle's IMU (`mavsysid.flight.offline.imu_sensor.ImuSensor`: the true gyro and
+specific force with constant biases and white noise; on the ground the reaction to
+gravity) is read once per tick for telemetry, and at the truth log's samples; its noise is
+indexed by the sample's time in ms, so the two agree where they coincide.
 
 Model effects (`mavsysid.flight.offline.effects`): the config's ``[effects]`` and any
 hidden ones act on the truth as in the offline simulator — their wrench evaluated once
@@ -34,6 +38,7 @@ from mavsysid.flight.offline.effects import (
     config_truth_effects,
     motor_time_constant,
 )
+from mavsysid.flight.offline.imu_sensor import ImuSensor
 from mavsysid.flight.offline.sensor_noise import SensorNoise
 from mavsysid.flight.offline.truth_step import advance_truth, summed_effect_wrench
 from mavsysid.flight.simvehicle.reference import (
@@ -103,19 +108,24 @@ class TruthLog:
 
     def __init__(self, directory: Path, config: VehicleConfig, meta: dict[str, Any],
                  seed: int, noise: bool) -> None:
-        self.recorder = FlightRecorder(directory, config, config.rotor_count)
+        self.recorder = FlightRecorder(directory, config, config.rotor_count, imu=True)
         self.recorder.start({**meta, "simulated": True})
         self._noise = SensorNoise(config, seed + 1, enabled=noise)
         self.closed = False
 
     def record(self, t: float, y: np.ndarray, n_cmd: np.ndarray, ref: np.ndarray,
-               effects: Sequence[TruthEffect] = ()) -> None:
+               effects: Sequence[TruthEffect] = (),
+               imu: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+               | None = None) -> None:
         """One row of each file at sim time ``t`` from the truth ``y = [x, n]``; ``effects``
-        change what ``pose.csv`` reports (pose and rotor-speed hooks)."""
+        change what ``pose.csv`` reports (pose and rotor-speed hooks); ``imu`` is the IMU's
+        (measured, true) reading, each (gyro, specific force), body FLU."""
         x, n = y[:STATE_DIM], y[STATE_DIM:]
         pos, quat, speeds = _sensed(effects, t, y, n_cmd)
         pos, quat, speeds = self._noise.apply(pos, quat, speeds)
-        self.recorder.record(t, pos, quat, speeds, ref, x, n, n_cmd)
+        measured, true = imu if imu is not None else ((np.zeros(3), np.zeros(3)),) * 2
+        self.recorder.record(t, pos, quat, speeds, ref, x, n, n_cmd, imu=measured,
+                             true_imu=true)
 
     def finish(self, status: str, summary: dict[str, Any]) -> None:
         """Close the files and write the final metadata (once)."""
@@ -156,12 +166,15 @@ class SimVehicle:
     effects : sequence of TruthEffect
         Hidden truth-side effects (`mavsysid.flight.offline.effects.hidden_effect`); the
         config's own ``effects`` are simulated too, before these.
+    imu : ImuSensor, optional
+        The vehicle's IMU; by default one at the config's ``[imu] position`` with biases
+        and noise from ``seed`` (none without ``sensor_noise``).
     """
 
     def __init__(self, config: VehicleConfig, true_theta: np.ndarray, start=(0.0, 0.0, 0.0),
                  yaw: float = 0.0, seed: int = 0, sensor_noise: bool = True,
                  truth_log: TruthLog | None = None,
-                 effects: Sequence[TruthEffect] = ()) -> None:
+                 effects: Sequence[TruthEffect] = (), imu: ImuSensor | None = None) -> None:
         k = config.rotor_count
         self.config = config
         self.true_theta = np.asarray(true_theta, dtype=float).reshape(6)
@@ -198,6 +211,9 @@ class SimVehicle:
         self._noise = SensorNoise(config, seed, enabled=sensor_noise)
         self._measured: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._measured_tick = -1
+        self.imu = imu if imu is not None else ImuSensor(config, seed, sensor_noise)
+        self._imu_reading: tuple[np.ndarray, np.ndarray] | None = None
+        self._imu_tick = -1
         self.idle_speed = self._idle_speed(config)
         self.hold_here()
         self._reset_shaper()
@@ -270,6 +286,21 @@ class SimVehicle:
             self._measured_tick = self.tick
         assert self._measured is not None
         return self._measured
+
+    def _imu_at(self, t_us: int) -> tuple[tuple[np.ndarray, np.ndarray],
+                                          tuple[np.ndarray, np.ndarray]]:
+        """The IMU's (measured, true) reading of the state now, sampled at ``t_us``."""
+        true = self.imu.ideal(self.y[:STATE_DIM], self.y[STATE_DIM:], self.true_theta,
+                              *self._wrench, landed=self.landed)
+        return self.imu.measure(*true, sample=t_us // 1000), true
+
+    def imu_measured(self) -> tuple[np.ndarray, np.ndarray]:
+        """The IMU's gyro (rad/s) and specific force (m/s²) at this tick, body FLU."""
+        if self._imu_tick != self.tick:
+            self._imu_reading = self._imu_at(self.time_us)[0]
+            self._imu_tick = self.tick
+        assert self._imu_reading is not None
+        return self._imu_reading
 
     # --- transitions -------------------------------------------------------------------
     def hold_here(self) -> None:
@@ -365,4 +396,5 @@ class SimVehicle:
 
     def _record(self, t_us: int) -> None:
         assert self.truth_log is not None
-        self.truth_log.record(t_us * 1e-6, self.y, self.n_cmd, self.ref, self._log_effects)
+        self.truth_log.record(t_us * 1e-6, self.y, self.n_cmd, self.ref, self._log_effects,
+                              self._imu_at(t_us))

@@ -9,8 +9,14 @@ Messages due in the same tick go out in a fixed order, LOCAL_POSITION_NED last, 
 a recorder sees the attitude and ESC rpm of a sample before its position. Due times are
 multiples of the interval in sim time, so a 50 Hz message is stamped 0, 20, 40, … ms.
 
+The IMU goes out as its autopilot sends it, off until asked for (SET_MESSAGE_INTERVAL,
+or ArduPilot's RAW_SENSORS stream group): ArduPilot RAW_IMU (its first IMU in mG and
+mrad/s, ``GCS_MAVLINK::send_raw_imu``, at ``time_usec`` since boot); PX4 HIGHRES_IMU (SI,
+``fields_updated`` flagging the accelerometer and gyro) and SCALED_IMU (mG, mrad/s). At
+most 250 Hz, like every message here.
+
 Everything is stamped with the sim time of the tick (time_boot_ms), converted to
-NED/FRD here, and built from the published (noisy) pose. The local NED origin is the
+NED/FRD here, and built from the published (noisy) pose and IMU. The local NED origin is the
 world ENU origin (0, 0, 0); home is the start position; GLOBAL_POSITION_INT places the
 origin at 47.397742° N, 8.545594° E, 488 m (PX4 SITL's default).
 """
@@ -26,6 +32,7 @@ from mavsysid.flight.simvehicle.fence import ALT_MAX, CIRCLE, POLYGON
 from mavsysid.flight.simvehicle.geodesy import enu_to_lat_lon
 from mavsysid.flight.simvehicle.link import mavlink
 from mavsysid.flight.simvehicle.physics import ORIGIN
+from mavsysid.formats.tlog import STANDARD_GRAVITY
 from mavsysid.vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ned, yaw_enu_to_ned
 from mavsysid.vehicle.rotation import quat_to_euler
 
@@ -43,12 +50,15 @@ _ESC_IDS = (M.MAVLINK_MSG_ID_ESC_TELEMETRY_1_TO_4, M.MAVLINK_MSG_ID_ESC_TELEMETR
             M.MAVLINK_MSG_ID_ESC_TELEMETRY_9_TO_12)
 _ESC_CLASSES = (M.MAVLink_esc_telemetry_1_to_4_message, M.MAVLink_esc_telemetry_5_to_8_message,
                 M.MAVLink_esc_telemetry_9_to_12_message)
+_IMU_IDS = (M.MAVLINK_MSG_ID_HIGHRES_IMU, M.MAVLINK_MSG_ID_SCALED_IMU, M.MAVLINK_MSG_ID_RAW_IMU)
 #: Send order within a tick.
 _ORDER = (M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_SYSTEM_TIME,
           M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
           M.MAVLINK_MSG_ID_FENCE_STATUS,
           M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, *_ESC_IDS,
-          M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+          *_IMU_IDS, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+#: HIGHRES_IMU.fields_updated: x, y, z of the accelerometer and of the gyro.
+_HIGHRES_IMU_FIELDS = 0b111111
 _POSITION_IDS = frozenset((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
                            M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_HOME_POSITION,
                            M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN))
@@ -79,6 +89,7 @@ def ardupilot_streams() -> dict[int, tuple[int, ...]]:
         M.MAV_DATA_STREAM_EXTRA1: (M.MAVLINK_MSG_ID_ATTITUDE,),
         M.MAV_DATA_STREAM_EXTRA3: (M.MAVLINK_MSG_ID_SYSTEM_TIME,
                                    M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, *_ESC_IDS),
+        M.MAV_DATA_STREAM_RAW_SENSORS: (M.MAVLINK_MSG_ID_RAW_IMU,),
     }
 
 
@@ -166,6 +177,10 @@ def default_rates(autopilot: Autopilot, rotor_count: int) -> dict[int, float]:
     if autopilot is Autopilot.ARDUPILOT:
         rates[M.MAVLINK_MSG_ID_EKF_STATUS_REPORT] = 1.0
         rates[M.MAVLINK_MSG_ID_FENCE_STATUS] = 1.0  # sent only while the fence is enabled
+        rates[M.MAVLINK_MSG_ID_RAW_IMU] = 0.0
+    else:
+        rates[M.MAVLINK_MSG_ID_HIGHRES_IMU] = 0.0
+        rates[M.MAVLINK_MSG_ID_SCALED_IMU] = 0.0
     return rates
 
 
@@ -202,6 +217,10 @@ class TelemetryBuilder:
         if autopilot.ardupilot:
             self._builders[M.MAVLINK_MSG_ID_EKF_STATUS_REPORT] = self.ekf_status_report
             self._builders[M.MAVLINK_MSG_ID_FENCE_STATUS] = self.fence_status
+            self._builders[M.MAVLINK_MSG_ID_RAW_IMU] = self.raw_imu
+        else:
+            self._builders[M.MAVLINK_MSG_ID_HIGHRES_IMU] = self.highres_imu
+            self._builders[M.MAVLINK_MSG_ID_SCALED_IMU] = self.scaled_imu
 
     def can_build(self, msg_id: int) -> bool:
         """Whether this vehicle has such a message at all."""
@@ -336,6 +355,28 @@ class TelemetryBuilder:
         custom = list(b"mavsysid")
         return M.MAVLink_autopilot_version_message(caps, version, 0, 0, 0, custom, [0] * 8,
                                                    [0] * 8, 0, 0, 0x6D617673, [0] * 18)
+
+    def _imu_frd(self) -> tuple[list[float], list[float]]:
+        """The IMU's gyro (rad/s) and specific force (m/s²) at this tick, body FRD."""
+        gyro, accel = self.vehicle.imu_measured()
+        return flu_to_frd(gyro).tolist(), flu_to_frd(accel).tolist()
+
+    def _milli(self) -> list[int]:
+        """The IMU as SCALED_IMU / RAW_IMU carry it: mG, then mrad/s (int16)."""
+        gyro, accel = self._imu_frd()
+        values = [a * 1000.0 / STANDARD_GRAVITY for a in accel] + [g * 1000.0 for g in gyro]
+        return [max(-32768, min(32767, round(v))) for v in values]
+
+    def highres_imu(self):
+        gyro, accel = self._imu_frd()
+        return M.MAVLink_highres_imu_message(self.vehicle.time_us, *accel, *gyro, 0.0, 0.0, 0.0,
+                                             0.0, 0.0, 0.0, 45.0, _HIGHRES_IMU_FIELDS, 0)
+
+    def scaled_imu(self):
+        return M.MAVLink_scaled_imu_message(self._ms(), *self._milli(), 0, 0, 0, 4500)
+
+    def raw_imu(self):
+        return M.MAVLink_raw_imu_message(self.vehicle.time_us, *self._milli(), 0, 0, 0, 0, 4500)
 
     def _esc_builder(self, block: int):
         cls = _ESC_CLASSES[block]

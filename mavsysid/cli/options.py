@@ -42,7 +42,7 @@ LINK_TIMEOUTS = ("speedup", "heartbeat_timeout", "prearm_timeout", "position_tim
 
 def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     """The link options of the commands that fly a vehicle (stream, experiment): signing,
-    clock speed-up, the waits before flying and the fence.
+    clock speed-up, the waits before flying, the fence and the log download.
 
     Parameters
     ----------
@@ -65,6 +65,10 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-fence", action="store_true",
                         help="fly without the autopilot's geofence around the box (by default "
                         "a vehicle without a working fence is refused)")
+    parser.add_argument("--no-log-download", action="store_true",
+                        help="after landing, do not download the vehicle's own log of the "
+                        "flight (by default it goes into the flight directory as "
+                        "autopilot.bin / autopilot.ulg)")
 
 
 def require_positive(args: argparse.Namespace, options: tuple[str, ...]) -> None:

@@ -61,7 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="true θ = nominal θ × F (one factor, or six for c_T,c_D,c_M,"
                         "j_x,j_y,j_z); the controller keeps the nominal θ (default: 1)")
     parser.add_argument("--no-noise", action="store_true",
-                        help="publish the true pose and rotor speeds")
+                        help="publish the true pose, rotor speeds and IMU (no noise, no IMU "
+                        "bias)")
     parser.add_argument("--hidden-effect", action="append", default=[], metavar="SPEC",
                         help="add a model effect to the truth only, as NAME:KEY=VALUE,... "
                         "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2; names: "

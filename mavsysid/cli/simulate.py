@@ -74,7 +74,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-rate", type=float, default=100.0, metavar="HZ",
                         help="pose log rate (default: 100)")
     parser.add_argument("--no-noise", action="store_true",
-                        help="log the true pose and rotor speeds without sensor noise")
+                        help="log the true pose, rotor speeds and IMU without sensor noise "
+                        "(nor IMU bias)")
     parser.add_argument("--no-motor-lag", action="store_true",
                         help="rotors reach commanded speeds instantly")
 

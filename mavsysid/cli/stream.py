@@ -176,7 +176,8 @@ def _settings(args: argparse.Namespace) -> StreamSettings:
         position_timeout=args.position_timeout, max_tracking_error=args.max_tracking_error,
         link_loss=args.link_loss, prearm_timeout=args.prearm_timeout,
         log_dir=args.log_dir, lockstep=args.lockstep, fence=not args.no_fence,
-        set_limits=args.set_limits, dry_run=args.dry_run)
+        set_limits=args.set_limits, dry_run=args.dry_run,
+        download_log=not args.no_log_download)
 
 
 def _replan_settings(args: argparse.Namespace) -> ReplanSettings | None:
