@@ -1,0 +1,211 @@
+"""The autopilot-loop model's prediction against flown flights: ArduCopter SITL and
+`mavsysid sim`.
+
+For each flight the trajectory that was streamed (``trajectory.json`` of the flight
+directory) is flown by `mavsysid.vehicle.autopilot_loop.fly` with the autopilot's own
+parameters (SITL: every PARM of its DataFlash log; `mavsysid sim`: its parameter table),
+starting at the trajectory's start as the streamer's ``meta.json`` places it on the
+autopilot's clock (``trajectory_window.start``), refined by the lag that best lines up the
+flown position with the setpoints. Compared with what was flown (``flight.tlog``:
+LOCAL_POSITION_NED, ATTITUDE_QUATERNION, SERVO_OUTPUT_RAW through the vehicle's motor
+curve; `mavsysid sim`: its ``truth.csv``): position, attitude (angle between the
+quaternions), yaw and rotor speeds, each as RMS, max and the lag that best aligns the
+prediction with the flight (cross-correlation, positive: the flight later) — beside the
+same numbers for the setpoints themselves (the exact-tracking assumption: the flatness
+map of the trajectory).
+
+    # fly on a fresh SITL per kind and seed (planned: `mavsysid experiment`; practitioner:
+    # the Lissajous with yaw), then compare
+    nice python bench/autopilot_prediction.py --sitl --seeds 1 --work DIR
+    # compare flights already flown on SITL (DIR as bench/sitl_practitioner.py leaves it)
+    python bench/autopilot_prediction.py --report DIR
+    # against `mavsysid sim` (lock-step), ArduPilot and PX4 personalities
+    nice python bench/autopilot_prediction.py --sim ardupilot px4 --work DIR
+    # the figure of one flight
+    python bench/autopilot_prediction.py --figure FLIGHT_DIR --out docs/images/x.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+VEHICLE = "sitl_quad"
+
+
+@dataclass
+class Flown:
+    """A flight as logged, on the trajectory's clock (s from its start), world ENU."""
+
+    t: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    rotor_t: np.ndarray
+    rotor_speeds: np.ndarray
+
+
+def dataflash_parameters(path: Path) -> dict[str, float]:
+    """Every PARM of a DataFlash log (the last value of each name)."""
+    from pymavlink import DFReader
+
+    log = DFReader.DFReader_binary(str(path))
+    values: dict[str, float] = {}
+    while (m := log.recv_match(type="PARM")) is not None:
+        values[m.Name] = float(m.Value)
+    return values
+
+
+def read_flown_tlog(flight: Path, config, start: float) -> Flown:
+    """Pose and rotor speeds of ``flight.tlog`` in ENU/FLU and the config's rotor order."""
+    from mavsysid.estimation.readers.autopilot_logs import read_autopilot_log
+    from mavsysid.formats.tlog import read_tlog
+
+    streams = read_autopilot_log(read_tlog, flight / "flight.tlog", config)
+    pose, rotors = streams.pose, streams.rotors
+    speeds = np.column_stack([r.values for r in rotors])
+    return Flown(pose.t - start, pose.values[:, :3], pose.values[:, 3:7],
+                 rotors[0].t - start, speeds)
+
+
+def read_flown_truth(flight: Path, start: float) -> Flown:
+    """The true pose and rotor speeds of a simulated flight's ``truth.csv``."""
+    import pandas as pd
+
+    truth = pd.read_csv(flight / "truth.csv")
+    t = truth["t"].to_numpy() - start
+    pos = truth[["x", "y", "z"]].to_numpy()
+    quat = truth[["qw", "qx", "qy", "qz"]].to_numpy()
+    speed_columns = [c for c in truth.columns if c.startswith("n") and c[1:].isdigit()]
+    return Flown(t, pos, quat, t, truth[speed_columns].to_numpy())
+
+
+def quaternion_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between attitudes, rad, row by row."""
+    dot = np.abs(np.sum(a * b, axis=1))
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+def yaw_of(q: np.ndarray) -> np.ndarray:
+    """Heading of the body x axis, rad, unwrapped."""
+    w, x, y, z = q.T
+    return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def lag_of(reference: np.ndarray, flown: np.ndarray, step: float, most: float = 1.0) -> float:
+    """The delay (s) of ``flown`` behind ``reference`` (1-D, same grid) that best aligns
+    their variations (largest cross-correlation within ±``most`` s)."""
+    a, b = reference - reference.mean(), flown - flown.mean()
+    shifts = np.arange(-int(most / step), int(most / step) + 1)
+    scores = [np.dot(a[max(0, -s):len(a) - max(0, s)], b[max(0, s):len(b) - max(0, -s)])
+              for s in shifts]
+    return float(shifts[int(np.argmax(scores))] * step)
+
+
+def channel_stats(error: np.ndarray) -> dict[str, float]:
+    """RMS and max of an error (rows: samples; columns: components summed as a norm)."""
+    norm = np.linalg.norm(error.reshape(len(error), -1), axis=1)
+    return {"rms": float(np.sqrt(np.mean(norm**2))), "max": float(np.max(norm))}
+
+
+def compare(trajectory, flown: Flown, loop, config, settle: float = 0.5) -> dict:
+    """Prediction and setpoints against the flown flight over the trajectory (plus
+    ``settle`` s), on the flight's pose times."""
+    from mavsysid.vehicle.autopilot_loop import fly
+    from mavsysid.vehicle.flatness import flat_to_state
+
+    span = trajectory.duration + settle
+    flight = fly(loop, trajectory, config, sample_step=0.0025, duration=span)
+    keep = (flown.t >= 0.0) & (flown.t <= span)
+    t = flown.t[keep]
+    idx = np.clip(np.searchsorted(flight.times, t), 0, len(flight.times) - 1)
+    flat = flat_to_state(trajectory.flat_outputs(t), config)
+    out = {"duration": trajectory.duration}
+    pos = flown.position[keep]
+    q = flown.quaternion[keep]
+    step = float(np.median(np.diff(t)))
+    for name, p_pos, p_q in (("model", flight.position[idx], flight.quaternion[idx]),
+                             ("setpoints", flat.position, flat.quaternion)):
+        yaw_err = np.angle(np.exp(1j * (yaw_of(q) - yaw_of(p_q))))
+        out[name] = {
+            "position_m": channel_stats(pos - p_pos),
+            "attitude_deg": {k: float(np.degrees(v)) for k, v in
+                             channel_stats(quaternion_angle(q, p_q)[:, None]).items()},
+            "yaw_deg": {k: float(np.degrees(v)) for k, v in
+                        channel_stats(yaw_err[:, None]).items()},
+            "lag_position_s": float(np.mean([lag_of(p_pos[:, i], pos[:, i], step)
+                                             for i in range(3)])),
+            "lag_yaw_s": lag_of(yaw_of(p_q), yaw_of(q), step),
+        }
+    rk = (flown.rotor_t >= 0.0) & (flown.rotor_t <= span)
+    rt = flown.rotor_t[rk]
+    ridx = np.clip(np.searchsorted(flight.times, rt), 0, len(flight.times) - 1)
+    rflat = flat_to_state(trajectory.flat_outputs(rt), config)
+    rstep = float(np.median(np.diff(rt)))
+    for name, speeds in (("model", flight.rotor_speeds[ridx]),
+                         ("setpoints", rflat.rotor_speeds)):
+        err = flown.rotor_speeds[rk] - speeds
+        out[name]["rotor_rad_s"] = {
+            "rms": float(np.sqrt(np.mean(err**2))), "max": float(np.max(np.abs(err))),
+            "lag_s": float(np.mean([lag_of(speeds[:, i], flown.rotor_speeds[rk][:, i], rstep)
+                                    for i in range(speeds.shape[1])]))}
+    return out
+
+
+def sitl_flight(kind_dir: Path):
+    """(flight directory, DataFlash log) of one SITL flight bench/sitl_practitioner.py left."""
+    flights = [p for p in (kind_dir / "logs").iterdir() if p.is_dir()]
+    logs = sorted((kind_dir / "sitl" / "logs").glob("*.BIN"))
+    return (flights[0] if flights else None), (logs[-1] if logs else None)
+
+
+def compare_sitl(flight: Path, dataflash: Path) -> dict:
+    """`compare` for one SITL flight, its loop set from the log's parameters."""
+    from mavsysid.formats.trajectory_file import read_trajectory
+    from mavsysid.vehicle.autopilot_loop import AutopilotLoop
+    from mavsysid.vehicle.config import load_vehicle
+
+    config = load_vehicle(VEHICLE)
+    meta = json.loads((flight / "meta.json").read_text())
+    trajectory = read_trajectory(flight / "trajectory.json").trajectory
+    loop = AutopilotLoop.from_parameters("ardupilot", dataflash_parameters(dataflash),
+                                         meta["stream"]["setpoint_rate_hz"])
+    flown = read_flown_tlog(flight, config, meta["trajectory_window"]["start"])
+    return compare(trajectory, flown, loop, config)
+
+
+def report_rows(name: str, result: dict) -> None:
+    """Print one flight's comparison, model and setpoints."""
+    for kind in ("model", "setpoints"):
+        r = result[kind]
+        print(f"{name:28s} {kind:9s} pos {100 * r['position_m']['rms']:5.1f}/"
+              f"{100 * r['position_m']['max']:5.1f} cm lag {r['lag_position_s']:+.3f} s | "
+              f"att {r['attitude_deg']['rms']:4.1f}/{r['attitude_deg']['max']:4.1f}° | "
+              f"yaw {r['yaw_deg']['rms']:4.1f}/{r['yaw_deg']['max']:5.1f}° lag "
+              f"{r['lag_yaw_s']:+.3f} s | rotors {r['rotor_rad_s']['rms']:5.1f}/"
+              f"{r['rotor_rad_s']['max']:5.1f} rad/s lag {r['rotor_rad_s']['lag_s']:+.3f} s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--report", type=Path, help="SITL flights bench/sitl_practitioner.py "
+                        "left in this folder")
+    args = parser.parse_args()
+    if args.report:
+        for kind_dir in sorted(args.report.glob("*/seed*")):
+            flight, dataflash = sitl_flight(kind_dir)
+            if flight is None or dataflash is None:
+                continue
+            report_rows(f"{kind_dir.parent.name} {kind_dir.name}", compare_sitl(flight,
+                                                                                dataflash))
+
+
+if __name__ == "__main__":
+    main()
