@@ -181,6 +181,90 @@ def compare_sitl(flight: Path, dataflash: Path) -> dict:
     return compare(trajectory, flown, loop, config)
 
 
+def fly_sitl(work: Path, seeds: list[int]) -> None:
+    """A planned and a practitioner's flight per seed on a fresh SITL each
+    (`bench/sitl_practitioner.py`'s), kept under ``work/KIND/seedS``."""
+    from bench.sitl_practitioner import SITL_PARMS, fly_planned, fly_practitioner
+    from tests.support.sitl import running_sitl
+
+    settings = argparse.Namespace(budget=20.0, samples=200, refine_steps=300)
+    for seed in seeds:
+        for kind in ("planned", "practitioner"):
+            where = work / kind / f"seed{seed}"
+            with running_sitl(where / "sitl", defaults=[SITL_PARMS], model="x") as sitl:
+                text = (fly_planned(sitl.connect, seed, settings, where / "logs")
+                        if kind == "planned" else
+                        fly_practitioner(sitl.connect, settings, where / "logs"))
+            (where / "run.out").write_text(text)
+            print(f"{kind} seed {seed}: {text.splitlines()[0]}", flush=True)
+
+
+def fly_sim(work: Path, autopilot: str, trajectory_file: Path) -> Path:
+    """``trajectory_file`` streamed to `mavsysid sim --autopilot AUTOPILOT` (lock-step, no
+    noise, its truth logged); the flight directory, with ``truth.csv`` copied in."""
+    import shutil
+
+    from mavsysid.flight.loopback_ports import free_udp_port
+
+    from tests.support.stream_flights import SimProcess, flight_dir, run_stream
+
+    port = free_udp_port()
+    truth = work / "truth"
+    with SimProcess(work / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--vehicle",
+                    VEHICLE, "--autopilot", autopilot, "--speedup", "4", "--no-noise",
+                    "--truth-log", str(truth)) as sim:
+        sim.wait_ready(timeout=300)
+        done = run_stream(trajectory_file, "--connect", f"udp:127.0.0.1:{port}", "--vehicle",
+                          VEHICLE, "--speedup", "4", "--log-dir", str(work / "logs"),
+                          cwd=work, timeout=600)
+    if done.returncode != 0:
+        raise RuntimeError(f"stream exit {done.returncode}: {done.stderr[-2000:]}")
+    flight = flight_dir(work / "logs")
+    shutil.copy(truth / "truth.csv", flight / "truth.csv")
+    shutil.copy(trajectory_file, flight / "trajectory.json")
+    return flight
+
+
+def compare_sim(flight: Path, autopilot: str) -> dict:
+    """`compare` for a `mavsysid sim` flight, its loop set from the sim's parameter table."""
+    from mavsysid.flight.autopilot_modes import Autopilot
+    from mavsysid.flight.simvehicle.params import default_parameters
+    from mavsysid.formats.trajectory_file import read_trajectory
+    from mavsysid.vehicle.autopilot_loop import AutopilotLoop
+    from mavsysid.vehicle.config import load_vehicle
+
+    config = load_vehicle(VEHICLE)
+    meta = json.loads((flight / "meta.json").read_text())
+    table = default_parameters(Autopilot[autopilot.upper()], config)
+    values = {table.at(i).name: table.at(i).value for i in range(len(table))}
+    loop = AutopilotLoop.from_parameters(autopilot, values, meta["stream"]["setpoint_rate_hz"])
+    trajectory = read_trajectory(flight / "trajectory.json").trajectory
+    flown = read_flown_truth(flight, meta["trajectory_window"]["start"])
+    return compare(trajectory, flown, loop, config)
+
+
+def sim_flights(work: Path, autopilots: list[str]) -> None:
+    """The practitioner's figure (the SITL limits) and a planned flight of the SITL
+    bench, each streamed to `mavsysid sim` with each autopilot personality."""
+    from mavsysid.experiments.baselines import practitioner_excitation
+    from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajectory_file
+    from mavsysid.pipeline.plan import autopilot_limits
+    from mavsysid.planner.settings import PlannerSettings
+    from mavsysid.vehicle.config import load_vehicle
+
+    config = load_vehicle(VEHICLE)
+    limits = autopilot_limits(REPO / "bench" / "arducopter_stock_limits.parm")[1]
+    settings = PlannerSettings(budget=20.0, autopilot_limits=limits)
+    work.mkdir(parents=True, exist_ok=True)
+    figure = work / "practitioner.json"
+    write_trajectory_file(figure, trajectory_file_for(
+        practitioner_excitation(config, settings).trajectory, config, "practitioner",
+        settings.box))
+    for autopilot in autopilots:
+        flight = fly_sim(work / autopilot, autopilot, figure)
+        report_rows(f"sim {autopilot} practitioner", compare_sim(flight, autopilot))
+
+
 def report_rows(name: str, result: dict) -> None:
     """Print one flight's comparison, model and setpoints."""
     for kind in ("model", "setpoints"):
@@ -197,7 +281,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--report", type=Path, help="SITL flights bench/sitl_practitioner.py "
                         "left in this folder")
+    parser.add_argument("--sitl", action="store_true", help="fly on SITL first (--work)")
+    parser.add_argument("--sim", nargs="+", choices=("ardupilot", "px4"),
+                        help="fly on mavsysid sim with these personalities (--work)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1])
+    parser.add_argument("--work", type=Path)
     args = parser.parse_args()
+    if args.sim:
+        sim_flights(args.work, args.sim)
+        return
+    if args.sitl:
+        fly_sitl(args.work, args.seeds)
+        args.report = args.work
     if args.report:
         for kind_dir in sorted(args.report.glob("*/seed*")):
             flight, dataflash = sitl_flight(kind_dir)
