@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from mavsysid.vehicle import arducopter_loop, px4_loop
@@ -183,12 +184,12 @@ class AutopilotLoop:
         """
         return dict(self.parameters)[name]
 
-    @property
+    @cached_property
     def loop_rate(self) -> float:
         """The rate its controllers run at, Hz."""
         return self.value("SCHED_LOOP_RATE") if self.autopilot == "ardupilot" else 400.0
 
-    @property
+    @cached_property
     def hover_throttle(self) -> float:
         """The throttle (thrust share) that holds the vehicle's weight."""
         return self.value("MOT_THST_HOVER" if self.autopilot == "ardupilot"
@@ -331,16 +332,32 @@ def fly(loop: AutopilotLoop, trajectory: Trajectory, config: VehicleConfig,
     step = tick if sample_step is None else float(sample_step)
     per_sample = max(1, round(step / tick))
     samples = max(1, round(span / step))
-    dt = span / (samples * per_sample)
     kernel = _KERNELS[loop.autopilot]
-    params = loop.kernel_parameters(config, dt, theta)
+    params = _kernel_parameters(loop, config, theta)
+    params[0] = span / (samples * per_sample)  # the tick, P_DT of either kernel
     rows = setpoint_rows(trajectory, loop.setpoint_rate, span, start)
-    f = trajectory.flat_outputs(np.array([start]))
-    state = kernel.initial_state(f.position[0], f.velocity[0], f.acceleration[0],
-                                 float(f.yaw[0]), float(f.yaw_rate[0]), loop.hover_throttle)
+    state = kernel.initial_state(rows[0, 1:4], rows[0, 4:7], rows[0, 7:10], float(rows[0, 10]),
+                                 float(rows[0, 11]), loop.hover_throttle)
     out = np.empty((samples + 1, kernel.RECORD_COLUMNS))
     kernel.run_loop(params, rows, state, samples * per_sample, per_sample, out)
     return flown_flight(out, config, theta)
+
+
+_PARAMETER_CACHE: dict[tuple, tuple[VehicleConfig, np.ndarray]] = {}
+
+
+def _kernel_parameters(loop: AutopilotLoop, config: VehicleConfig, theta: np.ndarray
+                       ) -> np.ndarray:
+    """A copy of ``loop``'s kernel parameters for ``config`` at ``theta`` (kept: the
+    planner flies thousands of segments through one loop)."""
+    key = (loop, id(config), theta.tobytes())
+    hit = _PARAMETER_CACHE.get(key)
+    if hit is None or hit[0] is not config:
+        if len(_PARAMETER_CACHE) >= 64:
+            _PARAMETER_CACHE.clear()
+        hit = (config, loop.kernel_parameters(config, 1.0 / loop.loop_rate, theta))
+        _PARAMETER_CACHE[key] = hit
+    return hit[1].copy()
 
 
 def flown_flight(records: np.ndarray, config: VehicleConfig, theta: np.ndarray) -> FlownFlight:
