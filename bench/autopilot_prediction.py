@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -115,14 +115,52 @@ def channel_stats(error: np.ndarray) -> dict[str, float]:
     return {"rms": float(np.sqrt(np.mean(norm**2))), "max": float(np.max(norm))}
 
 
-def compare(trajectory, flown: Flown, loop, config, settle: float = 0.5) -> dict:
+def received_setpoints(dataflash: Path, trajectory, start: float, rate: float) -> np.ndarray:
+    """The setpoints as ArduCopter received them (GUIP: its clock, position, velocity,
+    acceleration) over the trajectory, rows as `fly_setpoints` takes them (t from the
+    trajectory's start on the autopilot's clock); the yaw and yaw rate of the trajectory
+    sample each one is (the nearest in position to its expected index)."""
+    from pymavlink import DFReader
+
+    log = DFReader.DFReader_binary(str(dataflash))
+    rows = []
+    while (m := log.recv_match(type="GUIP")) is not None:
+        rows.append((m.TimeUS * 1e-6 - start, m.pY, m.pX, m.pZ, m.vY, m.vX, m.vZ,
+                     m.aY, m.aX, m.aZ))
+    got = np.array(rows)
+    got = got[(got[:, 0] >= -0.5 / rate) & (got[:, 0] <= trajectory.duration + 0.5)]
+    k_all = np.arange(0, int(trajectory.duration * rate) + 1)
+    samples = trajectory.flat_outputs(k_all / rate)
+    out, last = [], 0
+    for row in got:
+        expected = round(float(row[0]) * rate)
+        window = np.arange(max(last, expected - 15), min(k_all[-1], expected + 15) + 1)
+        if window.size == 0:
+            continue
+        k = int(window[np.argmin(np.linalg.norm(samples.position[window] - row[1:4], axis=1))])
+        last = k
+        out.append([*row, samples.yaw[k], samples.yaw_rate[k]])
+    return np.array(out)
+
+
+def compare(trajectory, flown: Flown, loop, config, settle: float = 0.5,
+            received: np.ndarray | None = None) -> dict:
     """Prediction and setpoints against the flown flight over the trajectory (plus
-    ``settle`` s), on the flight's pose times."""
-    from mavsysid.vehicle.autopilot_loop import fly
+    ``settle`` s), on the flight's pose times; the prediction from the setpoints as the
+    autopilot ``received`` them when given (`received_setpoints`), else from the
+    trajectory at the streamer's nominal rate."""
+    from mavsysid.vehicle.autopilot_loop import fly, fly_setpoints
     from mavsysid.vehicle.flatness import flat_to_state
 
     span = trajectory.duration + settle
-    flight = fly(loop, trajectory, config, sample_step=0.0025, duration=span)
+    if received is None:
+        flight = fly(loop, trajectory, config, sample_step=0.0025, duration=span)
+    else:
+        shift = float(received[0, 0])
+        rows = received.copy()
+        rows[:, 0] -= shift
+        flight = fly_setpoints(loop, rows, config, sample_step=0.0025, duration=span)
+        flight = replace(flight, times=flight.times + shift)
     keep = (flown.t >= 0.0) & (flown.t <= span)
     t = flown.t[keep]
     idx = np.clip(np.searchsorted(flight.times, t), 0, len(flight.times) - 1)
@@ -175,10 +213,15 @@ def compare_sitl(flight: Path, dataflash: Path) -> dict:
     config = load_vehicle(VEHICLE)
     meta = json.loads((flight / "meta.json").read_text())
     trajectory = read_trajectory(flight / "trajectory.json").trajectory
-    loop = AutopilotLoop.from_parameters("ardupilot", dataflash_parameters(dataflash),
-                                         meta["stream"]["setpoint_rate_hz"])
-    flown = read_flown_tlog(flight, config, meta["trajectory_window"]["start"])
-    return compare(trajectory, flown, loop, config)
+    rate = meta["stream"]["setpoint_rate_hz"]
+    loop = AutopilotLoop.from_parameters("ardupilot", dataflash_parameters(dataflash), rate)
+    start = meta["trajectory_window"]["start"]
+    flown = read_flown_tlog(flight, config, start)
+    out = compare(trajectory, flown, loop, config)
+    out["received"] = compare(trajectory, flown, loop, config,
+                              received=received_setpoints(dataflash, trajectory, start,
+                                                          rate))["model"]
+    return out
 
 
 def fly_sitl(work: Path, seeds: list[int]) -> None:
@@ -265,9 +308,61 @@ def sim_flights(work: Path, autopilots: list[str]) -> None:
         report_rows(f"sim {autopilot} practitioner", compare_sim(flight, autopilot))
 
 
+def figure(kind_dir: Path, out: Path) -> None:
+    """Flown, predicted and set: position, yaw and rotor 1 of one SITL flight."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mavsysid.formats.trajectory_file import read_trajectory
+    from mavsysid.vehicle.autopilot_loop import AutopilotLoop, fly
+    from mavsysid.vehicle.config import load_vehicle
+    from mavsysid.vehicle.flatness import flat_to_state
+
+    flight, dataflash = sitl_flight(kind_dir)
+    config = load_vehicle(VEHICLE)
+    meta = json.loads((flight / "meta.json").read_text())
+    trajectory = read_trajectory(flight / "trajectory.json").trajectory
+    loop = AutopilotLoop.from_parameters("ardupilot", dataflash_parameters(dataflash))
+    flown = read_flown_tlog(flight, config, meta["trajectory_window"]["start"])
+    keep = (flown.t >= 0.0) & (flown.t <= trajectory.duration + 0.5)
+    rkeep = (flown.rotor_t >= 0.0) & (flown.rotor_t <= trajectory.duration + 0.5)
+    flown = Flown(flown.t[keep], flown.position[keep], flown.quaternion[keep],
+                  flown.rotor_t[rkeep], flown.rotor_speeds[rkeep])
+    pred = fly(loop, trajectory, config, sample_step=0.01, duration=trajectory.duration + 0.5)
+    flat = flat_to_state(trajectory.flat_outputs(pred.times), config)
+    fig, axes = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
+    at = np.interp
+    for i, name in enumerate("xy"):
+        axes[i].plot(flown.t, 100 * (flown.position[:, i] - at(flown.t, pred.times,
+                                                                flat.position[:, i])),
+                     "k", label="flown − set")
+        axes[i].plot(pred.times, 100 * (pred.position[:, i] - flat.position[:, i]), "r",
+                     label="predicted − set")
+        axes[i].set_ylabel(f"{name} off the setpoint, cm")
+    axes[0].legend(loc="upper right")
+    axes[2].plot(flown.t, np.degrees(yaw_of(flown.quaternion)
+                                     - at(flown.t, pred.times, yaw_of(flat.quaternion))), "k")
+    axes[2].plot(pred.times, np.degrees(pred.yaw - yaw_of(flat.quaternion)), "r")
+    axes[2].set_ylabel("yaw off the setpoint, °")
+    axes[3].plot(flown.rotor_t, flown.rotor_speeds[:, 0], "k", label="flown (motor output)")
+    axes[3].plot(pred.times, pred.rotor_speeds[:, 0], "r", label="predicted")
+    axes[3].plot(pred.times, flat.rotor_speeds[:, 0], "b--", label="set (flatness)")
+    axes[3].set_ylabel("rotor 1, rad/s")
+    axes[3].legend(loc="upper right")
+    axes[3].set_xlabel("trajectory time, s")
+    axes[3].set_xlim(0.0, trajectory.duration + 0.5)
+    fig.suptitle(f"ArduCopter SITL, {kind_dir.parent.name} {kind_dir.name}: flown against "
+                 "the autopilot-loop prediction")
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+
+
 def report_rows(name: str, result: dict) -> None:
     """Print one flight's comparison, model and setpoints."""
-    for kind in ("model", "setpoints"):
+    for kind in ("model", "received", "setpoints"):
+        if kind not in result:
+            continue
         r = result[kind]
         print(f"{name:28s} {kind:9s} pos {100 * r['position_m']['rms']:5.1f}/"
               f"{100 * r['position_m']['max']:5.1f} cm lag {r['lag_position_s']:+.3f} s | "
@@ -286,7 +381,12 @@ def main() -> None:
                         help="fly on mavsysid sim with these personalities (--work)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1])
     parser.add_argument("--work", type=Path)
+    parser.add_argument("--figure", type=Path, help="a SITL flight's folder (KIND/seedS)")
+    parser.add_argument("--out", type=Path, default=Path("autopilot_prediction.png"))
     args = parser.parse_args()
+    if args.figure:
+        figure(args.figure, args.out)
+        return
     if args.sim:
         sim_flights(args.work, args.sim)
         return

@@ -34,6 +34,7 @@ __all__ = [
     "FlownFlight",
     "flown_flight",
     "fly",
+    "fly_setpoints",
     "loop_parameter_names",
     "setpoint_rows",
     "torque_per_output",
@@ -307,7 +308,8 @@ def fly(loop: AutopilotLoop, trajectory: Trajectory, config: VehicleConfig,
     """Predict the flight ``loop`` flies when ``trajectory`` is streamed to it.
 
     The loop starts in steady flight on the trajectory at ``start`` (s of the
-    trajectory) and receives its setpoints from then on at ``loop.setpoint_rate``.
+    trajectory) and receives its setpoints from then on at ``loop.setpoint_rate``
+    (`setpoint_rows`, `fly_setpoints`).
 
     Parameters
     ----------
@@ -326,8 +328,30 @@ def fly(loop: AutopilotLoop, trajectory: Trajectory, config: VehicleConfig,
     start : float
         Trajectory time of the first setpoint, s.
     """
-    theta = config.theta if theta is None else np.asarray(theta, dtype=float)
     span = trajectory.duration - start if duration is None else float(duration)
+    rows = setpoint_rows(trajectory, loop.setpoint_rate, span, start)
+    return fly_setpoints(loop, rows, config, theta, sample_step, span)
+
+
+def fly_setpoints(loop: AutopilotLoop, rows: np.ndarray, config: VehicleConfig,
+                  theta: np.ndarray | None = None, sample_step: float | None = None,
+                  duration: float | None = None) -> FlownFlight:
+    """Predict the flight ``loop`` flies from setpoints as they arrive.
+
+    Parameters
+    ----------
+    loop : AutopilotLoop
+    rows : ndarray, shape (M, 12)
+        Setpoints [t, p (3), v (3), a (3), yaw, yaw rate] (s, m, m/s, m/s², rad, rad/s,
+        world ENU) in the order they arrive, t from 0; the loop starts in steady flight on
+        the first.
+    config, theta, sample_step
+        As for `fly`.
+    duration : float, optional
+        How long to fly, s (default: to the last setpoint).
+    """
+    theta = config.theta if theta is None else np.asarray(theta, dtype=float)
+    span = float(rows[-1, 0]) if duration is None else float(duration)
     tick = 1.0 / loop.loop_rate
     step = tick if sample_step is None else float(sample_step)
     per_sample = max(1, round(step / tick))
@@ -335,11 +359,11 @@ def fly(loop: AutopilotLoop, trajectory: Trajectory, config: VehicleConfig,
     kernel = _KERNELS[loop.autopilot]
     params = _kernel_parameters(loop, config, theta)
     params[0] = span / (samples * per_sample)  # the tick, P_DT of either kernel
-    rows = setpoint_rows(trajectory, loop.setpoint_rate, span, start)
     state = kernel.initial_state(rows[0, 1:4], rows[0, 4:7], rows[0, 7:10], float(rows[0, 10]),
                                  float(rows[0, 11]), loop.hover_throttle)
     out = np.empty((samples + 1, kernel.RECORD_COLUMNS))
-    kernel.run_loop(params, rows, state, samples * per_sample, per_sample, out)
+    kernel.run_loop(params, np.ascontiguousarray(rows, dtype=float), state,
+                    samples * per_sample, per_sample, out)
     return flown_flight(out, config, theta)
 
 
