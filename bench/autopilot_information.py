@@ -17,6 +17,7 @@ D-opt det(Σθ)^(1/6) (SI) and the planning time (wall, sample-budgeted search).
 
     nice python bench/autopilot_information.py [--seeds 1 2 3] [--budget 20]
         [--samples 200] [--refine-steps 300] [--time T] [--json OUT]
+    python bench/autopilot_information.py --timing [--seeds 1 2 3]
     python bench/autopilot_information.py --save-loop DATAFLASH.BIN OUT.parm
 """
 
@@ -67,8 +68,9 @@ def flights(seed: int, args: argparse.Namespace) -> dict:
     for kind, autopilot in (("exact", None), ("model", loop)):
         began = time.perf_counter()
         result = plan(config, replace(settings, autopilot=autopilot))
-        out[kind] = (result.trajectory, time.perf_counter() - began)
-    out["practitioner"] = (practitioner_excitation(config, settings).trajectory, 0.0)
+        out[kind] = (result.trajectory, time.perf_counter() - began, result.stats.samples,
+                     result.stats.refine_steps)
+    out["practitioner"] = (practitioner_excitation(config, settings).trajectory, 0.0, 0, 0)
     return out
 
 
@@ -89,11 +91,11 @@ def run(args: argparse.Namespace) -> list[dict]:
     _, _, loop = sitl_setup()
     rows = []
     for seed in args.seeds:
-        for kind, (trajectory, seconds) in flights(seed, args).items():
+        for kind, (trajectory, seconds, samples, steps) in flights(seed, args).items():
             flown, flown_dopt = information(trajectory, loop)
             exact, exact_dopt = information(trajectory, None)
-            rows.append({"seed": seed, "kind": kind, "plan_s": seconds,
-                         "duration": trajectory.duration,
+            rows.append({"seed": seed, "kind": kind, "plan_s": seconds, "samples": samples,
+                         "refine_steps": steps, "duration": trajectory.duration,
                          "model": {"rel_sigma": flown.tolist(), "dopt": flown_dopt},
                          "setpoints": {"rel_sigma": exact.tolist(), "dopt": exact_dopt}})
             print_row(rows[-1])
@@ -107,7 +109,8 @@ def print_row(row: dict) -> None:
     m, s = row["model"], row["setpoints"]
     cells = "  ".join(f"{n} {100 * v:6.2f}" for n, v in zip(PARAMETER_NAMES, m["rel_sigma"],
                                                              strict=True))
-    print(f"{row['kind']:12s} seed {row['seed']}  plan {row['plan_s']:5.1f} s  "
+    print(f"{row['kind']:12s} seed {row['seed']}  plan {row['plan_s']:5.1f} s "
+          f"({row['samples']} samples, {row['refine_steps']} steps)  "
           f"{row['duration']:5.2f} s  D-opt flown {m['dopt']:.3g} (as set {s['dopt']:.3g})  "
           f"σ/θ % flown: {cells}", flush=True)
 
@@ -118,14 +121,38 @@ def summary(rows: list[dict]) -> None:
 
     by = {k: [r for r in rows if r["kind"] == k] for k in KINDS}
     base = {r["seed"]: r["model"]["dopt"] for r in by["model"]}
-    print(f"{'kind':12s} {'D-opt':>9s} {'÷ model':>8s} {'plan s':>7s}  median σ/θ % (flown)")
+    print(f"{'kind':12s} {'D-opt':>9s} {'÷ model':>8s} {'plan s':>7s} {'samples':>7s}  "
+          "median σ/θ % (flown)")
     for kind, items in by.items():
         dopt = np.median([r["model"]["dopt"] for r in items])
         ratio = np.median([r["model"]["dopt"] / base[r["seed"]] for r in items])
         sig = np.median([r["model"]["rel_sigma"] for r in items], axis=0)
         plan_s = np.median([r["plan_s"] for r in items])
-        print(f"{kind:12s} {dopt:9.3g} {ratio:8.2f} {plan_s:7.1f}  " + "  ".join(
+        samples = np.median([r["samples"] for r in items])
+        print(f"{kind:12s} {dopt:9.3g} {ratio:8.2f} {plan_s:7.1f} {samples:7.0f}  " + "  ".join(
             f"{n} {100 * v:.2f}" for n, v in zip(PARAMETER_NAMES, sig, strict=True)))
+
+
+def timing(seeds: list[int]) -> None:
+    """CPU and wall time of sample-budgeted plans (200 samples, 300 steps), exact and on
+    the model, one after the other after a warm-up that loads the kernels."""
+    from mavsysid.planner.rrbt import plan
+    from mavsysid.planner.settings import PlannerSettings
+
+    config, limits, loop = sitl_setup()
+    base = PlannerSettings(budget=20.0, planning_time=np.inf, max_samples=30, refine_steps=20,
+                           seed=9, autopilot_limits=limits)
+    plan(config, base)
+    plan(config, replace(base, autopilot=loop))
+    for seed in seeds:
+        for name, autopilot in (("exact", None), ("model", loop)):
+            settings = replace(base, max_samples=200, refine_steps=300, seed=seed,
+                               autopilot=autopilot)
+            wall, cpu = time.perf_counter(), time.process_time()
+            result = plan(config, settings)
+            print(f"{name:6s} seed {seed}: wall {time.perf_counter() - wall:.2f} s, CPU "
+                  f"{time.process_time() - cpu:.2f} s, {result.stats.edges} edges",
+                  flush=True)
 
 
 def save_loop(dataflash: Path, out: Path) -> None:
@@ -153,7 +180,12 @@ def main() -> None:
     parser.add_argument("--time", type=float, help="plan for this wall time instead, s")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--save-loop", nargs=2, type=Path, metavar=("DATAFLASH", "OUT"))
+    parser.add_argument("--timing", action="store_true",
+                        help="only time sample-budgeted plans, exact and on the model")
     args = parser.parse_args()
+    if args.timing:
+        timing(args.seeds)
+        return
     if args.save_loop:
         save_loop(*args.save_loop)
         return

@@ -15,8 +15,9 @@ same numbers for the setpoints themselves (the exact-tracking assumption: the fl
 map of the trajectory).
 
     # fly on a fresh SITL per kind and seed (planned: `mavsysid experiment`; practitioner:
-    # the Lissajous with yaw), then compare
-    nice python bench/autopilot_prediction.py --sitl --seeds 1 --work DIR
+    # the Lissajous with yaw; model: `experiment --autopilot-model`), then compare
+    nice python bench/autopilot_prediction.py --sitl --seeds 1 [--kinds planned model] \
+        --work DIR
     # compare flights already flown on SITL (DIR as bench/sitl_practitioner.py leaves it)
     python bench/autopilot_prediction.py --report DIR
     # against `mavsysid sim` (lock-step), ArduPilot and PX4 personalities
@@ -224,20 +225,40 @@ def compare_sitl(flight: Path, dataflash: Path) -> dict:
     return out
 
 
-def fly_sitl(work: Path, seeds: list[int]) -> None:
-    """A planned and a practitioner's flight per seed on a fresh SITL each
-    (`bench/sitl_practitioner.py`'s), kept under ``work/KIND/seedS``."""
+def fly_model_planned(connect: str, seed: int, args: argparse.Namespace, logs: Path) -> str:
+    """``mavsysid experiment --autopilot-model`` (else as `fly_planned`); its output."""
+    import subprocess
+
+    from mavsysid.planner.settings import PlannerSettings
+
+    from bench.sitl_practitioner import box_text
+
+    done = subprocess.run(
+        [sys.executable, "-m", "mavsysid", "experiment", "--connect", connect,
+         "--vehicle", VEHICLE, "--budget", f"{args.budget:g}", "--samples",
+         str(args.samples), "--refine-steps", str(args.refine_steps), "--seed", str(seed),
+         "--box", box_text(PlannerSettings.box), "--prearm-timeout", "300",
+         "--autopilot-model", "--log-dir", str(logs)], capture_output=True, text=True,
+        check=False)
+    return f"exit {done.returncode}\n{done.stdout}{done.stderr}"
+
+
+def fly_sitl(work: Path, seeds: list[int], kinds: list[str]) -> None:
+    """Flights per seed and kind on a fresh SITL each, kept under ``work/KIND/seedS``:
+    ``planned`` and ``practitioner`` as `bench/sitl_practitioner.py` flies them, ``model``
+    planned on the autopilot's predicted flight (`fly_model_planned`)."""
     from bench.sitl_practitioner import SITL_PARMS, fly_planned, fly_practitioner
     from tests.support.sitl import running_sitl
 
     settings = argparse.Namespace(budget=20.0, samples=200, refine_steps=300)
+    fliers = {"planned": lambda c, s, logs: fly_planned(c, s, settings, logs),
+              "practitioner": lambda c, s, logs: fly_practitioner(c, settings, logs),
+              "model": lambda c, s, logs: fly_model_planned(c, s, settings, logs)}
     for seed in seeds:
-        for kind in ("planned", "practitioner"):
+        for kind in kinds:
             where = work / kind / f"seed{seed}"
             with running_sitl(where / "sitl", defaults=[SITL_PARMS], model="x") as sitl:
-                text = (fly_planned(sitl.connect, seed, settings, where / "logs")
-                        if kind == "planned" else
-                        fly_practitioner(sitl.connect, settings, where / "logs"))
+                text = fliers[kind](sitl.connect, seed, where / "logs")
             (where / "run.out").write_text(text)
             print(f"{kind} seed {seed}: {text.splitlines()[0]}", flush=True)
 
@@ -380,6 +401,8 @@ def main() -> None:
     parser.add_argument("--sim", nargs="+", choices=("ardupilot", "px4"),
                         help="fly on mavsysid sim with these personalities (--work)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1])
+    parser.add_argument("--kinds", nargs="+", choices=("planned", "practitioner", "model"),
+                        default=["planned", "practitioner"], help="what to fly with --sitl")
     parser.add_argument("--work", type=Path)
     parser.add_argument("--figure", type=Path, help="a SITL flight's folder (KIND/seedS)")
     parser.add_argument("--out", type=Path, default=Path("autopilot_prediction.png"))
@@ -391,7 +414,7 @@ def main() -> None:
         sim_flights(args.work, args.sim)
         return
     if args.sitl:
-        fly_sitl(args.work, args.seeds)
+        fly_sitl(args.work, args.seeds, args.kinds)
         args.report = args.work
     if args.report:
         for kind_dir in sorted(args.report.glob("*/seed*")):
