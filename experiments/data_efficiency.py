@@ -66,7 +66,8 @@ def belief_history(config: VehicleConfig, trajectory: Trajectory, settings: Plan
     trajectory : Trajectory
         The flight, starting and ending at rest.
     settings : PlannerSettings
-        Measurement rate and prior σ (`mavsysid.planner.search_setup.initial_covariance`).
+        Measurement rate and prior σ (`mavsysid.planner.search_setup.initial_covariance`);
+        with ``autopilot`` the belief follows the flight it is predicted to fly.
     passes : int
         How many times the flight is repeated.
 
@@ -77,7 +78,8 @@ def belief_history(config: VehicleConfig, trajectory: Trajectory, settings: Plan
     """
     model = ErrorStateModel.for_vehicle(config)
     theta = config.theta
-    states, n, dt = edge_samples(trajectory, config, theta, settings.measurement_rate)
+    states, n, dt = edge_samples(trajectory, config, theta, settings.measurement_rate,
+                                 settings.autopilot)
     sigma = initial_covariance(model, config, settings)
     covs = [model.parameter_covariance_si(sigma)[None]]
     for _ in range(passes):

@@ -25,7 +25,7 @@ from mavsysid.estimation import (
 )
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
-from mavsysid.pipeline.plan import autopilot_limits, run_plan
+from mavsysid.pipeline.plan import read_autopilot, run_plan
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
 from mavsysid.planner.plan_file import write_trajectory
 from mavsysid.planner.plan_result import PlanResult
@@ -72,7 +72,8 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
                              stream: StreamSettings,
                              estimator: EstimatorSettings | None = None,
                              say: Callable[[str], None] | None = None,
-                             progress: bool = True) -> ExperimentOutcome:
+                             progress: bool = True,
+                             autopilot_model: bool = False) -> ExperimentOutcome:
     """Plan within the vehicle's limits, fly it on ``stream.connect``, estimate θ from its log.
 
     Parameters
@@ -91,6 +92,9 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
         Receives one-line status messages.
     progress : bool
         Progress bars while planning and streaming.
+    autopilot_model : bool
+        Also read the autopilot's loop parameters and plan on the flight it is predicted
+        to fly (`PlannerSettings.autopilot`); else the setpoints count as flown exactly.
 
     Returns
     -------
@@ -107,10 +111,12 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
     """
     say = say or (lambda _text: None)
     say(f"reading the autopilot's limits from the vehicle on {stream.connect}")
-    source, limits = autopilot_limits(stream.connect, stream.signing_key,
-                                      stream.heartbeat_timeout, say)
+    envelope = read_autopilot(stream.connect, stream.signing_key, stream.heartbeat_timeout,
+                              say, loop=autopilot_model)
+    source = envelope.source
     say(f"planning within the limits of {source}")
-    plan = run_plan(vehicle, replace(planner, autopilot_limits=limits), progress=progress)
+    plan = run_plan(vehicle, replace(planner, autopilot_limits=envelope.limits,
+                                     autopilot=envelope.loop), progress=progress)
     if plan.shortfall:
         say(f"warning: {plan.shortfall}")
     stream.log_dir.mkdir(parents=True, exist_ok=True)

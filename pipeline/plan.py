@@ -21,6 +21,7 @@ import numpy as np
 from mavsysid.planner.plan_request import check_request
 from mavsysid.planner.plan_result import PlanProgress, PlanResult
 from mavsysid.planner.settings import PlannerSettings
+from mavsysid.vehicle.autopilot_loop import AutopilotLoop, loop_parameter_names
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.kinematic_limits import KinematicLimits
@@ -28,8 +29,9 @@ from mavsysid.vehicle.trajectory import Trajectory
 
 from mavsysid.errors import InputError, JobFailedError
 
-__all__ = ["SATURATION_WARNING", "PlanPreview", "ProgressCallback", "autopilot_limits",
-           "preview_plan", "progress_bar", "run_plan", "with_margins"]
+__all__ = ["SATURATION_WARNING", "AutopilotEnvelope", "PlanPreview", "ProgressCallback",
+           "autopilot_limits", "preview_plan", "progress_bar", "read_autopilot", "run_plan",
+           "with_margins"]
 
 #: Predicted rotor saturation (share of control ticks) above which `plan` warns: beyond it
 #: the autopilot has no room to correct, and a vehicle whose θ differs saturates more.
@@ -41,10 +43,46 @@ _AUTOPILOT_NAMES = {"ARDUPILOT": "ArduPilot", "PX4": "PX4"}
 ProgressCallback = Callable[[PlanProgress], None]
 
 
+@dataclass(frozen=True)
+class AutopilotEnvelope:
+    """What a plan is made for, read from an autopilot (`read_autopilot`).
+
+    Attributes
+    ----------
+    source : str
+        Where it came from and its limits, in words (one line).
+    limits : KinematicLimits
+        The envelope (`mavsysid.flight.ground.autopilot_limits.limits_from_parameters`:
+        correction limits included, so that the plan flies with no note).
+    loop : AutopilotLoop or None
+        Its closed loop (`mavsysid.vehicle.autopilot_loop`), when asked for: the loop
+        parameters it reported, stock defaults for the rest.
+    """
+
+    source: str
+    limits: KinematicLimits
+    loop: AutopilotLoop | None = None
+
+
 def autopilot_limits(source: str | Path, signing_key: bytes | None = None,
                      heartbeat_timeout: float = 30.0, say: Callable[[str], None] | None = None
                      ) -> tuple[str, KinematicLimits]:
-    """The envelope of the autopilot that will fly a plan (``plan --autopilot-limits``).
+    """The envelope of the autopilot that will fly a plan (``plan --autopilot-limits``):
+    `read_autopilot`'s source and limits.
+
+    Parameters
+    ----------
+    source, signing_key, heartbeat_timeout, say
+        As for `read_autopilot`.
+    """
+    envelope = read_autopilot(source, signing_key, heartbeat_timeout, say)
+    return envelope.source, envelope.limits
+
+
+def read_autopilot(source: str | Path, signing_key: bytes | None = None,
+                   heartbeat_timeout: float = 30.0, say: Callable[[str], None] | None = None,
+                   loop: bool = False) -> AutopilotEnvelope:
+    """The limits (and with ``loop`` the closed loop) of the autopilot that will fly a plan.
 
     Parameters
     ----------
@@ -52,20 +90,16 @@ def autopilot_limits(source: str | Path, signing_key: bytes | None = None,
         A parameter dump (`mavsysid.formats.parameter_file`), or a MAVLink link to the
         vehicle (``tcp:HOST:PORT``, ``udp:HOST:PORT``, ``udpout:HOST:PORT``,
         ``serial:DEVICE[:BAUD]``, a ``/dev/…`` device; a regular file of that name is read
-        as a file): its limits are then read live, as `mavsysid stream` reads them.
+        as a file): its parameters are then read live, as `mavsysid stream` reads them.
     signing_key : bytes, optional
         MAVLink 2 signing key for a vehicle that signs.
     heartbeat_timeout : float
         Wall seconds to wait for the vehicle's first heartbeat.
     say : callable, optional
         Receives one-line progress messages while connecting.
-
-    Returns
-    -------
-    tuple
-        Where the limits came from and what they are, in words (one line), and the envelope
-        (`mavsysid.flight.ground.autopilot_limits.limits_from_parameters`: correction limits
-        included, so that the plan flies with no note).
+    loop : bool
+        Also read its loop parameters and model its closed loop (``plan
+        --autopilot-model``).
 
     Raises
     ------
@@ -92,13 +126,23 @@ def autopilot_limits(source: str | Path, signing_key: bytes | None = None,
     if signing_key is not None and not is_link:
         raise InputError(f"--signing-key: only with --autopilot-limits LINK, got the file {text}")
     if is_link:
-        autopilot, values = vehicle_limit_values(text, signing_key, heartbeat_timeout, say)
+        autopilot, values = vehicle_limit_values(text, signing_key, heartbeat_timeout, say,
+                                                 loop=loop)
         limits = limits_from_parameters(values, text)[1]
         where = f"the {_AUTOPILOT_NAMES[autopilot.name]} vehicle on {text}"
     else:
-        autopilot, limits = limits_from_parameters(read_parameter_file(text), text)
+        values = read_parameter_file(text)
+        autopilot, limits = limits_from_parameters(values, text)
         where = f"the {_AUTOPILOT_NAMES[autopilot.name]} parameters in {text}"
-    return f"{where}: {limits_text(limits)}", limits
+    words = f"{where}: {limits_text(limits)}"
+    if not loop:
+        return AutopilotEnvelope(words, limits)
+    kind = autopilot.name.lower()
+    names = loop_parameter_names(kind)
+    known = sum(name in values for name in names)
+    return AutopilotEnvelope(f"{words}; its loop from {known} of {len(names)} parameters "
+                             "(stock defaults for the rest)", limits,
+                             AutopilotLoop.from_parameters(kind, values))
 
 
 @contextmanager

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from mavsysid.vehicle.autopilot_loop import AutopilotLoop, FlownFlight, fly
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.covariance import (
     measurement_information,
@@ -40,6 +41,8 @@ __all__ = [
     "apply_transfer_logdet",
     "edge_samples",
     "edge_transfer",
+    "flown_samples",
+    "flown_steps",
     "identity_transfer",
     "propagate_final",
     "propagate_steps",
@@ -145,9 +148,23 @@ def apply_transfer(sigma: np.ndarray, transfer: EdgeTransfer) -> np.ndarray:
 
 
 def edge_samples(
-    trajectory: Trajectory, config: VehicleConfig, theta: np.ndarray, rate: float
+    trajectory: Trajectory, config: VehicleConfig, theta: np.ndarray, rate: float,
+    autopilot: AutopilotLoop | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Nominal states and rotor speeds at the K + 1 step boundaries of a segment.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The segment (flat outputs over its duration).
+    config : VehicleConfig
+    theta : ndarray, shape (6,)
+        θ of the flatness map (or of the autopilot's plant), SI.
+    rate : float
+        Steps per second, Hz.
+    autopilot : AutopilotLoop, optional
+        The closed loop that flies the segment (`flown_samples`); None: the setpoints are
+        flown exactly (the flatness map, the paper's assumption).
 
     Returns
     -------
@@ -156,6 +173,8 @@ def edge_samples(
     dt : float
         Step, s (T / K with K = max(1, round(T · rate))).
     """
+    if autopilot is not None:
+        return flown_samples(trajectory, config, theta, rate, autopilot)
     T = trajectory.duration
     K = max(1, round(T * rate))
     tau = np.linspace(0.0, T, K + 1)
@@ -163,8 +182,50 @@ def edge_samples(
     return flat.states(), flat.rotor_speeds, T / K
 
 
+def flown_samples(
+    trajectory: Trajectory, config: VehicleConfig, theta: np.ndarray, rate: float,
+    autopilot: AutopilotLoop,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """`edge_samples` of the flight ``autopilot`` flies when the segment is streamed to it
+    (`mavsysid.vehicle.autopilot_loop.fly`), from steady flight on the segment's start.
+
+    Parameters
+    ----------
+    trajectory, config, theta, rate
+        As for `edge_samples`.
+    autopilot : AutopilotLoop
+        The autopilot's closed loop.
+
+    Returns
+    -------
+    states : ndarray, shape (K + 1, 13)
+    rotor_speeds : ndarray, shape (K + 1, k)
+        The rotor speeds of the predicted thrust and rotor torques.
+    dt : float
+    """
+    flight, dt = flown_steps(trajectory, config, theta, rate, autopilot)
+    return flight.states(), flight.rotor_speeds, dt
+
+
+def flown_steps(
+    trajectory: Trajectory, config: VehicleConfig, theta: np.ndarray, rate: float,
+    autopilot: AutopilotLoop,
+) -> tuple[FlownFlight, float]:
+    """The predicted flight of `flown_samples` itself (K + 1 samples) and its step, s.
+
+    Parameters
+    ----------
+    trajectory, config, theta, rate, autopilot
+        As for `flown_samples`.
+    """
+    T = trajectory.duration
+    K = max(1, round(T * rate))
+    return fly(autopilot, trajectory, config, theta, sample_step=T / K), T / K
+
+
 def segments_samples(
-    segments: list, config: VehicleConfig, theta: np.ndarray, rate: float
+    segments: list, config: VehicleConfig, theta: np.ndarray, rate: float,
+    autopilot: AutopilotLoop | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """`edge_samples` of several segments with one flatness call (its overhead dominates).
 
@@ -172,13 +233,15 @@ def segments_samples(
     ----------
     segments : list of mavsysid.planner.segments.Segment
         Segments (any object with ``duration`` and ``flat_outputs(tau)``).
-    config, theta, rate
-        As for `edge_samples`.
+    config, theta, rate, autopilot
+        As for `edge_samples` (with an autopilot, each segment is flown on its own).
 
     Returns
     -------
     list of (states (K + 1, 13), rotor_speeds (K + 1, k), dt s), one per segment
     """
+    if autopilot is not None:
+        return [flown_samples(s, config, theta, rate, autopilot) for s in segments]
     flats, counts, steps = [], [], []
     for segment in segments:
         T = segment.duration

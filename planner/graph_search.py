@@ -20,12 +20,13 @@ from mavsysid.planner.belief import (
     apply_transfer_logdet,
     edge_samples,
     edge_transfer,
+    flown_steps,
     identity_transfer,
     riccati_final,
     segments_samples,
     steps_transfer,
 )
-from mavsysid.planner.feasibility import check_segment
+from mavsysid.planner.feasibility import check_segment, rotor_square_range
 from mavsysid.planner.graph import STOP_DURATIONS, Belief, Edge, Vertex, logdet
 from mavsysid.planner.kinematic_check import exceeded_limits
 from mavsysid.planner.move_time import longest_segment, move_duration_range
@@ -46,6 +47,7 @@ from mavsysid.planner.segments import (
 )
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.planner.yaw_branch import nearest_yaw_branch
+from mavsysid.vehicle.autopilot_loop import AutopilotLoop
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import E_THETA, ErrorStateModel
 from mavsysid.vehicle.rotation import wrap_angle
@@ -57,6 +59,8 @@ _STOP_MARGIN = 0.2
 _PROGRESS_PERIOD = 0.25
 #: Vertices (nearest first) from which a sample's free-end connection is tried.
 _NEAREST_TRIES = 5
+#: Most predicted segment flights kept between their check and their transfer.
+_FLOWN_CACHE = 20_000
 
 
 class GraphSearch:
@@ -82,6 +86,11 @@ class GraphSearch:
         self.stopped_by = ""
         #: F and Q of the segments last priced by `propagate_segments`, by id.
         self._steps: dict[int, tuple[Segment, np.ndarray, np.ndarray]] = {}
+        #: Predicted flights of segments (`samples_of`) with their n² range, by id, when
+        #: an autopilot is set.
+        self._flown: dict[int, tuple[Segment, tuple[np.ndarray, np.ndarray, float],
+                                     tuple[float, float]]] = {}
+        self._rotor_range = rotor_square_range(config, settings.rotor_headroom)
         self.best: tuple[float, Belief] | None = None
         self.history: list[tuple[float, float]] = []
         self.first_solution: float | None = None
@@ -156,9 +165,38 @@ class GraphSearch:
                                   self.settings.autopilot_limits)
         return None if rng is None else float(self.rng.uniform(*rng))
 
+    def samples_of(self, segment: Segment) -> tuple[np.ndarray, np.ndarray, float]:
+        """States, rotor speeds and step of ``segment`` at the propagation rate: the
+        flatness map, or the flight the autopilot is predicted to fly (kept from its check).
+
+        Parameters
+        ----------
+        segment : Segment
+            A polynomial segment (duration s, flat outputs in m and rad).
+        """
+        autopilot = self.settings.autopilot
+        if autopilot is None:
+            return edge_samples(segment_trajectory(segment), self.config, self.theta,
+                                self.settings.propagation_rate)
+        return self._flown_of(segment, autopilot)[1]
+
+    def _flown_of(self, segment: Segment, autopilot: AutopilotLoop
+                  ) -> tuple[Segment, tuple[np.ndarray, np.ndarray, float], tuple[float, float]]:
+        hit = self._flown.get(id(segment))
+        if hit is not None and hit[0] is segment:
+            return hit
+        flight, dt = flown_steps(segment, self.config, self.theta,
+                                 self.settings.propagation_rate, autopilot)
+        n2 = flight.rotor_speeds_squared
+        entry = (segment, (flight.states(), flight.rotor_speeds, dt),
+                 (float(np.min(n2)), float(np.max(n2))))
+        if len(self._flown) >= _FLOWN_CACHE:
+            self._flown.clear()
+        self._flown[id(segment)] = entry
+        return entry
+
     def transfer_of(self, segment: Segment) -> EdgeTransfer:
-        states, n, dt = edge_samples(segment_trajectory(segment), self.config, self.theta,
-                                     self.settings.propagation_rate)
+        states, n, dt = self.samples_of(segment)
         return edge_transfer(self.search_model, states, n, self.theta, dt)
 
     def propagate_segments(self, sigma: np.ndarray, segments: list[Segment]) -> np.ndarray:
@@ -167,8 +205,11 @@ class GraphSearch:
         if not segments:
             return sigma
         rate = self.settings.propagation_rate
-        for segment, (states, n, dt) in zip(
-                segments, segments_samples(segments, self.config, self.theta, rate), strict=True):
+        if self.settings.autopilot is None:
+            samples = segments_samples(segments, self.config, self.theta, rate)
+        else:
+            samples = [self.samples_of(segment) for segment in segments]
+        for segment, (states, n, dt) in zip(segments, samples, strict=True):
             F, Q = self.search_model.discrete(states[:-1], n[:-1], self.theta, dt)
             self._steps[id(segment)] = (segment, F, Q)
             sigma = riccati_final(self.search_model, sigma, F, Q)
@@ -201,7 +242,25 @@ class GraphSearch:
             return result.reason
         limits = self.settings.autopilot_limits
         over = "" if limits is None else exceeded_limits(segment, limits)
-        return f"autopilot {over}" if over else ""
+        if over:
+            return f"autopilot {over}"
+        return self.flown_refusal(segment)
+
+    def flown_refusal(self, segment: Segment) -> str:
+        """"autopilot rotor speed" when the flight the autopilot is predicted to fly needs a
+        rotor speed outside the plan's range (`rotor_square_range`), else "".
+
+        Parameters
+        ----------
+        segment : Segment
+            The candidate segment; its predicted flight is kept for its transfer.
+        """
+        autopilot = self.settings.autopilot
+        if autopilot is None or not self.settings.rotor_check:
+            return ""
+        low, high = self._flown_of(segment, autopilot)[2]
+        lo, hi = self._rotor_range
+        return "" if lo <= low and high <= hi else "autopilot rotor speed"
 
     def feasible(self, segment: Segment) -> bool:
         """Whether ``segment`` keeps the vehicle's constraints and the autopilot's limits."""

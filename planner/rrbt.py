@@ -48,7 +48,7 @@ from mavsysid.vehicle.trajectory import PiecewisePolynomial
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["plan", "search_graph", "search_result"]
+__all__ = ["plan", "search_graph", "search_result", "sigma_over_time"]
 
 
 def search_graph(config: VehicleConfig, settings: PlannerSettings, objective: str,
@@ -112,18 +112,9 @@ def search_result(search: GraphSearch, kind: str, path: RefinablePath | None) ->
         np.array([s.duration for s in segments]),
         np.array([s.position_coeffs for s in segments]),
         np.array([s.yaw_coeffs for s in segments]))
-    model, theta, rate = search.model, search.theta, search.settings.measurement_rate
+    model = search.model
     sigma = initial_covariance(model, search.config, search.settings)
-    times, sig = [0.0], [np.sqrt(np.diag(model.parameter_covariance_si(sigma)))]
-    t_offset = 0.0
-    for segment in segments:
-        states, n, dt = edge_samples(segment_trajectory(segment), search.config, theta, rate)
-        history = propagate_steps(model, sigma, states, n, theta, dt)
-        sigma = history[-1]
-        si = model.parameter_covariance_si(history[1:])
-        sig.extend(np.sqrt(np.diagonal(si, axis1=1, axis2=2)))
-        times.extend(t_offset + dt * np.arange(1, len(history)))
-        t_offset += segment.duration
+    times, sig, sigma = sigma_over_time(search, trajectory, segments, sigma)
     final_cov = model.parameter_covariance_si(sigma)
     stats = PlannerStats(
         samples=search.samples, vertices=len(search.vertices), edges=search.edges,
@@ -148,7 +139,49 @@ def search_result(search: GraphSearch, kind: str, path: RefinablePath | None) ->
     return PlanResult(
         kind=kind, trajectory=trajectory,
         predicted_dopt=float(np.exp(logdet(final_cov) / 6.0)),
-        predicted_covariance=final_cov, sigma_times=np.array(times),
-        predicted_sigma=np.array(sig), config=search.config, settings=search.settings,
+        predicted_covariance=final_cov, sigma_times=times,
+        predicted_sigma=sig, config=search.config, settings=search.settings,
         stats=stats, graph=graph,
         shortfall=shortfall_note(trajectory.duration, search.settings, stats))
+
+
+def sigma_over_time(search: GraphSearch, trajectory: PiecewisePolynomial, segments: list,
+                    sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The predicted σ of θ along the chosen flight at the measurement rate, step by step
+    (paper Eqs. prior–posterior): per segment on the flatness map, or on the whole flight
+    the autopilot is predicted to fly (`PlannerSettings.autopilot`).
+
+    Parameters
+    ----------
+    search : GraphSearch
+        Its estimator model, θ and settings.
+    trajectory : PiecewisePolynomial
+        The whole flight, its stop included.
+    segments : list of Segment
+        Its segments, in order.
+    sigma : ndarray, shape (18, 18)
+        The belief at the start.
+
+    Returns
+    -------
+    times : ndarray, shape (S,)
+        s from the start.
+    sigma_theta : ndarray, shape (S, 6)
+        σ of θ, SI.
+    final : ndarray, shape (18, 18)
+        The belief at the end.
+    """
+    model, theta, rate = search.model, search.theta, search.settings.measurement_rate
+    times, sig = [0.0], [np.sqrt(np.diag(model.parameter_covariance_si(sigma)))]
+    autopilot = search.settings.autopilot
+    pieces = [trajectory] if autopilot is not None else [segment_trajectory(s) for s in segments]
+    t_offset = 0.0
+    for piece in pieces:
+        states, n, dt = edge_samples(piece, search.config, theta, rate, autopilot)
+        history = propagate_steps(model, sigma, states, n, theta, dt)
+        sigma = history[-1]
+        si = model.parameter_covariance_si(history[1:])
+        sig.extend(np.sqrt(np.diagonal(si, axis1=1, axis2=2)))
+        times.extend(t_offset + dt * np.arange(1, len(history)))
+        t_offset += piece.duration
+    return np.array(times), np.array(sig), sigma

@@ -59,7 +59,7 @@ def warm_up(config: VehicleConfig, settings: PlannerSettings) -> None:
     check_segment(segment, config, np.asarray(settings.box, dtype=float))
     model = search_model(config, settings)
     states, n, dt = edge_samples(segment_trajectory(segment), config, config.theta,
-                                 settings.propagation_rate)
+                                 settings.propagation_rate, settings.autopilot)
     transfer = edge_transfer(model, states, n, config.theta, dt)
     apply_transfer_logdet(np.eye(model.dim), transfer)
     propagate_final(model, np.eye(model.dim), states, n, config.theta, dt)

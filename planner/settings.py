@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mavsysid.vehicle.autopilot_loop import AutopilotLoop
 from mavsysid.vehicle.kinematic_limits import KinematicLimits
 
 __all__ = ["PlannerSettings"]
@@ -81,6 +82,13 @@ class PlannerSettings:
         Check rotor speeds (through the allocation at the prior θ). False gives the paper's
         constraint set (thrust, body rate, yaw acceleration, box, speed; no rotor check),
         the ablation of `mavsysid.experiments.baselines`.
+    autopilot : AutopilotLoop or None
+        The closed loop of the autopilot that will fly the plan
+        (`mavsysid.vehicle.autopilot_loop`): the information and the rotor check are
+        computed on the flight it is predicted to fly from the streamed setpoints (each
+        segment from steady flight on its start during the search; the chosen flight's σ
+        over time on the whole flight). None: the setpoints are flown exactly (the
+        paper's assumption, the flatness map).
     """
 
     budget: float = 30.0
@@ -100,6 +108,7 @@ class PlannerSettings:
     rotor_check: bool = True
     prior_covariance: tuple[tuple[float, ...], ...] | None = None
     rotor_confidence: float = 0.0
+    autopilot: AutopilotLoop | None = None
 
     @property
     def theta_covariance(self) -> np.ndarray:

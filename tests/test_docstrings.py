@@ -382,7 +382,6 @@ NOT_YET_DOCUMENTED: frozenset[str] = frozenset({
     "mavsysid.planner.belief.EdgeTransfer.__init__",
     "mavsysid.planner.belief.apply_transfer",
     "mavsysid.planner.belief.apply_transfer_logdet",
-    "mavsysid.planner.belief.edge_samples",
     "mavsysid.planner.belief.edge_transfer",
     "mavsysid.planner.belief.propagate_final",
     "mavsysid.planner.belief.propagate_steps",

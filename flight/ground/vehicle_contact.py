@@ -16,6 +16,7 @@ from mavsysid.flight.ground.autopilot_limits import limit_parameters, parameter_
 from mavsysid.flight.ground.link_state import VehicleState
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
 from mavsysid.flight.ground.parameter_session import ParameterSession
+from mavsysid.vehicle.autopilot_loop import loop_parameter_names
 
 from mavsysid.errors import JobFailedError
 
@@ -62,8 +63,8 @@ def meet_vehicle(link: MavlinkLink, timeout: float, refused: str,
 
 def vehicle_limit_values(connect: str, signing_key: bytes | None = None,
                          heartbeat_timeout: float = 30.0,
-                         say: Callable[[str], None] | None = None
-                         ) -> tuple[Autopilot, dict[str, float]]:
+                         say: Callable[[str], None] | None = None,
+                         loop: bool = False) -> tuple[Autopilot, dict[str, float]]:
     """Read the limit parameters (`parameter_names`) from the vehicle on ``connect``.
 
     Parameters
@@ -77,6 +78,9 @@ def vehicle_limit_values(connect: str, signing_key: bytes | None = None,
         Wall seconds to wait for the vehicle's first heartbeat.
     say : callable, optional
         Receives one-line progress messages.
+    loop : bool
+        Also read its position- and attitude-controller parameters
+        (`mavsysid.vehicle.autopilot_loop.loop_parameter_names`).
 
     Returns
     -------
@@ -94,7 +98,10 @@ def vehicle_limit_values(connect: str, signing_key: bytes | None = None,
         vehicle = meet_vehicle(link, heartbeat_timeout, "autopilot limits not read", say)
         autopilot = vehicle.autopilot
         assert autopilot is not None  # meet_vehicle refuses any other
-        values = ParameterSession(link).read(parameter_names(autopilot))
+        names = parameter_names(autopilot)
+        if loop:
+            names += loop_parameter_names(autopilot.name.lower())
+        values = ParameterSession(link).read(names)
     if not any(p.name in values for p in limit_parameters(autopilot)):
         shown = ", ".join(p.name for p in limit_parameters(autopilot)[:3])
         raise JobFailedError(f"autopilot limits not read: the vehicle on {connect} answered "

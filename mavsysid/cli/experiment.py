@@ -71,6 +71,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="planner seed (default: 0)")
     parser.add_argument("--log-dir", type=Path, default=Path("logs"), metavar="DIR",
                         help="where the flight directory is created (default: ./logs)")
+    parser.add_argument("--autopilot-model", action="store_true",
+                        help="also read the autopilot's position- and attitude-controller "
+                        "parameters and plan on the flight its closed loop is predicted to "
+                        "fly from the setpoints (default: the setpoints count as flown "
+                        "exactly)")
     add_link_arguments(parser)
     parser.add_argument("--prior-sigma", type=float,
                         default=EstimatorSettings.prior_relative_sigma, metavar="REL",
@@ -153,6 +158,6 @@ def main(args: argparse.Namespace) -> int:
 
     outcome = run_autopilot_experiment(
         args.vehicle, planner, stream, EstimatorSettings(prior_relative_sigma=args.prior_sigma),
-        say, progress=verbose)
+        say, progress=verbose, autopilot_model=args.autopilot_model)
     print(format_report(outcome, args.verbosity))
     return 0

@@ -23,8 +23,8 @@ from mavsysid.formats.setpoints_csv import write_setpoints_csv
 from mavsysid.pipeline.plan import (
     SATURATION_WARNING,
     PlanPreview,
-    autopilot_limits,
     preview_plan,
+    read_autopilot,
     run_plan,
     with_margins,
 )
@@ -141,6 +141,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, absent ones "
                         "limit nothing; the plan then passes `stream`'s limit check against "
                         "the same values")
+    parser.add_argument("--autopilot-model", action="store_true",
+                        help="with --autopilot-limits: also read the autopilot's position- "
+                        "and attitude-controller parameters (ArduCopter PSC_*, ATC_*, "
+                        "MOT_THST_HOVER; PX4 MPC_*, MC_*; absent ones at their stock "
+                        "defaults) and plan on the flight its closed loop is predicted to fly "
+                        "from the setpoints (default: the setpoints count as flown exactly)")
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
                         help="MAVLink 2 signing for --autopilot-limits LINK: a file holding "
                         "the passphrase")
@@ -165,21 +171,26 @@ def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSe
         time = math.inf if args.samples is not None else _DEFAULT_TIME
     elif time == 0.0 and args.samples is not None:
         time = math.inf
-    limits = None
+    limits = loop = None
     if args.autopilot_limits is not None:
         key = None
         if args.signing_key is not None:
             from mavsysid.flight.mavlink_setup import signing_key_from_file
 
             key = signing_key_from_file(args.signing_key)
-        source, limits = autopilot_limits(args.autopilot_limits, key, say=say)
-        say(f"planning within the autopilot limits read from {source}")
+        envelope = read_autopilot(args.autopilot_limits, key, say=say,
+                                  loop=args.autopilot_model)
+        limits, loop = envelope.limits, envelope.loop
+        say(f"planning within the autopilot limits read from {envelope.source}")
     elif args.signing_key is not None:
         raise InputError("--signing-key: only with --autopilot-limits LINK")
+    elif args.autopilot_model:
+        raise InputError("--autopilot-model: only with --autopilot-limits FILE|LINK")
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
                            refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom,
-                           autopilot_limits=limits, rotor_confidence=args.rotor_confidence)
+                           autopilot_limits=limits, rotor_confidence=args.rotor_confidence,
+                           autopilot=loop)
 
 
 def main(args: argparse.Namespace) -> int:

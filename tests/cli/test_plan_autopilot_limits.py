@@ -33,3 +33,23 @@ def test_a_dump_without_usable_limits_exits_2_in_one_line(tmp_path, capsys, plan
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and str(dump) in err and problem in err, err
     assert not planned and not (tmp_path / "t.json").exists()
+
+
+def test_the_autopilot_model_reaches_the_planner(tmp_path, capsys, planned):
+    """``--autopilot-model``: the dump's loop parameters (others at their defaults) give
+    the planner ArduCopter's loop; without it the setpoints count as flown exactly."""
+    dump = tmp_path / "loop.parm"
+    dump.write_text("".join(f"{k} {v:g}\n" for k, v in STOCK.items())
+                    + "ATC_RAT_YAW_P 0.3\nMOT_THST_HOVER 0.39\n")
+    assert main(["plan", "--autopilot-limits", str(dump), "--autopilot-model", "--no-preview",
+                 "-o", str(tmp_path / "t.json")]) == 0
+    loop = planned[-1].autopilot
+    assert loop.autopilot == "ardupilot"
+    assert loop.value("ATC_RAT_YAW_P") == 0.3 and loop.value("PSC_JERK_XY") == STOCK["PSC_JERK_XY"]
+    assert loop.value("ATC_INPUT_TC") == 0.15  # not in the dump: the stock default
+    assert "its loop from" in capsys.readouterr().err
+    assert main(["-q", "plan", "--autopilot-limits", str(dump), "--no-preview",
+                 "-o", str(tmp_path / "u.json")]) == 0
+    assert planned[-1].autopilot is None
+    assert main(["plan", "--autopilot-model", "-o", str(tmp_path / "v.json")]) == 2
+    assert "--autopilot-model: only with --autopilot-limits" in capsys.readouterr().err
