@@ -1,4 +1,37 @@
-"""answer."""
+"""The answer of ``mavsysid estimate``: θ per parameter, the balance checked by the filter.
+
+`estimate` is the one entry point: the force and torque balance
+(`mavsysid.estimation.balance.fit`, which follows real data: band, window and
+rotor-to-pose offset chosen from the flight, HAC σ widened by the errors in the variables
+and by split disagreements) and the filter with its batch refinement
+(`mavsysid.estimation.filter.estimator`, the paper's estimator, more precise where its
+model and noise assumptions hold) both run; the balance's θ is the filter's
+equation-error reference. Per estimated quantity (`answer_parameters`):
+
+* the filter determines it and the balance has a value for it (determined or not): the
+  filter's value and σ stand unless a test at the 5 % level (beyond `AGREEMENT_SIGMAS` =
+  1.96 σ of their difference, and beyond the quantity's relative tolerance, the accuracy
+  asked of the estimator) rejects them. Where the filter is the more precise, the test is
+  Hausman's (Hausman 1978): both come from one flight and the filter is the efficient
+  estimator when the paper's model holds, so their difference has variance σ_b² − σ_f².
+  Where it is not (its σ widened for a mismatch, or a flight it follows poorly), the
+  difference is taken as of two independent estimates, σ_b² + σ_f². When the filter is
+  rejected the balance answers: its value and σ where it determines the quantity, the
+  prior's otherwise; the disagreement is reported as a mismatch (what ``diagnose`` looks
+  for), not a refusal;
+* one determines it: that one's value and σ (the filter's only when it followed the
+  flight);
+* neither: c_D whose data value lies within `BOUND_SIGMAS` σ of 0 is "at the bound" (drag
+  linear in rotor speed, or none: the value clipped at 0 with the data's σ); anything else
+  is "not determined by this flight" and keeps the prior's value and σ.
+
+A filter determines a quantity by the balance's own rule
+(`mavsysid.estimation.results.quantity_status`). The covariance keeps the cross terms
+within each source and none between sources. A filter that cannot follow the flight, or
+whose θ `check_result` refuses (physically impossible, far outside the prior, contradicted
+by the balance), leaves the balance's answer with the reason in the notes; a flight is
+refused only when neither determines anything.
+"""
 
 from __future__ import annotations
 

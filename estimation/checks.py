@@ -1,4 +1,31 @@
-"""checks."""
+"""Refusals of what the data contradict: an impossible θ, a log's wrong clock, a rotor
+channel reading wrong.
+
+**An impossible θ** (`check_plausible`, `implausibility`), refused in one line
+(`JobFailedError`, exit 3): a value or σ that is not finite or missing; c_T, c_D, c_M or a
+principal moment ≤ 0 (c_D = 0 is a valid *config* value, but a drag *estimated* ≤ 0 is not
+a drag); J breaking the rigid-body triangle inequality beyond the configs' slack; a value
+more than `PRIOR_FACTOR_MAX` times off the prior. An entry the model lets vanish
+(`vanishing_parameters`: c_D beside ``rotor_drag_linear``) may be ≈ 0, and as low as keeps
+the rotor drag a drag up to the top rotor speed (`vanishing_floor`).
+
+**A wrong clock or position unit** (`check_kinematics`, `tilt_gain`). The thrust points
+along the body z axis, so per horizontal axis a_h = λ (a_z + g) b_h / b_z + μ v_h + c
+(b = R e_z; drag linear in the velocity and a constant beside it), independent of c_T,
+mass and inertia. λ = 1 for a consistent log; a clock s times off scales it by 1/s², a
+position in mm read as m by 10⁻³, and the inertia would come out wrong by s² with a small
+σ. λ outside [1 / `TIME_SCALE_FACTOR`, `TIME_SCALE_FACTOR`] is refused, when the flight
+tilts enough to tell (`MIN_TILT_ACCELERATION`).
+
+**A rotor channel reading wrong** (`check_rotor_balance`, `rescale_wrong_rotor`). A
+vehicle holding its attitude keeps the thrust-weighted centroid of its rotor hubs,
+Σ r_i n_i² / Σ n_i², at its centre of gravity, within a few per cent of the arm. A channel
+reading half the true speed moves it by a third of the arm or more while the vehicle keeps
+flying level: the rotor speeds contradict each other, and a flight whose centroid lies
+more than `MAX_CENTROID_OFFSET` off is refused. The one case the data can correct, a
+single channel reading a constant share of its speed (a Crazyflie's RPM deck), is rescaled
+by the least-squares scale that centres the centroid, and said in a note.
+"""
 
 from __future__ import annotations
 

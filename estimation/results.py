@@ -1,4 +1,16 @@
-"""What estimation returns: parameter estimates with uncertainty, and their history."""
+"""What estimation returns, and the words of its answer.
+
+`ParameterEstimate` (values and covariance of the estimated quantities by name),
+`EstimationResult` (everything ``estimate`` reports: the prior, the filter and the batch,
+the history, the balance and the per-quantity answer), `EstimationHistory`,
+`FittedEffect`; the balance's `WrenchBalanceResult` with its `DataTheta`, `FitChoices` and
+`HoldoutCheck`. The answer's words: `DETERMINED`, `NOT_DETERMINED`, `AT_BOUND`, and the
+rule that says which (`parameter_status`, `quantity_status`): a parameter of θ is
+determined by the flight when its value is physical (positive) and its σ is at most
+`MAX_RELATIVE_SIGMA` of it, its 95 % interval about ±25 %: a fourfold narrowing of the
+tool's default prior (σ = `PRIOR_RELATIVE_SIGMA` of the nominal); a nuisance quantity
+when its σ is as much narrower than its prior's. The prior itself: `prior_from_config`.
+"""
 
 from __future__ import annotations
 
@@ -223,8 +235,9 @@ class EstimationResult:
         Innovation log-likelihood Σ log N(y_k; 0, S_k) of the filter at the fitted process
         noise and effects (at the config's noise when refinement is off); NaN if unknown.
     equation_error : ParameterEstimate or None
-        θ by equation error (`mavsysid.estimation.equation_error_fit`), the independent
-        check of the final θ; None when the guard is off.
+        θ by equation error (the force and torque balance's with the prior,
+        `WrenchBalanceResult.with_prior`), the independent check of the final θ; None when
+        the guard is off.
     mismatch_widening : ndarray, shape (6,), or None
         σ multipliers (≥ 1) already applied to the final θ's covariance where it and the
         equation-error θ disagree beyond their σ

@@ -1,4 +1,24 @@
-"""robust."""
+"""The one robust covariance of the estimator: Newey–West (HAC) for residuals that are not white.
+
+The naive covariance of a weighted least-squares (or MAP) estimate assumes every whitened
+residual is independent with unit variance. When the model misses some physics the
+residuals carry the missing force: correlated over seconds and larger than assumed, and
+that σ is several times too small. `hac_covariance` is the Newey–West (Bartlett)
+long-run covariance of a score series, its bandwidth by Andrews's (1991) AR(1) plug-in
+(`andrews_bartlett_bandwidth`): the estimator of statsmodels' ``S_hac_simple`` (which the
+tests compare against) with the lagged products from one FFT, since the batch
+refinement's bandwidths reach hundreds of samples. The balance's regressions
+(`mavsysid.estimation.balance.regression`) and the batch refinement use it.
+
+For the batch: the estimate moves with the residuals as Δθ = −(H⁻¹ Jᵀ r)_θ, and each time
+sample's share of it, its *influence*, is a series whose long-run variance is the variance
+of θ̂ whatever the residuals' correlation (`robust_theta_covariance`). Fitted residuals
+are smaller than the errors they estimate (r = (I − P) ε), so the plain HAC is biased low;
+`inflated_theta_covariance` calibrates it against the same HAC of white unit residuals
+projected the same way, and inflates the naive covariance by the ratio (never below 1).
+`disagreement_widening`: σ' = √(σ² + Δ²) where two estimators consistent under a correct
+model disagree beyond `DISAGREEMENT_SIGMAS` combined σ.
+"""
 
 from __future__ import annotations
 

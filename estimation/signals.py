@@ -1,4 +1,37 @@
-"""signals."""
+"""The signals of a flight: uniform grids, smoothing and derivatives, the pose's own noise.
+
+**Uniform grids** (`uniform_segments`). Real logs repeat the pose: a logger running
+faster than the on-board estimator writes the last estimate again (a Crazyflie's 500 Hz
+uSD log repeats about half its rows), and a lost radio packet repeats a row. A repeated
+pose is a measurement of an earlier time; taken at face value it makes the position a
+staircase whose second derivative is noise. So a row whose position and attitude both
+equal the previous row's exactly is left out (`fresh_pose`), and the fresh samples are
+interpolated onto a uniform grid at the log's median step (linear in position and in the
+sign-continuous quaternion, renormalised). The rotor speeds keep every row:
+`UniformSegment.rotor_speeds` interpolates them at t − δ, for a pose that lags them by δ.
+
+**Smoothing and derivatives** (`smooth_pose`). A Savitzky–Golay smoother turns poses
+into velocity, acceleration, body rates and angular acceleration: the quaternion's
+components are smoothed as a signal (sign made continuous), ω = 2 Im(q* ⊗ q̇) and
+ω̇ = 2 Im(q* ⊗ q̈). Whatever is compared with the smoothed measurement goes through the
+same smoother (`acceleration_kernel`, `body_force_readout`, `body_rotation_readout`), so
+its attenuation of fast content applies to both sides and cancels.
+
+**Band-pass** (`Band`): a zero-phase Butterworth band (or low-pass) along time, applied
+alike to both sides of a balance.
+
+**The pose's noise** (`measured_pose_noise`, `pose_sigma`). Each coordinate is fitted by
+a local cubic over `NOISE_WINDOW` samples; the residual of a local polynomial fit is the
+white part of the noise times √(1 − c₀) (c₀ the fit's centre weight), and its robust scale
+(1.4826 × MAD) ignores the odd outlier and manoeuvre. Attitude: a small rotation δ moves q
+by |δ|/2, so the per-axis angle σ is 2 √(Σ σ_c² / 3). An on-board estimator's pose is
+smoothed: its white residual collapses although its error does not, so `pose_sigma` takes
+the measured σ only when it clearly exceeds the σ assumed for the pose's source
+(`NOISE_TOLERANCE`).
+
+**States from the pose** (`pose_states`): position, attitude and their central
+differences, where the nuisance quantities' terms are evaluated before a filter pass.
+"""
 
 from __future__ import annotations
 

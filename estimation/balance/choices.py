@@ -1,4 +1,29 @@
-"""balance.choices."""
+"""One equation-error fit of a flight: band, window and rotor-to-pose offset chosen from the
+flight, then the regressions.
+
+1. **Band** (`choose_band`, `choose_lowpass`). A torque balance ω̇ = J⁻¹ τ(n) holds only
+   where both sides measure the same thing: below some frequency the rotor torque of a
+   real flight is dominated by what the rigid-body model lacks or a controller cancels
+   (trim imbalance, slow aerodynamic moments, a centre of gravity off the rotors'
+   centre); above some frequency the pose's second derivative is noise and the rotor
+   speeds' sensing lags. Where it holds the two are coherent: the band is the contiguous
+   one around the coherence peak where γ² ≥ `MIN_COHERENCE` = 0.9 (pose smoothed with the
+   short `PILOT_WINDOW`), roll/pitch and yaw apart, and the force rows get the low-pass
+   where the vertical force is coherent with the thrust. γ² ≥ 0.9 keeps the forward and
+   reverse slopes (Frisch's bounds) within about 10 % of each other. Nothing here is
+   tuned to a vehicle.
+2. **Window** (`smoother_window`): the longest Savitzky–Golay window that passes the
+   highest band; both sides go through it and through the band-pass.
+3. **Offset** (`scan_delay`). A pose from an on-board estimator, a motion-capture link or
+   a logger's buffering reaches the log later than the rotor speeds it results from; a
+   few milliseconds bias the inertia as much as a wrong window does. δ minimises the
+   band-passed torque residual over a grid of ±`MAX_DELAY`, refined by a parabola.
+4. **Regressions** (`regress`): the force rows give c_T and c_T c_D, the torque rows the
+   ratios, with the reverse (Frisch) value of each main coefficient.
+
+Rows are thinned to about `ROWS_PER_PERIOD` per period of the highest frequency kept:
+the filtered rows carry nothing faster.
+"""
 
 from __future__ import annotations
 

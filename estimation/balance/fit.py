@@ -1,4 +1,25 @@
-"""balance.fit."""
+"""θ from the force and torque balance, per parameter, with the held-out check.
+
+The equation-error estimate as an answer of its own (docs/estimation-real-flights.md):
+the pose's fresh samples on a uniform grid; band, window and offset chosen from the flight
+and the regressions (`mavsysid.estimation.balance.choices`); θ, its σ widened by errors in
+the variables and by the disagreement of the flight's halves and the band's halves
+(`mavsysid.estimation.balance.theta`); and a status per quantity: determined when its
+widened σ is within `mavsysid.estimation.results.MAX_RELATIVE_SIGMA` of its value (a
+nuisance quantity: a fourfold narrowing of its prior), else the prior's value and σ are
+kept (`mavsysid.estimation.results.quantity_status`). `fit_wrench_balance` answers for
+every parameter the flight determines; a flight it determines nothing of still gives its
+data θ, the filter's equation-error reference
+(`mavsysid.estimation.results.WrenchBalanceResult.with_prior`).
+
+**Held-out check** (`predict_holdout`): the metric a researcher can check without the
+truth (and the one data-driven multirotor models are compared by, e.g. NeuroBEM's force
+and torque RMSE). The balance is fitted on the first part of the flight (band, window,
+offset and θ all chosen there) and predicts the rest from its pose and rotor speeds; the
+RMSE of the measured minus the predicted body specific force and angular acceleration is
+compared with the prior θ's. A ratio below 1 is a model that predicts unseen data better
+than the prior.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,20 @@
-"""balance.regression."""
+"""Weighted least squares over stacked axes with a Newey–West covariance, and its reverse.
+
+The balance rows y_{t,a} = Σ_j X_{t,a,j} β_j + e_{t,a} (t time, a axis) are fitted with
+one weight per axis, w_a = 1 / RMS of that axis' residual (two passes), so that axes in
+different units and noise count alike. The residuals of a smoothed balance are correlated
+over the smoother's and the unmodelled dynamics' time scales; the covariance is therefore
+the sandwich A⁻¹ S A⁻¹ with A = Σ_t Σ_a w_a² X Xᵀ and S the Newey–West (Bartlett)
+long-run covariance of the per-time scores s_t = Σ_a w_a² X_{t,a} e_{t,a}
+(`mavsysid.estimation.robust.hac_covariance`, the one HAC of the estimator), summed over
+independent segments.
+
+Errors in the regressors. The rotor side carries errors too (speed-sensing noise and lag,
+torques the controller cancels), which bias the slope towards zero. The reverse regression
+of a regressor on the measured side is biased the other way; with errors on both sides
+the coefficient lies between the two (Frisch's bounds). The reverse value of each main
+coefficient is returned so that its interval can cover both (`reverse_coefficient`).
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,32 @@
-"""balance.rows."""
+"""The equation-error rows of a flight: the measured [f, ω̇] and the model's, through one smoother.
+
+The *equation error* per sample and axis is
+
+    r = [f_meas − F_B/m,  ω̇_meas − J⁻¹(M_B − ω × J ω)]       (paper Eqs. newton, euler)
+
+with f_meas = Rᵀ(a − g) the body specific force (m/s²) and ω̇_meas the angular
+acceleration (rad/s²), both from the smoothed pose (`mavsysid.estimation.signals`), and
+F_B, M_B the model's wrench (paper Eq. drag, the kernels of `mavsysid.vehicle.mav_model`,
+plus any `ModelEffect` wrench) at the smoothed states and the logged rotor speeds
+(`model_accelerations`); the model goes through the same smoother
+(`consistent_accelerations`) so that the smoother's attenuation applies to both sides.
+
+`BalanceBuilder` writes the balance as linear regressions. Euler's equation solved per
+axis,
+
+    ω̇_x = (c_T/j_x) τ_x − ((j_z − j_y)/j_x) ω_y ω_z,   and cyclically,
+
+is linear in the ratios of `TORQUE_COEFFICIENTS`; the force rows are linear in c_T and
+c_T c_D (`FORCE_COEFFICIENTS`). The unit wrenches come from the model's own kernel at
+θ = e_c_T, e_c_T + e_c_D and e_c_M, so no law is written twice. Terms beyond the paper's
+model enter as nuisance coefficients so that they are not taken for inertia: the rotors'
+angular momentum (J_r Σ ε_i ṅ_i about z and the precession −ω × h about x and y), the
+rotor drag's yaw moment, and in the force rows a rotor drag linear in rotor speed (without
+it the quadratic c_D absorbs the linear one). Each nuisance quantity of the vehicle
+(`mavsysid.vehicle.parameters`) adds its term's columns after the model's. The thrust row
+compares magnitudes: an attitude error shortens the measured z component by cos ε, which
+the magnitude is free of.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,19 @@
-"""balance.theta."""
+"""From balance coefficients to θ, and the parts of its honest σ.
+
+**θ from the coefficients** (`theta_from_coefficients`): c_T and c_T c_D from the force
+rows; j_x = c_T / (c_T/j_x), j_y likewise; j_z from the gyroscopic coefficients of roll and
+pitch (j_z = j_y − g_x j_x and j_z = j_x + g_y j_y, paper Eq. euler solved for j_z,
+combined by inverse variance); c_M = (c_M/j_z) j_z; each nuisance quantity from its force
+and torque coefficients, combined by inverse variance. The covariance follows by the delta
+method (a numerical Jacobian). The force and torque fits are independent (`stack`).
+
+**σ** has six parts, added in quadrature (`widened_sigma`, `SIGMA_PARTS`): the Newey–West
+sandwich; errors in the variables (the interval reaches the reverse regression's value,
+σ_eiv = |θ_forward − θ_reverse| / 1.96); the two halves of the flight and the two halves of
+the band, each fitted alone (a disagreement beyond their own σ is model error the sandwich
+cannot see and adds (d² − σ_a² − σ_b²)/4, `split_widening`); the two routes to j_z, which
+carry over to c_M; and the thrust row's second-order bias.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,23 @@
-"""batch.kernels."""
+"""Compiled kernels of the batch refinement: state ⊞/⊟, the shooting residuals, Jacobian and
+normal equations, and their block solve.
+
+The unknowns are the 12-D error of each shooting node and the scaled error of the P
+estimated quantities. The Jacobian rows of one sample touch node k and θ; the defect
+between node k and k+1 touches nodes k, k+1 and θ. So JᵀJ is block tridiagonal in the
+nodes with a dense θ border:
+
+    ⎡ D₀  U₀           B₀ ⎤
+    ⎢ U₀ᵀ D₁  U₁       B₁ ⎥
+    ⎢     ⋱   ⋱   ⋱    ⋮  ⎥
+    ⎣ B₀ᵀ B₁ᵀ  …  T       ⎦
+
+`shoot_kernel` accumulates those blocks directly (``mode`` 2) instead of building J as a
+sparse matrix (``mode`` 1 still gives J in COO form, for `scipy.optimize.least_squares`
+and the tests). A block Cholesky factorisation in that order (`ThetaBorderedFactor`)
+creates no fill: O(K·12³) work and memory. The θ block of the inverse, the θ covariance,
+is the inverse of the last Schur complement, which the factorisation yields for free.
+Jacobi scaling to a unit diagonal keeps it well conditioned.
+"""
 
 from __future__ import annotations
 

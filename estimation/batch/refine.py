@@ -1,4 +1,25 @@
-"""batch.refine."""
+"""Batch maximum-a-posteriori refinement: states and θ jointly over the whole flight.
+
+In the spirit of Burri et al.'s maximum-likelihood identification, and because the paper
+found its EKF overconfident on real flights, the filter's estimate is refined by a batch
+MAP over states and θ jointly, posed as multiple shooting: nodes at every sample by
+default (or every ``node_interval`` seconds); the unknowns are the model state at each
+node (as a 12-D error of the filtered state) and the P estimated quantities (as scaled
+errors). The cost is
+
+    Σ_samples |pose residual / σ|²  +  Σ_nodes |W_k (x_{k+1} ⊟ Φ(x_k, θ))|²  +  |θ prior|²,
+
+where Φ integrates the model (RK4, logged rotor speeds) from one node to the next and W_k
+whitens the defect with the process noise accumulated over the interval (at the level the
+caller chose, e.g. fitted by `mavsysid.estimation.filter.likelihood`). The defects let
+the states follow the data, so a long flight does not drift off. `ShootingProblem` holds
+the flight in the kernels' arrays and evaluates the residuals with their Jacobian, as a
+sparse matrix or directly as the blocks of JᵀJ and Jᵀr that `refine` solves
+(`mavsysid.estimation.batch.kernels`); `solve_least_squares` solves the same problem with
+`scipy.optimize.least_squares`, the reference the refinement is measured against. θ's
+covariance is inflated by the residuals' HAC against a correct model's
+(`mavsysid.estimation.robust.inflated_theta_covariance`).
+"""
 
 from __future__ import annotations
 

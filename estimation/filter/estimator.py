@@ -1,4 +1,23 @@
-"""filter.estimator."""
+"""The filter side of ``mavsysid estimate``: filter, fit noise, refine.
+
+0. Known model effects (the config's ``[effects.NAME]`` tables, or effects a caller such
+   as the discrepancy workflow passes) put the flight in the model's terms; by default
+   their parameters are fitted jointly with θ and the noise level first
+   (`mavsysid.estimation.filter.likelihood`). Without effects this step is absent and the
+   results are exactly the paper's model's.
+1. The parameter EKF runs over the flight with the vehicle config's noise (the paper's
+   estimator), guarded against divergence (`mavsysid.estimation.filter.guard`): the
+   *filter* estimate and its history over time.
+2. Refinement (optional, on by default): the process-noise level is fitted by maximum
+   likelihood on the filter's innovations, and a batch MAP estimate of states and θ
+   jointly is computed at that level (`mavsysid.estimation.batch.refine`): the *refined*
+   estimate.
+
+The equation-error θ of the force and torque balance is the guard's reference: the
+restart point, the agreement check, and the widening of σ where the two disagree. The
+estimated quantities are θ and the config's nuisance quantities
+(`mavsysid.vehicle.parameters`).
+"""
 
 from __future__ import annotations
 

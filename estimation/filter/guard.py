@@ -1,4 +1,31 @@
-"""filter.guard."""
+"""The filter's guard: a diverging filter restarted or refused, and a θ the balance contradicts.
+
+**Divergence** (`divergence`). A consistent filter's normalised innovation squared (NIS)
+averages the measurement dimension m = 6; its mean over a window of w samples lies below
+the χ²(m w)/w 99.9 % bound. A model that cannot follow the log (θ far off, c_T 70× too
+small) makes the innovations grow by orders of magnitude; model mismatch on good flights
+(wind, motor lag, a smoothed on-board pose) raises the NIS several-fold too, so the bound
+is widened by `NIS_FACTOR`. The filter counts as diverged when the median of its windowed
+mean NIS over the flight's second half exceeds that, when its θ is physically impossible
+or far off the prior (`mavsysid.estimation.checks`), or when its state overflowed.
+
+**Restart** (`guarded_filter`). A diverged filter restarts from the equation-error θ (the
+force and torque balance's, with the prior) with its measurement σ scaled by
+√(NIS level / m): the innovations measure the pose noise the filter met, which a smoothed
+on-board pose hides from the log's white residual. A pose whose noise drifts makes the
+innovations correlated; `decorrelated_attempt` raises σ to the white σ of equal
+information (`correlated_noise_sigma`). After `MAX_RESTARTS` the estimate is refused
+(`JobFailedError`, one line); the batch refinement never starts from a diverged filter.
+
+**Contradiction** (`check_agreement`). The final θ and the equation-error θ are two
+estimates from one log, both consistent when the model fits it. They disagree when they
+differ by more than `AGREEMENT_SIGMAS` × √(σ² + σ_EE²) *and* by more than the relative
+tolerance `AGREEMENT_TOLERANCE` (5 %, c_D 15 %). A disagreement is what a model mismatch
+looks like: the estimator widens that parameter's σ to hold it
+(`mavsysid.estimation.robust.disagreement_widening`) and says so, and ``mavsysid
+diagnose`` takes it from there. Only a disagreement as large as `UNDETERMINED_RELATIVE` of
+the value is refused. Nuisance quantities beyond θ are not judged here.
+"""
 
 from __future__ import annotations
 

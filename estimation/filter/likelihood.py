@@ -1,4 +1,33 @@
-"""filter.likelihood."""
+"""What the filter fits by maximum likelihood besides θ: the process-noise level and the
+parameters of known model effects, and the effects in the filter's terms.
+
+**Effects in the filter's terms** (`model_terms`). A `ModelEffect` enters through up to
+three channels: ``rotor_speeds`` (the filter is driven by the acting speeds),
+``pose`` (the poses are corrected; a delay re-times them, each pose then paired with the
+acting rotor speeds interpolated at its corrected time, so the sample count stays the
+same for every delay) and ``wrench`` (an extra body force and torque per sample, linear
+between samples in the filter's RK4 step). The wrench depends on the state and θ but is
+defined in numpy, once for truth and model, so it is evaluated on a previous filter pass
+(`WrenchReference`); `reference_terms` iterates the passes until θ settles.
+
+**The noise level** (`fit_noise_scale`). The force and moment noise densities of the
+vehicle config are assumptions; the filter's innovation log-likelihood
+Σ log N(y_k; 0, S_k) is a function of their scale, and its maximum is the
+maximum-likelihood noise level (the classical way to tune a Kalman filter from data). Too
+much noise throws information away; too little makes the filter overconfident. A fit at
+the upper edge of its range is refused.
+
+**Effects' parameters** (`fit_effect_parameters`). ψ is estimated from the same flight as
+θ: ℓ(ψ, s) is the marginal likelihood of the poses given ψ and the noise scale s, θ and
+the states integrated out by the filter; its maximum is the joint ML estimate, and σ(ψ)
+comes from the observed information −∂²ℓ/∂ψ² (central differences at about one σ). Signed
+parameters are kept in their range. Through the likelihood rather than an augmented filter
+state because the effects act through channels that are not smooth inside the filter (a
+delay re-times the measurements, a motor lag filters the whole rotor-speed log). A damped
+Newton method in scaled units; the ψ–s cross terms are taken as zero (parameters of the
+mean and of the covariance are asymptotically orthogonal). ψ's uncertainty is carried
+into θ's: Σ_θ ← Σ_θ|ψ + J Σ_ψ Jᵀ (`EffectFit.theta_covariance_increment`).
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,35 @@
-"""readers.logs."""
+"""Where a flight comes from: each log kind into `LogStreams`, the calibration window, and
+an external motion-capture pose merged on its own clock.
+
+**Pose logs** (`read_pose_csv`): mavsysid's own ``pose.csv`` is already in the project's
+conventions (world ENU, body FLU, rad/s in the config's rotor order) and is read strictly
+by `mavsysid.formats.poselog.read_pose_log`; a simulated flight's ``meta.json`` next to it
+supplies the truth.
+
+**Autopilot logs** (`read_autopilot_log`, ``.tlog``, ``.ulg``, ``.bin``). Each format's
+module reads its log into a `ParsedLog` in the log's own conventions (NED/FRD and the
+autopilot's motor numbering). Here the pose goes into ENU/FLU (`mavsysid.vehicle.frames`;
+the autopilot's separately timed position and attitude combined into one pose,
+`combine_pose`) and the motor outputs into the config's rotor order
+(`rotors_in_config_order`): more motor outputs than rotors are refused unless the vehicle
+names its autopilot frame, through which (`mavsysid.vehicle.motor_order`) they are put
+into the config's order.
+
+**The calibration window** (`choose_window`). A real log holds take-off, landing and time
+on the ground around the part flown for identification. In this order: the window given
+(``--start``/``--end``, s on the log's clock); the trajectory `mavsysid stream` flew
+(``trajectory_window`` of the ``meta.json`` beside the log); the longest span in the mode
+an external controller flies it in (GUIDED, OFFBOARD: `control_spans`); else the whole
+log. It says which and why in an ``info:`` note.
+
+**An external pose** (``--pose``, `merge_pose`): the merged flight keeps the flight log's
+clock and rotor speeds and takes its pose from the motion-capture file, shifted by the
+clock offset, given or found by `estimate_time_offset`. The two clocks share no
+timestamps, so the offset comes from the motion: when the flight log has a pose of its
+own, both sides give the body angular-rate magnitude |ω| (frame independent); with rotor
+speeds only, the motion capture's specific force along the body z axis is correlated with
+Σ n². The lag of the correlation's peak, refined by a parabola, is the offset.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,29 @@
-"""readers.samples."""
+"""From a log's streams to a checked `FlightData`: resampling, repairs and refusals.
+
+Each reader returns `LogStreams`: the pose samples (ENU/FLU) and one or more rotor-speed
+series (rad/s, the config's rotor order), each on its own clock. `to_flight_data`
+resamples the rotor speeds to the pose times (pose samples outside their span are
+dropped) and checks the result (`validate_flight`). Keeping the streams apart until then
+lets ``--pose`` swap in a motion-capture pose first.
+
+**Refusals** (`LogFormatError`, one line naming the file, exit 2): a rotor count other
+than the vehicle config's, rotor speeds in the wrong unit (rpm, rev/s, normalised
+outputs), less than `MIN_DURATION` of data, attitudes far from unit quaternions. A gap
+longer than `MAX_GAP` (`gap_limit`) splits the flight into segments; segments shorter than
+`MIN_DURATION` are dropped, with a note.
+
+**Repairs**, reported with counts as warnings: rows with NaN dropped, out-of-order
+timestamps sorted, duplicate timestamps dropped, short gaps, slightly non-unit
+quaternions normalised.
+
+**Samples no working sensor produces in flight** (`drop_unphysical_samples`): a measured
+position, attitude or set of rotor speeds never repeats to the last bit while the vehicle
+flies, and a rotor that reads 0 while the others carry the vehicle has a dead channel.
+Such samples (a stalled estimator, a lost motion-capture body, a dead ESC telemetry
+channel) are left out as gaps, one note each; one rotor's dead readings, while the vehicle
+keeps flying, are filled from the other rotors instead (`fill_dead_rotor`). On the ground
+a signal may well stand still, so only runs mostly at flying thrust count.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,17 @@
-"""report.figures."""
+"""``estimate --report DIR``: PNG figures, the history CSV and a one-page HTML report.
+
+Figures are made with `matplotlib.figure.Figure` directly (not pyplot), so nothing global
+changes: no backend is selected, no window opens; saving renders through Agg. The page is
+plain HTML (no script, nothing fetched from the network) with the figures as ``<img>`` of
+the PNG files beside it, so the folder can be opened, copied or attached as it is;
+`html_page` is shared with ``diagnose --report``. The model-against-measurement figure
+(`compare_wrench`) shows the force and torque balance's own rows at the final θ: the
+measured wrench and the paper's model's, through one smoother, in N and N·m.
+
+Files written into DIR (`ESTIMATE_REPORT_FILES`): ``index.html``; ``parameters.png`` (θ over
+time with ±σ bands); ``innovations.png`` (innovations and NIS); ``rotor_speeds.png`` (the
+rotor inputs); ``wrench.png`` (model against measurement); ``history.csv``.
+"""
 
 from __future__ import annotations
 

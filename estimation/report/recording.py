@@ -1,4 +1,12 @@
-"""report.recording."""
+"""A Rerun recording of an estimation run (``mavsysid estimate --rrd FILE``).
+
+Entities (time series on the ``time`` timeline, s from the start of the log):
+``parameters/<name>/estimate``, ``/upper``, ``/lower`` (the filter's θ_j and θ_j ± σ_j, SI;
+``/true`` when the truth is known, ``/refined`` when refinement ran); ``world/measured`` and
+``world/filtered`` (the position, m, world ENU); ``innovations/position/{x,y,z}``,
+``innovations/attitude/{x,y,z}``, ``innovations/nis`` with its χ²(6) bound; ``rotors/n<i>``
+(the logged rotor speeds, rad/s); and the answer as a markdown panel.
+"""
 
 from __future__ import annotations
 

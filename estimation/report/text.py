@@ -1,4 +1,14 @@
-"""report.text."""
+"""What `estimate` tells the user in words and numbers: a table on stdout, ``estimate.json``,
+the updated vehicle config and the estimate over time as CSV.
+
+The JSON follows docs/architecture.md's user-facing contract (``{"parameters": {"c_T":
+{"value", "sigma", ...}, ...}, ...}``, nuisance quantities beyond θ under ``"nuisance"``);
+everything in it is SI, and quantities that do not exist (a parameter that never
+converged, no refinement) are ``null``, never NaN. The history CSV (``--history``) has one
+row per filter step: ``t`` (s, the log's clock), each parameter's filtered value and σ,
+then the NIS, with 17 significant digits so that reading it back gives the filter's
+numbers exactly.
+"""
 
 from __future__ import annotations
 
