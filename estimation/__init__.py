@@ -22,7 +22,11 @@ import importlib
 from typing import Any
 
 from mavsysid.estimation.answer import FilterEstimator, check_result, estimate
-from mavsysid.estimation.balance.fit import WrenchBalanceSettings, fit_wrench_balance
+from mavsysid.estimation.balance.fit import (
+    WrenchBalanceSettings,
+    compare_wrench,
+    fit_wrench_balance,
+)
 from mavsysid.estimation.balance.rows import consistent_accelerations, model_accelerations
 from mavsysid.estimation.checks import (
     check_kinematics,
@@ -48,8 +52,6 @@ from mavsysid.estimation.progress import (
 )
 from mavsysid.estimation.readers import READERS, describe_log_kinds, load_flight
 from mavsysid.estimation.report.text import (
-    CONVERGENCE_TOLERANCE,
-    convergence_time,
     format_table,
     result_to_json,
     updated_vehicle,
@@ -58,6 +60,9 @@ from mavsysid.estimation.report.text import (
 )
 from mavsysid.estimation.results import (
     AT_BOUND,
+    AXIS_NAMES,
+    AXIS_UNITS,
+    CONVERGENCE_TOLERANCE,
     DETERMINED,
     NOT_DETERMINED,
     EstimationHistory,
@@ -65,11 +70,10 @@ from mavsysid.estimation.results import (
     FittedEffect,
     ParameterEstimate,
     WrenchBalanceResult,
+    convergence_time,
     prior_from_config,
 )
 from mavsysid.estimation.signals import (
-    AXIS_NAMES,
-    AXIS_UNITS,
     MAX_JITTER,
     SmoothedPose,
     SmootherSettings,
@@ -82,7 +86,7 @@ from mavsysid.estimation.signals import (
 #: Public names whose modules load matplotlib or rerun: imported on first use.
 _LAZY = {
     **{name: "mavsysid.estimation.report.figures" for name in (
-        "ReportTable", "compare_wrench", "flight_lines", "html_page", "plot_rotor_speeds",
+        "ReportTable", "flight_lines", "html_page", "plot_rotor_speeds",
         "plot_wrench", "save_figure", "write_estimate_report", "write_index")},
     **{name: "mavsysid.estimation.report.recording" for name in (
         "ROTOR_COLORS", "log_estimation", "write_estimation_rrd")},
@@ -94,7 +98,8 @@ __all__ = [
     "EstimationResult", "EstimatorSettings", "FilterEstimator", "FittedEffect", "FlightData",
     "ParameterEKF", "ParameterEstimate", "SmoothedPose", "SmootherSettings", "StageLog",
     "WrenchBalanceResult", "WrenchBalanceSettings", "acceleration_kernel", "check_kinematics",
-    "check_plausible", "check_result", "consistent_accelerations", "convergence_time",
+    "check_plausible", "check_result", "compare_wrench", "consistent_accelerations",
+    "convergence_time",
     "describe_log_kinds", "estimate", "estimate_parameters", "estimate_with_effects",
     "fit_wrench_balance", "format_table", "implausibility", "load_flight",
     "model_accelerations", "nis_level", "noise_gain", "prior_from_config", "progress_wanted",

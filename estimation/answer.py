@@ -68,7 +68,6 @@ from mavsysid.estimation.results import (
     prior_from_config,
     quantity_status,
 )
-from mavsysid.estimation.robust import widened
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM
 from mavsysid.vehicle.parameters import (
@@ -458,7 +457,7 @@ def check_result(source: str, result: EstimationResult,
                     may_vanish=vanishing_parameters(e.name for e in effects), floor=floor)
     final = result.final
     if result.equation_error is not None:
-        unwidened = final if result.mismatch_widening is None else ParameterEstimate(
-            final.value, widened(final.covariance, 1.0 / result.mismatch_widening),
-            final.names)
+        factor = result.mismatch_widening
+        unwidened = final if factor is None else ParameterEstimate(
+            final.value, final.covariance / np.outer(factor, factor), final.names)
         check_agreement(source, unwidened, result.equation_error)

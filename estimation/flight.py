@@ -41,6 +41,7 @@ from typing import Literal
 
 import numpy as np
 from mavsysid.vehicle.mav_model import rotor_wrench
+from mavsysid.vehicle.rotation import continuous_sign, quat_conjugate, quat_multiply, quat_to_matrix
 
 __all__ = ["MIN_DURATION", "POSE_SOURCES", "SMOOTH_PERIOD", "FlightData", "InputSamples",
            "step_process_noise", "wrench_noise_density"]
@@ -308,6 +309,26 @@ class FlightData:
         """Index of the segment spanning the most time (the first of equals)."""
         spans = [self.t[stop - 1] - self.t[start] for start, stop in self.segment_bounds]
         return int(np.argmax(spans))
+
+    def pose_states(self) -> np.ndarray:
+        """Model states [p, v_B, q, ω] from the logged pose alone, shape (N, 13).
+
+        Velocity and body rates are central differences of the pose: where the nuisance
+        quantities' terms are evaluated before any filter pass (most depend on the rotor
+        speeds and time only; a velocity-dependent one sees the pose's noise through them).
+        """
+        t = np.asarray(self.t, float)
+        q = continuous_sign(self.quaternion)
+        x = np.zeros((len(t), 13))
+        x[:, 0:3] = self.position
+        x[:, 6:10] = q
+        if len(t) < 2:
+            return x
+        velocity = np.gradient(np.asarray(self.position, float), t, axis=0)
+        x[:, 3:6] = np.einsum("nji,nj->ni", quat_to_matrix(q), velocity)
+        q_dot = np.gradient(q, t, axis=0)
+        x[:, 10:13] = 2.0 * quat_multiply(quat_conjugate(q), q_dot)[:, 1:]
+        return x
 
     def time_slice(self, t0: float, t1: float) -> FlightData:
         """The samples with t0 ≤ t ≤ t1 (segments kept where they start inside)."""

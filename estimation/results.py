@@ -16,25 +16,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Protocol
 
 import numpy as np
-from mavsysid.estimation.signals import AXIS_NAMES, Band
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.vehicle.parameters import C_D, quantity_names
+from scipy.signal import butter, sosfiltfilt
 
 from mavsysid.errors import InputError
 
 __all__ = [
     "AT_BOUND",
+    "AXIS_NAMES",
+    "AXIS_UNITS",
     "COMBINATION_NAMES",
+    "CONVERGENCE_TOLERANCE",
     "C_D_PRIOR_SIGMA",
     "DETERMINED",
+    "FILTER_ORDER",
     "MAX_RELATIVE_SIGMA",
     "NOT_DETERMINED",
     "PRIOR_RELATIVE_SIGMA",
     "SIGMA_PARTS",
+    "Band",
     "DataTheta",
     "EstimationHistory",
     "EstimationResult",
@@ -44,6 +50,7 @@ __all__ = [
     "ParameterEstimate",
     "PriorChoices",
     "WrenchBalanceResult",
+    "convergence_time",
     "parameter_status",
     "prior_from_config",
     "quantity_status",
@@ -624,3 +631,115 @@ def prior_from_config(config: VehicleConfig, settings: PriorChoices | None = Non
     value = np.concatenate([value, [q.nominal for q in extras]])
     sigma = np.concatenate([sigma, [q.prior_sigma for q in extras]])
     return ParameterEstimate(value, np.diag(sigma**2), quantity_names(extras))
+
+
+#: Relative band that counts as converged (the paper's "within 5 %").
+CONVERGENCE_TOLERANCE = 0.05
+
+
+def convergence_time(
+    t: np.ndarray,
+    theta: np.ndarray,
+    reference: np.ndarray,
+    tolerance: float = CONVERGENCE_TOLERANCE,
+) -> np.ndarray:
+    """When each parameter's estimate settles within a relative band around a reference.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, s, increasing.
+    theta : ndarray, shape (N, P)
+        Estimates over time (P = 6 for θ), SI.
+    reference : ndarray, shape (P,)
+        Values to converge to (the truth, or the final estimate), SI.
+    tolerance : float, optional
+        Half-width of the band relative to ``|reference|`` (0.05 = 5 %).
+
+    Returns
+    -------
+    ndarray, shape (P,)
+        Per parameter, the first t_i such that ``|theta[k, j] - reference[j]| <=
+        tolerance * |reference[j]|`` for every k ≥ i, s; NaN when the last sample is
+        outside the band (or there are no samples). A NaN estimate counts as outside.
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    theta = np.asarray(theta, dtype=float)
+    reference = np.asarray(reference, dtype=float).reshape(-1)
+    if theta.ndim != 2 or theta.shape != (t.size, reference.size):
+        raise ValueError(
+            f"convergence_time: theta of shape ({t.size}, {reference.size}) to match t "
+            f"and reference, got {theta.shape}"
+        )
+    out = np.full(reference.size, np.nan)
+    if t.size == 0:
+        return out
+    inside = np.abs(theta - reference) <= tolerance * np.abs(reference)
+    # A reversed running AND marks the samples from which the estimate never leaves again.
+    stays = np.logical_and.accumulate(inside[::-1], axis=0)[::-1]
+    settled = stays[-1]
+    out[settled] = t[np.argmax(stays[:, settled], axis=0)]
+    return out
+
+
+#: The six residual axes: body specific force (m/s²) and angular acceleration (rad/s²).
+AXIS_NAMES = ("f_x", "f_y", "f_z", "dw_x", "dw_y", "dw_z")
+
+
+AXIS_UNITS = ("m/s²",) * 3 + ("rad/s²",) * 3
+
+
+#: Butterworth order of each side of the band-pass (doubled by the forward-backward pass).
+FILTER_ORDER = 2
+
+
+@dataclass(frozen=True)
+class Band:
+    """A frequency band [low, high], Hz, and the coherence found in it.
+
+    ``low = 0`` is a low-pass. Attributes: ``low``, ``high``, ``peak`` (Hz of the highest
+    coherence) and ``peak_coherence``, ``mean_coherence`` (γ² over the band).
+    """
+
+    low: float
+    high: float
+    peak: float = float("nan")
+    peak_coherence: float = float("nan")
+    mean_coherence: float = float("nan")
+
+    @property
+    def centre(self) -> float:
+        """Geometric centre, Hz (the arithmetic one for a low-pass)."""
+        return float(np.sqrt(self.low * self.high)) if self.low > 0 else 0.5 * self.high
+
+    def halves(self) -> tuple[Band, Band]:
+        """The band split at its centre."""
+        c = self.centre
+        return Band(self.low, c), Band(c, self.high)
+
+    def apply(self, x: np.ndarray, dt: float) -> np.ndarray:
+        """``x`` band-passed along axis 0 (zero phase), same shape.
+
+        Parameters
+        ----------
+        x : ndarray, shape (N, ...)
+        dt : float
+            Sample interval, s.
+        """
+        sos = _sos(self.low, self.high, dt)
+        shape = x.shape
+        flat = np.asarray(x, float).reshape(shape[0], -1)
+        return sosfiltfilt(sos, flat, axis=0).reshape(shape)
+
+    def settle(self) -> float:
+        """Time to cut off each end after filtering, s: one period of the lowest frequency."""
+        return 1.0 / (self.low if self.low > 0 else self.high)
+
+
+@lru_cache(maxsize=64)
+def _sos(low: float, high: float, dt: float) -> np.ndarray:
+    nyquist = 0.5 / dt
+    high = min(high, 0.95 * nyquist)
+    if low > 0:
+        return butter(FILTER_ORDER, [low, high], btype="bandpass", fs=1.0 / dt, output="sos")
+    return butter(FILTER_ORDER, high, btype="lowpass", fs=1.0 / dt, output="sos")

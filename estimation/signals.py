@@ -41,42 +41,17 @@ from functools import cached_property, lru_cache
 import numpy as np
 from mavsysid.estimation.flight import FlightData
 from mavsysid.vehicle.config import GRAVITY
-from mavsysid.vehicle.rotation import continuous_sign, quat_conjugate, quat_multiply, quat_to_matrix
+from mavsysid.vehicle.rotation import continuous_sign, quat_multiply, quat_to_matrix
 from scipy.ndimage import convolve1d
-from scipy.signal import butter, oaconvolve, savgol_coeffs, sosfiltfilt
+from scipy.signal import oaconvolve, savgol_coeffs
 
 from mavsysid.errors import InputError
 
-__all__ = [
-    "AXIS_NAMES",
-    "AXIS_UNITS",
-    "FILTER_ORDER",
-    "MAX_JITTER",
-    "NOISE_TOLERANCE",
-    "NOISE_WINDOW",
-    "Band",
-    "SmoothedPose",
-    "SmootherSettings",
-    "UniformSegment",
-    "acceleration_kernel",
-    "body_force_readout",
-    "body_rotation_readout",
-    "convolve_columns",
-    "fresh_pose",
-    "measured_pose_noise",
-    "noise_gain",
-    "pose_sigma",
-    "pose_states",
-    "savgol_kernel",
-    "smooth_pose",
-    "uniform_segments",
-    "uniform_step",
-]
+__all__ = ["MAX_JITTER", "SmoothedPose", "SmootherSettings", "UniformSegment",
+           "acceleration_kernel", "body_force_readout", "body_rotation_readout",
+           "convolve_columns", "fresh_pose", "noise_gain", "savgol_kernel",
+           "smooth_pose", "uniform_segments", "uniform_step"]
 
-
-#: The six residual axes: body specific force (m/s²) and angular acceleration (rad/s²).
-AXIS_NAMES = ("f_x", "f_y", "f_z", "dw_x", "dw_y", "dw_z")
-AXIS_UNITS = ("m/s²",) * 3 + ("rad/s²",) * 3
 
 #: Largest deviation of a sample interval from the median one, as a fraction of it, that
 #: the smoother takes as uniform (the log is then used as it is).
@@ -451,136 +426,3 @@ def uniform_segments(flight: FlightData, min_duration: float) -> list[UniformSeg
         if seg is not None and seg.t[-1] - seg.t[0] >= min_duration:
             out.append(seg)
     return out
-
-
-#: Samples of the local cubic fit (odd).
-NOISE_WINDOW = 9
-
-#: The measured σ replaces the assumed one when larger by more than this factor.
-NOISE_TOLERANCE = 1.5
-
-_MAD_TO_SIGMA = 1.4826
-
-
-def _white_sigma(x: np.ndarray) -> np.ndarray:
-    """Robust σ of the white part of each column of x (N, k)."""
-    c = savgol_kernel(NOISE_WINDOW, 3, 0, 1.0)
-    e = (x - convolve1d(x, c, axis=0, mode="nearest"))[NOISE_WINDOW:-NOISE_WINDOW]
-    mad = np.median(np.abs(e - np.median(e, axis=0)), axis=0)
-    return _MAD_TO_SIGMA * mad / np.sqrt(1.0 - c[NOISE_WINDOW // 2])
-
-
-def measured_pose_noise(flight: FlightData) -> tuple[float, float]:
-    """White-noise σ of position (m) and attitude (rad, per axis) in the longest segment."""
-    if len(flight.segment_starts) > 1:
-        flight = flight.segment(flight.longest_segment())
-    if len(flight) < 3 * NOISE_WINDOW:
-        return 0.0, 0.0
-    q = continuous_sign(flight.quaternion)
-    position = float(np.median(_white_sigma(np.asarray(flight.position, float))))
-    attitude = float(2.0 * np.sqrt(np.sum(_white_sigma(q) ** 2) / 3.0))
-    return position, attitude
-
-
-def pose_sigma(flight: FlightData, assumed: tuple[float, float]
-               ) -> tuple[tuple[float, float], str | None]:
-    """Measurement σ (m, rad) for the filter, and a note when the log changed it.
-
-    Parameters
-    ----------
-    flight : FlightData
-    assumed : tuple of 2 float
-        σ assumed for the pose source (m, rad): the floor.
-    """
-    measured = measured_pose_noise(flight)
-    used = tuple(m if m > NOISE_TOLERANCE * a else a
-                 for m, a in zip(measured, assumed, strict=True))
-    if used == tuple(assumed):
-        return tuple(assumed), None  # type: ignore[return-value]
-    return used, (  # type: ignore[return-value]
-        f"measurement σ measured from the pose (local-cubic residual, robust): "
-        f"{1000 * measured[0]:.2g} mm, {np.degrees(measured[1]):.2g}°; used "
-        f"{1000 * used[0]:.2g} mm, {np.degrees(used[1]):.2g}° (floor: the assumed "
-        f"{1000 * assumed[0]:.2g} mm, {np.degrees(assumed[1]):.2g}°)")
-
-
-#: Butterworth order of each side of the band-pass (doubled by the forward-backward pass).
-FILTER_ORDER = 2
-
-
-@dataclass(frozen=True)
-class Band:
-    """A frequency band [low, high], Hz, and the coherence found in it.
-
-    ``low = 0`` is a low-pass. Attributes: ``low``, ``high``, ``peak`` (Hz of the highest
-    coherence) and ``peak_coherence``, ``mean_coherence`` (γ² over the band).
-    """
-
-    low: float
-    high: float
-    peak: float = float("nan")
-    peak_coherence: float = float("nan")
-    mean_coherence: float = float("nan")
-
-    @property
-    def centre(self) -> float:
-        """Geometric centre, Hz (the arithmetic one for a low-pass)."""
-        return float(np.sqrt(self.low * self.high)) if self.low > 0 else 0.5 * self.high
-
-    def halves(self) -> tuple[Band, Band]:
-        """The band split at its centre."""
-        c = self.centre
-        return Band(self.low, c), Band(c, self.high)
-
-    def apply(self, x: np.ndarray, dt: float) -> np.ndarray:
-        """``x`` band-passed along axis 0 (zero phase), same shape.
-
-        Parameters
-        ----------
-        x : ndarray, shape (N, ...)
-        dt : float
-            Sample interval, s.
-        """
-        sos = _sos(self.low, self.high, dt)
-        shape = x.shape
-        flat = np.asarray(x, float).reshape(shape[0], -1)
-        return sosfiltfilt(sos, flat, axis=0).reshape(shape)
-
-    def settle(self) -> float:
-        """Time to cut off each end after filtering, s: one period of the lowest frequency."""
-        return 1.0 / (self.low if self.low > 0 else self.high)
-
-
-@lru_cache(maxsize=64)
-def _sos(low: float, high: float, dt: float) -> np.ndarray:
-    nyquist = 0.5 / dt
-    high = min(high, 0.95 * nyquist)
-    if low > 0:
-        return butter(FILTER_ORDER, [low, high], btype="bandpass", fs=1.0 / dt, output="sos")
-    return butter(FILTER_ORDER, high, btype="lowpass", fs=1.0 / dt, output="sos")
-
-
-def pose_states(flight: FlightData) -> np.ndarray:
-    """Model states [p, v_B, q, ω] from the logged pose alone, shape (N, 13).
-
-    Velocity and body rates are central differences of the pose: where the nuisance
-    quantities' terms are evaluated before any filter pass (most depend on the rotor
-    speeds and time only; a velocity-dependent one sees the pose's noise through them).
-
-    Parameters
-    ----------
-    flight : FlightData
-        The logged pose (N samples, strictly increasing times).
-    """
-    t = np.asarray(flight.t, float)
-    q = continuous_sign(flight.quaternion)
-    x = np.zeros((len(t), 13))
-    x[:, 0:3] = flight.position
-    x[:, 6:10] = q
-    if len(t) < 2:
-        return x
-    velocity = np.gradient(np.asarray(flight.position, float), t, axis=0)
-    x[:, 3:6] = np.einsum("nji,nj->ni", quat_to_matrix(q), velocity)
-    q_dot = np.gradient(q, t, axis=0)
-    x[:, 10:13] = 2.0 * quat_multiply(quat_conjugate(q), q_dot)[:, 1:]
-    return x

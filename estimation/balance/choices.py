@@ -41,8 +41,11 @@ from mavsysid.estimation.balance.rows import (
     BalanceBuilder,
     BalanceRows,
 )
-from mavsysid.estimation.results import MAX_RELATIVE_SIGMA, FitChoices
-from mavsysid.estimation.signals import Band, UniformSegment, savgol_kernel
+from mavsysid.estimation.results import MAX_RELATIVE_SIGMA, Band, FitChoices
+from mavsysid.estimation.signals import (
+    UniformSegment,
+    savgol_kernel,
+)
 from mavsysid.vehicle.config import VehicleConfig
 from scipy.signal import coherence, freqz
 
@@ -57,6 +60,7 @@ __all__ = [
     "choose_band",
     "choose_fit",
     "choose_lowpass",
+    "delay_sigma",
     "fit_balance",
     "regress",
     "scan_delay",
@@ -454,3 +458,31 @@ def fit_balance(segments: list[UniformSegment], config: VehicleConfig, c_d: floa
                           drag_linear=float(fitted_linear))
         force, torque, reverse = regress(balance_rows_for(builders, choices))
     return BalanceFit(choices, force, torque, reverse), builders
+
+
+def delay_sigma(fit: BalanceFit, builders: list[BalanceBuilder]) -> float:
+    """σ of δ: the torque residual regressed on the model's derivative in δ (Newey–West).
+
+    Parameters
+    ----------
+    fit : BalanceFit
+        The fit at its chosen δ.
+    builders : list of BalanceBuilder
+        Its segments' builders (`fit_balance`), for the rows at δ ± one sample.
+    """
+    c = fit.choices
+    h = builders[0].dt
+    b = fit.torque.coefficients
+    rows = balance_rows_for(builders, c)
+    plus, minus = (balance_rows_for(builders, replace(c, delay=c.delay + s)) for s in (h, -h))
+    if not (len(rows) == len(plus) == len(minus)) or not rows:
+        return float("nan")
+    y = [r.torque - r.torque_columns @ b for r in rows]
+    X = [((p.torque_columns - m.torque_columns) @ b / (2 * h))[:, :, None]
+         for p, m in zip(plus, minus, strict=True)]
+    if any(len(x) != len(e) for x, e in zip(X, y, strict=True)):
+        return float("nan")
+    try:
+        return float(fit_rows(y, X).sigma[0])
+    except np.linalg.LinAlgError:
+        return float("nan")

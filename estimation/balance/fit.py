@@ -23,17 +23,17 @@ than the prior.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.estimation.balance.choices import (
     MAIN_COLUMNS,
     BalanceFit,
     balance_rows_for,
+    delay_sigma,
     fit_balance,
     regress,
 )
-from mavsysid.estimation.balance.regression import fit_rows
 from mavsysid.estimation.balance.rows import (
     FORCE_COEFFICIENTS,
     BalanceBuilder,
@@ -54,6 +54,7 @@ from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import (
     COMBINATION_NAMES,
     MAX_RELATIVE_SIGMA,
+    Band,
     DataTheta,
     FitChoices,
     HoldoutCheck,
@@ -62,13 +63,17 @@ from mavsysid.estimation.results import (
     prior_from_config,
     quantity_status,
 )
-from mavsysid.estimation.signals import Band, UniformSegment, uniform_segments
+from mavsysid.estimation.signals import (
+    UniformSegment,
+    uniform_segments,
+)
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.parameters import C_D, C_M, C_T, INERTIA
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["WrenchBalanceSettings", "fit_wrench_balance", "predict_holdout"]
+__all__ = ["SMOOTHING_WINDOW", "WrenchBalanceSettings", "WrenchComparison", "compare_wrench",
+           "fit_wrench_balance", "predict_holdout"]
 
 
 def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
@@ -232,26 +237,6 @@ def _band_halves(builders: list[BalanceBuilder], choices: FitChoices
     return low, high
 
 
-def _delay_sigma(fit: BalanceFit, builders: list[BalanceBuilder]) -> float:
-    """σ of δ: the torque residual regressed on the model's derivative in δ (Newey–West)."""
-    c = fit.choices
-    h = builders[0].dt
-    b = fit.torque.coefficients
-    rows = balance_rows_for(builders, c)
-    plus, minus = (balance_rows_for(builders, replace(c, delay=c.delay + s)) for s in (h, -h))
-    if not (len(rows) == len(plus) == len(minus)) or not rows:
-        return float("nan")
-    y = [r.torque - r.torque_columns @ b for r in rows]
-    X = [((p.torque_columns - m.torque_columns) @ b / (2 * h))[:, :, None]
-         for p, m in zip(plus, minus, strict=True)]
-    if any(len(x) != len(e) for x, e in zip(X, y, strict=True)):
-        return float("nan")
-    try:
-        return float(fit_rows(y, X).sigma[0])
-    except np.linalg.LinAlgError:
-        return float("nan")
-
-
 def _segments(flight: FlightData, settings: WrenchBalanceSettings) -> list[UniformSegment]:
     segments = uniform_segments(flight, settings.min_segment)
     if not segments:
@@ -287,7 +272,7 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     cov[np.ix_(keep, keep)] = corr * np.outer(sigma[keep], sigma[keep])
     result = WrenchBalanceResult(
         ParameterEstimate(value, cov, prior.names), determined, base, parts, combo_sigma, prior,
-        fit.choices, _delay_sigma(fit, builders), None, fit.force.rows)
+        fit.choices, delay_sigma(fit, builders), None, fit.force.rows)
     return result, fit
 
 
@@ -350,3 +335,76 @@ def _holdout(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
     model = stack(fit.force.coefficients, fit.torque.coefficients)
     return predict_holdout(test, config, fit.choices, model,
                            coefficients_from_theta(prior.value))
+
+
+#: Savitzky–Golay window of the comparison without a balance, s: motion-capture noise
+#: differentiated twice stays well below the rotor forces, manoeuvres of a few Hz pass.
+SMOOTHING_WINDOW = 0.3
+
+
+@dataclass(frozen=True)
+class WrenchComparison:
+    """Measured and model body wrench over the flight (M samples on uniform grids).
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        s, the log's clock (smoother edges dropped; a NaN row between segments).
+    measured_force, model_force : ndarray, shape (M, 3)
+        Body force, N.
+    measured_torque, model_torque : ndarray, shape (M, 3)
+        Body torque, N·m, less the ω × J ω the model also predicts (J ω̇ on both sides).
+    """
+
+    t: np.ndarray
+    measured_force: np.ndarray
+    model_force: np.ndarray
+    measured_torque: np.ndarray
+    model_torque: np.ndarray
+
+
+def compare_wrench(flight: FlightData, config: VehicleConfig, theta: np.ndarray,
+                   window: float = SMOOTHING_WINDOW, delay: float = 0.0) -> WrenchComparison:
+    """Measured and model body force and torque along a flight (module docstring).
+
+    Both sides are the force and torque balance's rows (`mavsysid.estimation.balance.rows`:
+    the pose smoothed and differentiated, the model through the same smoother) at the
+    paper's model with θ, without band-pass, in the body frame and in N and N·m.
+
+    Parameters
+    ----------
+    flight : FlightData
+        Pose and rotor speeds (any sampling; put on uniform grids here).
+    config : VehicleConfig
+        Mass and rotor geometry.
+    theta : ndarray, shape (6,)
+        θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI (usually the final estimate).
+    window : float
+        Savitzky–Golay window, s (the balance's, when it ran).
+    delay : float
+        s by which the pose lags the rotor speeds (the balance's offset).
+
+    Returns
+    -------
+    WrenchComparison
+        Empty arrays when the flight is too short for the smoother.
+    """
+    theta = np.asarray(theta, float)
+    b = coefficients_from_theta(theta)
+    split = len(FORCE_COEFFICIENTS)
+    parts = []
+    for segment in uniform_segments(flight, 4.0 * window):
+        rows = BalanceBuilder(segment, config, window).rows(delay, float(theta[1]),
+                                                             magnitude=False)
+        if len(rows):
+            j = theta[3:6]
+            parts.append(np.hstack([
+                rows.t[:, None], config.mass * rows.force,
+                config.mass * rows.force_columns @ b[:split], j * rows.torque,
+                j * (rows.torque_columns @ b[split:])]))
+            parts.append(np.full((1, 13), np.nan))
+    if not parts:
+        empty = np.empty((0, 3))
+        return WrenchComparison(np.empty(0), empty, empty, empty, empty)
+    x = np.vstack(parts[:-1])
+    return WrenchComparison(x[:, 0], x[:, 1:4], x[:, 4:7], x[:, 7:10], x[:, 10:13])

@@ -41,7 +41,6 @@ from mavsysid.estimation.flight import FlightData, step_process_noise
 from mavsysid.estimation.progress import report_progress
 from mavsysid.estimation.results import ParameterEstimate
 from mavsysid.estimation.robust import inflated_theta_covariance
-from mavsysid.estimation.signals import pose_states
 from mavsysid.vehicle.linearization import ErrorStateModel
 from scipy.optimize import least_squares
 
@@ -122,7 +121,7 @@ class ShootingProblem:
                                      self.prior.value, r, eps),
             # The nuisance quantities' wrench per unit value, on the pose's states.
             "basis": np.ascontiguousarray(self.model.extra_basis(
-                pose_states(fl), n, self.prior.value, t - t[0])),
+                fl.pose_states(), n, self.prior.value, t - t[0])),
         }
 
     @property

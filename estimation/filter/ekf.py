@@ -32,7 +32,6 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from mavsysid.estimation.flight import FlightData, step_process_noise
 from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
-from mavsysid.estimation.signals import pose_states
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.covariance import (
     pose_residual_kernel,
@@ -344,7 +343,7 @@ class ParameterEKF(ExtendedKalmanFilter):
         # interpolating slow rotor-speed inputs leaves (`mavsysid.estimation.flight`).
         Qc = step_process_noise(self._Qc, t, n, flight.inputs, self.prior.value, r, eps)
         basis = np.ascontiguousarray(self.model.extra_basis(
-            pose_states(flight), n, self.prior.value, t - t[0]) if self.model.extras
+            flight.pose_states(), n, self.prior.value, t - t[0]) if self.model.extras
             else np.zeros((N, 6, 0)))
         try:
             log_likelihood = 0.0

@@ -29,7 +29,7 @@ import numpy as np
 from mavsysid.estimation.balance.fit import WrenchBalanceSettings, fit_wrench_balance
 from mavsysid.estimation.batch.refine import refine
 from mavsysid.estimation.filter.ekf import ParameterEKF
-from mavsysid.estimation.filter.guard import guarded_filter
+from mavsysid.estimation.filter.guard import guarded_filter, pose_sigma
 from mavsysid.estimation.filter.likelihood import (
     NOISE_SCALE_LIMITS,
     EffectFit,
@@ -39,17 +39,16 @@ from mavsysid.estimation.filter.likelihood import (
 )
 from mavsysid.estimation.flight import MIN_DURATION, FlightData
 from mavsysid.estimation.progress import report_stage
-from mavsysid.estimation.report.text import convergence_time
 from mavsysid.estimation.results import (
     C_D_PRIOR_SIGMA,
     PRIOR_RELATIVE_SIGMA,
     EstimationResult,
     FittedEffect,
     ParameterEstimate,
+    convergence_time,
     prior_from_config,
 )
 from mavsysid.estimation.robust import disagreement_widening, widened
-from mavsysid.estimation.signals import pose_sigma
 from mavsysid.vehicle.config import PARAMETER_NAMES, VehicleConfig
 from mavsysid.vehicle.linearization import initial_state_sigma
 from mavsysid.vehicle.model_effects import ModelEffect

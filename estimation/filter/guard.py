@@ -37,20 +37,23 @@ from mavsysid.estimation.filter.ekf import FilterOverflow, FilterRun
 from mavsysid.estimation.filter.likelihood import ModelTerms, reference_terms
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.estimation.signals import NOISE_TOLERANCE
+from mavsysid.estimation.signals import savgol_kernel
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM, initial_state_sigma
 from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.vehicle.parameters import PAPER_THETA
+from mavsysid.vehicle.rotation import continuous_sign
+from scipy.ndimage import convolve1d
 from scipy.stats import chi2
 
 from mavsysid.errors import JobFailedError
 
 __all__ = ["AGREEMENT_SIGMAS", "AGREEMENT_TOLERANCE", "CORRELATED_RHO", "DECORRELATION_PASSES",
-           "DIVERGED_NIS", "MAX_RESTARTS", "NIS_FACTOR", "NIS_WINDOW", "OVERFLOW_SHARE",
-           "UNDETERMINED_RELATIVE", "check_agreement", "correlated_noise_sigma",
-           "decorrelated_attempt", "disagreements", "divergence", "failure_phrase",
-           "filter_attempt", "guarded_filter", "nis_level"]
+           "DIVERGED_NIS", "MAX_RESTARTS", "NIS_FACTOR", "NIS_WINDOW", "NOISE_TOLERANCE",
+           "NOISE_WINDOW", "OVERFLOW_SHARE", "UNDETERMINED_RELATIVE", "check_agreement",
+           "correlated_noise_sigma", "decorrelated_attempt", "disagreements", "divergence",
+           "failure_phrase", "filter_attempt", "guarded_filter", "measured_pose_noise",
+           "nis_level", "pose_sigma"]
 
 
 #: Window of the NIS mean, s.
@@ -354,3 +357,56 @@ def guarded_filter(
             f"{flight.source}: the parameter filter {failure_phrase(reason)}, also when restarted "
             "from the equation-error θ; the model cannot follow this log".split()))
     return terms, run, start, sigma
+
+
+#: Samples of the local cubic fit (odd).
+NOISE_WINDOW = 9
+
+
+#: The measured σ replaces the assumed one when larger by more than this factor.
+NOISE_TOLERANCE = 1.5
+
+
+_MAD_TO_SIGMA = 1.4826
+
+
+def _white_sigma(x: np.ndarray) -> np.ndarray:
+    """Robust σ of the white part of each column of x (N, k)."""
+    c = savgol_kernel(NOISE_WINDOW, 3, 0, 1.0)
+    e = (x - convolve1d(x, c, axis=0, mode="nearest"))[NOISE_WINDOW:-NOISE_WINDOW]
+    mad = np.median(np.abs(e - np.median(e, axis=0)), axis=0)
+    return _MAD_TO_SIGMA * mad / np.sqrt(1.0 - c[NOISE_WINDOW // 2])
+
+
+def measured_pose_noise(flight: FlightData) -> tuple[float, float]:
+    """White-noise σ of position (m) and attitude (rad, per axis) in the longest segment."""
+    if len(flight.segment_starts) > 1:
+        flight = flight.segment(flight.longest_segment())
+    if len(flight) < 3 * NOISE_WINDOW:
+        return 0.0, 0.0
+    q = continuous_sign(flight.quaternion)
+    position = float(np.median(_white_sigma(np.asarray(flight.position, float))))
+    attitude = float(2.0 * np.sqrt(np.sum(_white_sigma(q) ** 2) / 3.0))
+    return position, attitude
+
+
+def pose_sigma(flight: FlightData, assumed: tuple[float, float]
+               ) -> tuple[tuple[float, float], str | None]:
+    """Measurement σ (m, rad) for the filter, and a note when the log changed it.
+
+    Parameters
+    ----------
+    flight : FlightData
+    assumed : tuple of 2 float
+        σ assumed for the pose source (m, rad): the floor.
+    """
+    measured = measured_pose_noise(flight)
+    used = tuple(m if m > NOISE_TOLERANCE * a else a
+                 for m, a in zip(measured, assumed, strict=True))
+    if used == tuple(assumed):
+        return tuple(assumed), None  # type: ignore[return-value]
+    return used, (  # type: ignore[return-value]
+        f"measurement σ measured from the pose (local-cubic residual, robust): "
+        f"{1000 * measured[0]:.2g} mm, {np.degrees(measured[1]):.2g}°; used "
+        f"{1000 * used[0]:.2g} mm, {np.degrees(used[1]):.2g}° (floor: the assumed "
+        f"{1000 * assumed[0]:.2g} mm, {np.degrees(assumed[1]):.2g}°)")

@@ -24,92 +24,17 @@ from pathlib import Path
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from mavsysid.estimation.balance.rows import FORCE_COEFFICIENTS, BalanceBuilder
-from mavsysid.estimation.balance.theta import coefficients_from_theta
+from mavsysid.estimation.balance.fit import WrenchComparison, compare_wrench
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.report.text import write_history_csv
-from mavsysid.estimation.results import EstimationResult
-from mavsysid.estimation.signals import AXIS_NAMES, uniform_segments
+from mavsysid.estimation.results import AXIS_NAMES, EstimationResult
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from scipy.stats import chi2
 
-__all__ = ["DPI", "ESTIMATE_REPORT_FILES", "SMOOTHING_WINDOW", "ReportTable", "WrenchComparison",
-           "compare_wrench", "estimate_table", "flight_lines", "holdout_table", "html_page",
-           "plot_innovations", "plot_parameters", "plot_rotor_speeds", "plot_wrench",
-           "save_figure", "write_estimate_report", "write_index"]
-
-
-#: Savitzky–Golay window of the comparison without a balance, s: motion-capture noise
-#: differentiated twice stays well below the rotor forces, manoeuvres of a few Hz pass.
-SMOOTHING_WINDOW = 0.3
-
-
-@dataclass(frozen=True)
-class WrenchComparison:
-    """Measured and model body wrench over the flight (M samples on uniform grids).
-
-    Attributes
-    ----------
-    t : ndarray, shape (M,)
-        s, the log's clock (smoother edges dropped; a NaN row between segments).
-    measured_force, model_force : ndarray, shape (M, 3)
-        Body force, N.
-    measured_torque, model_torque : ndarray, shape (M, 3)
-        Body torque, N·m, less the ω × J ω the model also predicts (J ω̇ on both sides).
-    """
-
-    t: np.ndarray
-    measured_force: np.ndarray
-    model_force: np.ndarray
-    measured_torque: np.ndarray
-    model_torque: np.ndarray
-
-
-def compare_wrench(flight: FlightData, config: VehicleConfig, theta: np.ndarray,
-                   window: float = SMOOTHING_WINDOW, delay: float = 0.0) -> WrenchComparison:
-    """Measured and model body force and torque along a flight (module docstring).
-
-    Both sides are the force and torque balance's rows (`mavsysid.estimation.balance.rows`:
-    the pose smoothed and differentiated, the model through the same smoother) at the
-    paper's model with θ, without band-pass, in the body frame and in N and N·m.
-
-    Parameters
-    ----------
-    flight : FlightData
-        Pose and rotor speeds (any sampling; put on uniform grids here).
-    config : VehicleConfig
-        Mass and rotor geometry.
-    theta : ndarray, shape (6,)
-        θ = [c_T, c_D, c_M, j_x, j_y, j_z], SI (usually the final estimate).
-    window : float
-        Savitzky–Golay window, s (the balance's, when it ran).
-    delay : float
-        s by which the pose lags the rotor speeds (the balance's offset).
-
-    Returns
-    -------
-    WrenchComparison
-        Empty arrays when the flight is too short for the smoother.
-    """
-    theta = np.asarray(theta, float)
-    b = coefficients_from_theta(theta)
-    split = len(FORCE_COEFFICIENTS)
-    parts = []
-    for segment in uniform_segments(flight, 4.0 * window):
-        rows = BalanceBuilder(segment, config, window).rows(delay, float(theta[1]),
-                                                             magnitude=False)
-        if len(rows):
-            j = theta[3:6]
-            parts.append(np.hstack([
-                rows.t[:, None], config.mass * rows.force,
-                config.mass * rows.force_columns @ b[:split], j * rows.torque,
-                j * (rows.torque_columns @ b[split:])]))
-            parts.append(np.full((1, 13), np.nan))
-    if not parts:
-        empty = np.empty((0, 3))
-        return WrenchComparison(np.empty(0), empty, empty, empty, empty)
-    x = np.vstack(parts[:-1])
-    return WrenchComparison(x[:, 0], x[:, 1:4], x[:, 4:7], x[:, 7:10], x[:, 10:13])
+__all__ = ["DPI", "ESTIMATE_REPORT_FILES", "ReportTable", "estimate_table", "flight_lines",
+           "holdout_table", "html_page", "plot_innovations", "plot_parameters",
+           "plot_rotor_speeds", "plot_wrench", "save_figure", "write_estimate_report",
+           "write_index"]
 
 
 #: Resolution of the written PNGs, dots per inch (a 10-inch-wide figure is 1000 px).

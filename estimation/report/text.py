@@ -21,64 +21,20 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.estimation.results import (
+    CONVERGENCE_TOLERANCE,
+    EstimationHistory,
+    EstimationResult,
+    ParameterEstimate,
+)
 from mavsysid.formats.flight_dir import write_json_atomic
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 
-__all__ = ["CONVERGENCE_TOLERANCE", "HISTORY_COLUMNS", "convergence_time", "format_table",
-           "history_frame", "result_to_json", "software_version", "updated_vehicle",
-           "write_estimate_json", "write_history_csv"]
+__all__ = ["HISTORY_COLUMNS", "format_table", "history_frame", "result_to_json",
+           "software_version", "updated_vehicle", "write_estimate_json", "write_history_csv"]
 
-
-#: Relative band that counts as converged (the paper's "within 5 %").
-CONVERGENCE_TOLERANCE = 0.05
 
 _POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
-
-
-def convergence_time(
-    t: np.ndarray,
-    theta: np.ndarray,
-    reference: np.ndarray,
-    tolerance: float = CONVERGENCE_TOLERANCE,
-) -> np.ndarray:
-    """When each parameter's estimate settles within a relative band around a reference.
-
-    Parameters
-    ----------
-    t : ndarray, shape (N,)
-        Sample times, s, increasing.
-    theta : ndarray, shape (N, P)
-        Estimates over time (P = 6 for θ), SI.
-    reference : ndarray, shape (P,)
-        Values to converge to (the truth, or the final estimate), SI.
-    tolerance : float, optional
-        Half-width of the band relative to ``|reference|`` (0.05 = 5 %).
-
-    Returns
-    -------
-    ndarray, shape (P,)
-        Per parameter, the first t_i such that ``|theta[k, j] - reference[j]| <=
-        tolerance * |reference[j]|`` for every k ≥ i, s; NaN when the last sample is
-        outside the band (or there are no samples). A NaN estimate counts as outside.
-    """
-    t = np.asarray(t, dtype=float).reshape(-1)
-    theta = np.asarray(theta, dtype=float)
-    reference = np.asarray(reference, dtype=float).reshape(-1)
-    if theta.ndim != 2 or theta.shape != (t.size, reference.size):
-        raise ValueError(
-            f"convergence_time: theta of shape ({t.size}, {reference.size}) to match t "
-            f"and reference, got {theta.shape}"
-        )
-    out = np.full(reference.size, np.nan)
-    if t.size == 0:
-        return out
-    inside = np.abs(theta - reference) <= tolerance * np.abs(reference)
-    # A reversed running AND marks the samples from which the estimate never leaves again.
-    stays = np.logical_and.accumulate(inside[::-1], axis=0)[::-1]
-    settled = stays[-1]
-    out[settled] = t[np.argmax(stays[:, settled], axis=0)]
-    return out
 
 
 def software_version() -> str:

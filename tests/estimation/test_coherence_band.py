@@ -11,7 +11,8 @@ from mavsysid.estimation.balance.choices import (
     smoother_window,
     welch_length,
 )
-from mavsysid.estimation.signals import Band, savgol_kernel
+from mavsysid.estimation.results import Band
+from mavsysid.estimation.signals import savgol_kernel
 from scipy.signal import butter, freqz, sosfiltfilt
 
 DT = 0.002

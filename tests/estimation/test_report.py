@@ -11,14 +11,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavsysid.estimation.report.text import (
-    convergence_time,
     format_table,
     result_to_json,
     software_version,
     updated_vehicle,
     write_estimate_json,
 )
-from mavsysid.estimation.results import EstimationHistory, EstimationResult, ParameterEstimate
+from mavsysid.estimation.results import (
+    EstimationHistory,
+    EstimationResult,
+    ParameterEstimate,
+    convergence_time,
+)
 from mavsysid.vehicle.config import (
     PARAMETER_NAMES,
     PARAMETER_UNITS,

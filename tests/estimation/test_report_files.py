@@ -8,12 +8,12 @@ import io
 import numpy as np
 import pandas as pd
 import pytest
+from mavsysid.estimation.balance.fit import compare_wrench
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.progress import StageLog, progress_wanted, report_stage, stage_listener
 from mavsysid.estimation.report.figures import (
     ESTIMATE_REPORT_FILES,
     ReportTable,
-    compare_wrench,
     html_page,
     write_estimate_report,
 )

@@ -7,8 +7,12 @@ import pytest
 from mavsysid.discrepancy import residuals
 from mavsysid.estimation import signals
 from mavsysid.estimation.balance import rows
+from mavsysid.estimation.filter.guard import (
+    NOISE_TOLERANCE,
+    measured_pose_noise,
+    pose_sigma,
+)
 from mavsysid.estimation.flight import FlightData
-from mavsysid.estimation.signals import NOISE_TOLERANCE, measured_pose_noise, pose_sigma
 from mavsysid.vehicle.rotation import quat_exp, quat_multiply
 from scipy.ndimage import uniform_filter1d
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from mavsysid.estimation.balance.rows import FORCE_COEFFICIENTS, BalanceBuilder
 from mavsysid.estimation.balance.theta import coefficients_from_theta
-from mavsysid.estimation.signals import Band, uniform_segments
+from mavsysid.estimation.results import Band
+from mavsysid.estimation.signals import uniform_segments
 from mavsysid.vehicle.config import load_vehicle
 
 SPLIT = len(FORCE_COEFFICIENTS)
