@@ -36,15 +36,15 @@ configured process-noise density step by step (`step_process_noise`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
 from mavsysid.vehicle.mav_model import rotor_wrench
 from mavsysid.vehicle.rotation import continuous_sign, quat_conjugate, quat_multiply, quat_to_matrix
 
-__all__ = ["MIN_DURATION", "POSE_SOURCES", "SMOOTH_PERIOD", "FlightData", "InputSamples",
-           "step_process_noise", "wrench_noise_density"]
+__all__ = ["MIN_DURATION", "POSE_SOURCES", "SMOOTH_PERIOD", "FlightData", "Imu", "ImuSeries",
+           "InputSamples", "step_process_noise", "wrench_noise_density"]
 
 
 #: Input series sampled at least this often (median step, s) are interpolated linearly:
@@ -227,6 +227,79 @@ POSE_SOURCES = ("motion_capture", "autopilot")
 
 
 @dataclass(frozen=True)
+class ImuSeries:
+    """One inertial sensor's samples (M of them), in the body frame (FLU).
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        Sample times, s, on the log's clock, strictly increasing.
+    values : ndarray, shape (M, 3)
+        Body rates (rad/s) of a gyro, or the specific force (m/s², +9.81 on z level at
+        rest) of an accelerometer.
+    cutoff_hz : float or None
+        The low-pass the samples went through before logging, Hz; 0 for raw samples, None
+        when the log does not say.
+    label : str
+        What the samples are, for messages ("IMU GyrX..Z", "HIGHRES_IMU", …).
+    """
+
+    t: np.ndarray
+    values: np.ndarray
+    cutoff_hz: float | None = None
+    label: str = "IMU"
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def rate(self) -> float:
+        """Median sample rate, Hz (0 for fewer than two samples)."""
+        return 1.0 / float(np.median(np.diff(self.t))) if len(self) > 1 else 0.0
+
+    def time_slice(self, t0: float, t1: float) -> ImuSeries:
+        """The samples with t0 ≤ t ≤ t1.
+
+        Parameters
+        ----------
+        t0, t1 : float
+            The span, s on the log's clock.
+        """
+        keep = (self.t >= t0) & (self.t <= t1)
+        return replace(self, t=self.t[keep], values=self.values[keep])
+
+
+@dataclass(frozen=True)
+class Imu:
+    """The vehicle's IMU as logged: its gyro and accelerometer, where it sits.
+
+    Attributes
+    ----------
+    gyro, accel : ImuSeries or None
+        Body rates and specific force, each at its own rate (the pose's or faster).
+    position : ndarray, shape (3,), or None
+        The IMU's offset from the centre of gravity, m, body FLU (the vehicle file's
+        ``[imu] position``, else the log's, e.g. ArduPilot ``INS_POS1_*``); None: not
+        stated, estimated where the data allow.
+    """
+
+    gyro: ImuSeries | None
+    accel: ImuSeries | None
+    position: np.ndarray | None = None
+
+    def time_slice(self, t0: float, t1: float) -> Imu:
+        """The samples with t0 ≤ t ≤ t1.
+
+        Parameters
+        ----------
+        t0, t1 : float
+            The span, s on the log's clock.
+        """
+        return replace(self, gyro=None if self.gyro is None else self.gyro.time_slice(t0, t1),
+                       accel=None if self.accel is None else self.accel.time_slice(t0, t1))
+
+
+@dataclass(frozen=True)
 class FlightData:
     """Samples of one flight, N of them.
 
@@ -257,6 +330,8 @@ class FlightData:
         The rotor-speed samples as logged, before interpolation to ``t``: the filter adds
         the interpolation error as process noise (`mavsysid.estimation.flight`).
         None: the rotor speeds are exact at ``t`` (as in a pose log).
+    imu : Imu or None
+        The vehicle's IMU over the flight, at its own rates; None when the log has none.
     """
 
     t: np.ndarray
@@ -269,6 +344,7 @@ class FlightData:
     warnings: tuple[str, ...] = field(default_factory=tuple)
     segment_starts: tuple[int, ...] = (0,)
     inputs: InputSamples | None = None
+    imu: Imu | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -300,10 +376,9 @@ class FlightData:
     def segment(self, index: int) -> FlightData:
         """Segment ``index`` alone, as a one-segment flight."""
         start, stop = self.segment_bounds[index]
-        return FlightData(self.t[start:stop], self.position[start:stop],
-                          self.quaternion[start:stop], self.rotor_speeds[start:stop],
-                          self.source, self.pose_source, self.truth, self.warnings,
-                          inputs=self.inputs)
+        return replace(self, t=self.t[start:stop], position=self.position[start:stop],
+                       quaternion=self.quaternion[start:stop],
+                       rotor_speeds=self.rotor_speeds[start:stop], segment_starts=(0,))
 
     def longest_segment(self) -> int:
         """Index of the segment spanning the most time (the first of equals)."""
@@ -336,6 +411,7 @@ class FlightData:
         # One contiguous time range: a segment start cut off lies before t0 or after t1.
         index = np.cumsum(keep) - 1
         starts = sorted({0, *(int(index[s]) for s in self.segment_starts if keep[s])})
-        return FlightData(self.t[keep], self.position[keep], self.quaternion[keep],
-                          self.rotor_speeds[keep], self.source, self.pose_source,
-                          self.truth, self.warnings, tuple(starts), inputs=self.inputs)
+        return replace(self, t=self.t[keep], position=self.position[keep],
+                       quaternion=self.quaternion[keep], rotor_speeds=self.rotor_speeds[keep],
+                       segment_starts=tuple(starts),
+                       imu=None if self.imu is None else self.imu.time_slice(t0, t1))

@@ -82,6 +82,9 @@ class EffectInputs:
         them (rotor inertia) adds nothing without them.
     rotor_speed_rates : ndarray, shape (N, k), optional
         ṅ, rad/s²; without it `rotor_accelerations` differentiates ``rotor_speeds``.
+    angular_acceleration : ndarray, shape (N, 3), optional
+        ω̇, rad/s², body frame, where the caller has it (what an IMU off the centre of
+        gravity feels, `mavsysid.vehicle.imu`).
     """
 
     t: np.ndarray
@@ -94,6 +97,7 @@ class EffectInputs:
     rotor_positions: np.ndarray
     rotor_directions: np.ndarray | None = None
     rotor_speed_rates: np.ndarray | None = None
+    angular_acceleration: np.ndarray | None = None
 
     def rotation(self) -> np.ndarray:
         """R(q) body → world, shape (N, 3, 3)."""

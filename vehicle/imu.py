@@ -19,9 +19,16 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from mavsysid.vehicle.effect_base import EffectInputs
 from mavsysid.vehicle.mav_model import add_rotor_wrench, euler_kernel
+from mavsysid.vehicle.parameters import EstimatedQuantity, QuantityTerm
 
-__all__ = ["imu_kernel", "imu_reading", "lever_arm_acceleration"]
+__all__ = ["IMU_POSITION_SIGMA", "ImuBias", "ImuOffset", "imu_kernel", "imu_quantities",
+           "imu_reading", "lever_arm_acceleration"]
+
+#: Prior σ of an IMU's offset from the centre of gravity the vehicle file does not state, m
+#: per axis: an autopilot or IMU board mounted near the centre of a small frame.
+IMU_POSITION_SIGMA = 0.03
 
 
 def lever_arm_acceleration(w: np.ndarray, w_dot: np.ndarray, position: np.ndarray) -> np.ndarray:
@@ -143,3 +150,81 @@ def imu_reading(x: np.ndarray, n: np.ndarray, theta: np.ndarray, mass: float,
                out)
     out = out.reshape(*batch, 6)
     return out[..., :3], out[..., 3:]
+
+
+class ImuBias(QuantityTerm):
+    """A constant bias of one axis of the gyro (rad/s) or the accelerometer (m/s²).
+
+    Parameters
+    ----------
+    channel : {"gyro", "accel"}
+    axis : int
+        0, 1, 2 for x, y, z (body FLU).
+    """
+
+    def __init__(self, channel: str, axis: int) -> None:
+        self.channel = channel  # type: ignore[misc]
+        self.axis = axis
+
+    def reading_basis(self, inputs: EffectInputs) -> np.ndarray:
+        out = np.zeros((inputs.t.shape[0], 3))
+        out[:, self.axis] = 1.0
+        return out
+
+
+class ImuOffset(QuantityTerm):
+    """One coordinate of the IMU's offset p from the centre of gravity, m (body FLU): the
+    accelerometer reads ω̇ × p + ω × (ω × p) beyond the centre's specific force.
+
+    Parameters
+    ----------
+    axis : int
+        0, 1, 2 for x, y, z.
+    """
+
+    channel = "accel"
+
+    def __init__(self, axis: int) -> None:
+        self.axis = axis
+
+    def reading_basis(self, inputs: EffectInputs) -> np.ndarray:
+        unit = np.zeros(3)
+        unit[self.axis] = 1.0
+        w_dot = (np.zeros_like(inputs.rates) if inputs.angular_acceleration is None
+                 else inputs.angular_acceleration)
+        return lever_arm_acceleration(inputs.rates, w_dot, unit)
+
+
+def imu_quantities(gyro: bool, accel: bool, position_known: bool, gyro_bias_sigma: float,
+                   accel_bias_sigma: float) -> tuple[EstimatedQuantity, ...]:
+    """The nuisance quantities an IMU brings: its biases, and its offset where not stated.
+
+    Parameters
+    ----------
+    gyro, accel : bool
+        Which sensors the flight has.
+    position_known : bool
+        Whether the IMU's offset from the centre of gravity is stated (vehicle file or log);
+        when not, its three coordinates are estimated from the accelerometer.
+    gyro_bias_sigma, accel_bias_sigma : float
+        Prior σ of the constant biases, rad/s and m/s² (the vehicle file's ``[noise]``).
+
+    Returns
+    -------
+    tuple of EstimatedQuantity
+        ``gyro_bias_x..z``, ``accel_bias_x..z``, ``imu_x..z``, as the flight calls for.
+    """
+    out: list[EstimatedQuantity] = []
+    for present, channel, unit, sigma in ((gyro, "gyro", "rad/s", gyro_bias_sigma),
+                                          (accel, "accel", "m/s²", accel_bias_sigma)):
+        if present:
+            out += [EstimatedQuantity(f"{channel}_bias_{a}", unit,
+                                      f"constant bias of the {channel} about {a}",
+                                      prior_sigma=sigma, term=ImuBias(channel, i))
+                    for i, a in enumerate("xyz")]
+    if accel and not position_known:
+        out += [EstimatedQuantity(f"imu_{a}", "m", f"the IMU's offset from the centre of "
+                                  f"gravity along {a}_B", prior_sigma=IMU_POSITION_SIGMA,
+                                  term=ImuOffset(i))
+                for i, a in enumerate("xyz")]
+    return tuple(out)

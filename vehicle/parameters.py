@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from mavsysid.vehicle.effect_base import EffectInputs
@@ -38,13 +39,18 @@ __all__ = [
 
 
 class QuantityTerm:
-    """Where a nuisance quantity enters the model: a body wrench linear in its value.
+    """Where a nuisance quantity enters the model, linear in its value.
 
-    Subclasses give the wrench per unit of the quantity along a flight (`wrench_basis`);
-    the model adds ``value × basis`` to the paper's F_B and M_B (paper Eqs. newton, euler).
-    A term that is not linear in its quantity is written as its first-order expansion
-    about the prior value.
+    On the vehicle (``channel`` "wrench"): a body force and torque the model adds to the
+    paper's F_B and M_B (paper Eqs. newton, euler), ``value × wrench_basis``. In a sensor
+    (``channel`` "gyro" or "accel"): what the IMU reads beyond the vehicle's motion,
+    ``value × reading_basis`` (a bias, the IMU's offset from the centre of gravity); the
+    dynamics do not see it. A term that is not linear in its quantity is written as its
+    first-order expansion about the prior value.
     """
+
+    #: Where the quantity enters: "wrench", "gyro" or "accel".
+    channel: ClassVar[str] = "wrench"
 
     def wrench_basis(self, inputs: EffectInputs) -> tuple[np.ndarray, np.ndarray]:
         """Body force (N) and torque (N·m) per unit of the quantity, each shape (N, 3).
@@ -54,7 +60,18 @@ class QuantityTerm:
         inputs : EffectInputs
             The states, rotor speeds and θ along the flight.
         """
-        raise NotImplementedError
+        zero = np.zeros((inputs.t.shape[0], 3))
+        return zero, zero
+
+    def reading_basis(self, inputs: EffectInputs) -> np.ndarray:
+        """What the IMU channel reads per unit of the quantity, shape (N, 3), body frame.
+
+        Parameters
+        ----------
+        inputs : EffectInputs
+            The states (with ``angular_acceleration`` where the reading needs it).
+        """
+        return np.zeros((inputs.t.shape[0], 3))
 
 
 @dataclass(frozen=True)

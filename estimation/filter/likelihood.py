@@ -208,9 +208,8 @@ def in_model_terms(flight: FlightData, effects: Sequence[ModelEffect]) -> Flight
         n = np.column_stack([np.interp(t_model, t, n[:, i]) for i in range(n.shape[1])])
     if n is flight.rotor_speeds and t_model is t and p is flight.position:
         return flight
-    return FlightData(np.asarray(t_model, float), np.asarray(p, float), np.asarray(q, float),
-                      np.asarray(n, float), flight.source, flight.pose_source, flight.truth,
-                      flight.warnings, flight.segment_starts, inputs=flight.inputs)
+    return replace(flight, t=np.asarray(t_model, float), position=np.asarray(p, float),
+                   quaternion=np.asarray(q, float), rotor_speeds=np.asarray(n, float))
 
 
 def _wrench(model_flight: FlightData, log_start: float, effects: Sequence[ModelEffect],

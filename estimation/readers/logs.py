@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation.flight import Imu, ImuSeries
 from mavsysid.estimation.readers.samples import (
     LogStreams,
     combine_pose,
@@ -51,7 +52,7 @@ from mavsysid.formats.parsed_log import ModeChanges, ParsedLog, Series
 from mavsysid.formats.poselog import read_external_pose, read_pose_log
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
+from mavsysid.vehicle.frames import frd_to_flu, ned_to_enu, quaternion_ned_to_enu
 from mavsysid.vehicle.motor_order import AUTOPILOT_FRAMES, MotorOrderError, output_to_rotor
 from mavsysid.vehicle.rotation import (
     interpolate_quaternions,
@@ -369,7 +370,8 @@ def read_autopilot_log(read: Callable[[Path, VehicleConfig], ParsedLog], path: P
     rotors, ordered = rotors_in_config_order(log.source, log.rotors, vehicle)
     return LogStreams(source=log.source, pose=pose, pose_source=log.pose_source, rotors=rotors,
                       warnings=(*notes, *log.rotor_notes, *ordered), pose_hint=log.pose_hint,
-                      control_spans=None if log.modes is None else control_spans(log.modes))
+                      control_spans=None if log.modes is None else control_spans(log.modes),
+                      imu=_autopilot_imu(log, vehicle))
 
 
 def _frames_with(count: int) -> str:
@@ -469,8 +471,32 @@ def read_pose_csv(path: Path, vehicle: VehicleConfig) -> LogStreams:
             pose_source = "autopilot"
     pose = Series(log.t, np.column_stack([log.position, log.quaternion]), "pose")
     rotors = (Series(log.t, log.rotor_speeds, "rotor speed"),)
+    imu = None
+    if log.gyro is not None or log.accel is not None:
+        imu = Imu(None if log.gyro is None else ImuSeries(log.t, log.gyro, None, "gyro_x..z"),
+                  None if log.accel is None else ImuSeries(log.t, log.accel, None, "acc_x..z"),
+                  _imu_position(vehicle, None))
     return LogStreams(source=str(path), pose=pose, pose_source=pose_source,
-                      rotors=rotors, warnings=notes, truth=truth)
+                      rotors=rotors, warnings=notes, truth=truth, imu=imu)
+
+
+def _imu_position(vehicle: VehicleConfig, logged: tuple[float, float, float] | None
+                  ) -> np.ndarray | None:
+    """The IMU's offset from the CoG, body FLU: the vehicle file's, else the log's (FRD)."""
+    if vehicle.imu_position is not None:
+        return np.asarray(vehicle.imu_position, dtype=float)
+    return None if logged is None else frd_to_flu(np.asarray(logged, dtype=float))
+
+
+def _autopilot_imu(log: ParsedLog, vehicle: VehicleConfig) -> Imu | None:
+    """The log's IMU in body FLU, with its stated low-pass and position."""
+    if log.gyro is None and log.accel is None:
+        return None
+    cutoffs = (None, None) if log.imu_filter is None else (
+        log.imu_filter.gyro_cutoff_hz, log.imu_filter.accel_cutoff_hz)
+    sensors = [None if s is None else ImuSeries(s.t, frd_to_flu(s.values), cutoff, s.label)
+               for s, cutoff in zip((log.gyro, log.accel), cutoffs, strict=True)]
+    return Imu(sensors[0], sensors[1], _imu_position(vehicle, log.imu_position))
 
 
 def merge_pose(log: LogStreams, pose_path: Path, time_offset: float | None) -> LogStreams:
@@ -509,4 +535,4 @@ def merge_pose(log: LogStreams, pose_path: Path, time_offset: float | None) -> L
     return LogStreams(source=f"{log.source} + pose {label}",
                       pose=Series(t + time_offset, mocap.values, raw.label),
                       pose_source="motion_capture", rotors=log.rotors,
-                      warnings=(*log.warnings, *notes), truth=log.truth)
+                      warnings=(*log.warnings, *notes), truth=log.truth, imu=log.imu)

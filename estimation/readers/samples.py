@@ -31,21 +31,48 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from mavsysid.estimation.flight import MIN_DURATION, FlightData, InputSamples
+from mavsysid.estimation.flight import MIN_DURATION, FlightData, Imu, ImuSeries, InputSamples
 from mavsysid.formats.parsed_log import PoseSource, Series
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.frames import ned_to_enu, quaternion_ned_to_enu
 from mavsysid.vehicle.mav_model import collective_thrust, rotor_thrust
-from mavsysid.vehicle.rotation import interpolate_quaternions
+from mavsysid.vehicle.rotation import (
+    interpolate_quaternions,
+    quat_conjugate,
+    quat_log,
+    quat_multiply,
+)
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["FLYING_THRUST", "HOVER_FACTOR", "MAX_BODY_RATE", "MAX_GAP", "MIN_LIVE_TIME",
-           "QUATERNION_ERROR", "QUATERNION_WARNING", "LogStreams", "attitude_jumps",
-           "check_sampling", "combine_pose", "dead_rotor_samples", "drop_unphysical_samples",
-           "fill_dead_rotor", "frozen_samples", "gap_limit", "long_gaps", "normalise_quaternions",
-           "repair_samples", "split_segments", "to_flight_data", "validate_flight"]
+__all__ = [
+    "ACCEL_MEDIAN_RANGE",
+    "FLYING_THRUST",
+    "GYRO_GAIN_RANGE",
+    "HOVER_FACTOR",
+    "MAX_BODY_RATE",
+    "MAX_GAP",
+    "MIN_LIVE_TIME",
+    "QUATERNION_ERROR",
+    "QUATERNION_WARNING",
+    "LogStreams",
+    "attitude_jumps",
+    "check_sampling",
+    "clean_imu",
+    "combine_pose",
+    "dead_rotor_samples",
+    "drop_unphysical_samples",
+    "fill_dead_rotor",
+    "frozen_samples",
+    "gap_limit",
+    "long_gaps",
+    "normalise_quaternions",
+    "repair_samples",
+    "split_segments",
+    "to_flight_data",
+    "validate_flight",
+]
 
 
 #: Σ c_T n² at or above this fraction of m g (nominal c_T) is flying, for `frozen_samples`.
@@ -629,6 +656,8 @@ class LogStreams:
     control_spans : tuple of (float, float), or None
         Time spans, s, in which the autopilot was in the mode an external controller flies
         it in (GUIDED, OFFBOARD); None when the log says nothing about modes.
+    imu : Imu or None
+        The IMU (body FLU), not yet cleaned; None when the log has none.
     """
 
     source: str
@@ -639,6 +668,7 @@ class LogStreams:
     truth: dict | None = None
     pose_hint: str = ""
     control_spans: tuple[tuple[float, float], ...] | None = None
+    imu: Imu | None = None
 
 
 def combine_pose(source: str, position: Series, attitude: Series,
@@ -758,9 +788,113 @@ def to_flight_data(streams: LogStreams, vehicle: VehicleConfig,
                              f"to {hi:.3f} s) do not overlap in time")
     t, values = t[keep], values[keep]
     speeds = InputSamples(tuple(columns)).interpolate(t)
+    imu, more = clean_imu(streams.imu, t, values[:, 3:7], source)
     data = FlightData(t=t, position=values[:, :3], quaternion=values[:, 3:7],
                       rotor_speeds=speeds, source=source,
                       pose_source=streams.pose_source,
-                      truth=streams.truth, warnings=tuple(notes),
-                      inputs=InputSamples(tuple(columns)))
+                      truth=streams.truth, warnings=(*notes, *more),
+                      inputs=InputSamples(tuple(columns)), imu=imu)
     return validate_flight(data, vehicle, np.vstack(gaps))
+
+
+#: Median specific force over a flight an accelerometer in m/s² reads (g while hovering,
+#: more in manoeuvres): outside this range it reads another unit (g, mG) or is broken.
+ACCEL_MEDIAN_RANGE = (0.5 * GRAVITY, 2.0 * GRAVITY)
+#: The gyro's rates against the attitude's: a gain outside this range is another unit
+#: (deg/s reads 57×) or frame (FRD read as FLU turns the y and z gains negative).
+GYRO_GAIN_RANGE = (0.7, 1.4)
+#: Attitude rates (RMS, rad/s) and their correlation with the gyro below which the gain
+#: is not judged (a flight that hardly turns, or a pose too noisy to differentiate).
+_GYRO_CHECK_RATE, _GYRO_CHECK_CORRELATION = 0.1, 0.5
+
+
+def _clean_sensor(series: ImuSeries | None, t: np.ndarray, source: str
+                  ) -> tuple[ImuSeries | None, list[str]]:
+    """A sensor's samples repaired and kept within the pose's span (one sample either
+    side), or None with a note when fewer than two remain."""
+    if series is None:
+        return None, []
+    ts, vs, notes = repair_samples(series.t, series.values, source, series.label)
+    inside = _inside(ts, (float(t[0]), float(t[-1])), margin=1)
+    ts, vs = ts[inside], vs[inside]
+    if ts.shape[0] < 2:
+        return None, [*notes, f"{source}: {series.label} has no samples during the flight; "
+                      "not used"]
+    return dataclasses.replace(series, t=ts, values=vs), notes
+
+
+def _pose_rates(t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Body rates (N-1, 3) from consecutive attitudes, at the midpoints."""
+    dq = quat_multiply(quat_conjugate(q[:-1]), q[1:])
+    return quat_log(dq) / np.diff(t)[:, None]
+
+
+def _check_gyro(gyro: ImuSeries, t: np.ndarray, q: np.ndarray, source: str) -> None:
+    """Refuse a gyro whose rates are not the attitude's (another unit or frame)."""
+    if t.shape[0] < 10:
+        return
+    rates = _pose_rates(t, q)
+    mid = 0.5 * (t[1:] + t[:-1])
+    measured = np.column_stack([np.interp(mid, gyro.t, gyro.values[:, a]) for a in range(3)])
+    for axis, name in enumerate("xyz"):
+        ref, got = rates[:, axis] - rates[:, axis].mean(), measured[:, axis]
+        got = got - got.mean()
+        power = float(ref @ ref)
+        if np.sqrt(power / ref.size) < _GYRO_CHECK_RATE:
+            continue
+        corr = float(ref @ got) / np.sqrt(power * float(got @ got) + 1e-300)
+        gain = float(ref @ got) / power
+        if abs(corr) >= _GYRO_CHECK_CORRELATION and not (
+                GYRO_GAIN_RANGE[0] <= gain <= GYRO_GAIN_RANGE[1]):
+            raise LogFormatError(
+                f"{source}: {gyro.label} about {name} reads {gain:.3g} × the rate of the "
+                "logged attitude (expected about 1): not rad/s in the body frame FLU (deg/s "
+                "reads 57 ×, a frame mix-up −1)")
+
+
+def clean_imu(imu: Imu | None, t: np.ndarray, q: np.ndarray, source: str
+              ) -> tuple[Imu | None, list[str]]:
+    """The IMU repaired, kept within the pose's span and checked against the pose.
+
+    Rows with NaN dropped and times put in order (`repair_samples`, with notes); a sensor
+    with no sample in the flight is left out with a note.
+
+    Parameters
+    ----------
+    imu : Imu or None
+        As read, body FLU.
+    t : ndarray, shape (N,)
+        The pose's times, s.
+    q : ndarray, shape (N, 4)
+        The pose's attitude, body → world.
+    source : str
+        The log, named in notes and refusals.
+
+    Returns
+    -------
+    imu : Imu or None
+        None when neither sensor remains.
+    notes : list of str
+
+    Raises
+    ------
+    LogFormatError
+        An accelerometer whose median specific force is outside `ACCEL_MEDIAN_RANGE`, or a
+        gyro whose rates are not the attitude's (`GYRO_GAIN_RANGE`): another unit or frame.
+    """
+    if imu is None:
+        return None, []
+    gyro, notes = _clean_sensor(imu.gyro, t, source)
+    accel, more = _clean_sensor(imu.accel, t, source)
+    notes += more
+    if accel is not None:
+        median = float(np.median(np.linalg.norm(accel.values, axis=1)))
+        if not ACCEL_MEDIAN_RANGE[0] <= median <= ACCEL_MEDIAN_RANGE[1]:
+            raise LogFormatError(
+                f"{source}: {accel.label} reads a median specific force of {median:.3g} m/s² "
+                f"over the flight (a flying vehicle: about {GRAVITY:g}): not m/s²")
+    if gyro is not None:
+        _check_gyro(gyro, t, q, source)
+    if gyro is None and accel is None:
+        return None, notes
+    return dataclasses.replace(imu, gyro=gyro, accel=accel), notes
