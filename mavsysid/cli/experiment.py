@@ -101,7 +101,7 @@ def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings
                             speedup=args.speedup, heartbeat_timeout=args.heartbeat_timeout,
                             position_timeout=args.position_timeout,
                             prearm_timeout=args.prearm_timeout, log_dir=args.log_dir,
-                            fence=not args.no_fence)
+                            fence=not args.no_fence, lockstep=args.lockstep)
     return planner, stream
 
 

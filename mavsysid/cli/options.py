@@ -58,6 +58,10 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-fence", action="store_true",
                         help="fly without the autopilot's geofence around the box (by default "
                         "a vehicle without a working fence is refused)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="test/bench tool: share one simulated clock with `mavsysid sim "
+                        "--lockstep` (same flight idle or overloaded); other vehicles: the "
+                        "wall clock")
 
 
 def require_positive(args: argparse.Namespace, options: tuple[str, ...]) -> None:

@@ -129,21 +129,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "prior θ plus Z times its first-order spread under the prior (a normal "
                         "quantile, e.g. 1.645: 95 %% per rotor and sample; default: "
                         f"{PlannerSettings.rotor_confidence:g}, at the prior θ only)")
-    parser.add_argument("--autopilot-limits", metavar="FILE|LINK",
+    parser.add_argument("--connect", metavar="LINK",
                         help="plan within the position-controller limits of the autopilot "
-                        "that will fly it, read live from the vehicle on a MAVLink LINK "
-                        "(tcp:HOST:PORT, udp:HOST:PORT, udpout:HOST:PORT, serial:DEVICE[:BAUD] "
-                        "or /dev/…, as `stream --connect`; nothing is changed on it) or from "
-                        "a parameter dump FILE of 'NAME VALUE' lines (ArduPilot .parm / "
-                        "MAVProxy 'param save', Mission Planner 'NAME,VALUE', QGroundControl "
-                        ".params; # comments), in the parameters' own units; ArduPilot "
-                        "WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, ATC_SLEW_YAW, "
-                        "ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, absent ones "
-                        "limit nothing; the plan then passes `stream`'s limit check against "
-                        "the same values")
+                        "that will fly it, read live from the vehicle on this MAVLink link, "
+                        "as `stream --connect` takes it (tcp:HOST:PORT, udp:HOST:PORT, "
+                        "udpout:HOST:PORT, a serial device[:BAUD]); nothing is changed on it. "
+                        "ArduPilot WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, "
+                        "ATC_SLEW_YAW, ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, "
+                        "absent ones limit nothing; the plan then passes `stream`'s limit "
+                        "check against the same values")
+    parser.add_argument("--autopilot-limits", metavar="FILE|LINK",
+                        help="the same limits from a parameter dump FILE of 'NAME VALUE' lines "
+                        "(ArduPilot .parm / MAVProxy 'param save', Mission Planner "
+                        "'NAME,VALUE', QGroundControl .params; # comments), in the "
+                        "parameters' own units; or, as --connect, a LINK")
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
-                        help="MAVLink 2 signing for --autopilot-limits LINK: a file holding "
-                        "the passphrase")
+                        help="MAVLink 2 signing for --connect LINK: a file holding the "
+                        "passphrase")
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -166,20 +168,35 @@ def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSe
     elif time == 0.0 and args.samples is not None:
         time = math.inf
     limits = None
-    if args.autopilot_limits is not None:
+    given = _limits_source(args)
+    if given is not None:
         key = None
         if args.signing_key is not None:
             from mavsysid.flight.mavlink_setup import signing_key_from_file
 
             key = signing_key_from_file(args.signing_key)
-        source, limits = autopilot_limits(args.autopilot_limits, key, say=say)
+        source, limits = autopilot_limits(given, key, say=say)
         say(f"planning within the autopilot limits read from {source}")
     elif args.signing_key is not None:
-        raise InputError("--signing-key: only with --autopilot-limits LINK")
+        raise InputError("--signing-key: only with --connect LINK")
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
                            refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom,
                            autopilot_limits=limits, rotor_confidence=args.rotor_confidence)
+
+
+def _limits_source(args: argparse.Namespace) -> str | None:
+    """Where the autopilot's limits come from: ``--connect LINK`` or ``--autopilot-limits
+    FILE|LINK`` (one of them), else None."""
+    if args.connect is not None and args.autopilot_limits is not None:
+        raise InputError("--connect and --autopilot-limits both name the autopilot's limits: "
+                         "give one")
+    if args.connect is not None:
+        from mavsysid.flight.mavlink_setup import parse_connect
+
+        parse_connect(args.connect)  # a link; a parameter dump is --autopilot-limits FILE
+        return str(args.connect)
+    return args.autopilot_limits
 
 
 def main(args: argparse.Namespace) -> int:

@@ -35,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     allow_negative_values(parser)  # "--start -1,2,0"
     parser.add_argument("--connect", default="udpout:127.0.0.1:14550", metavar="URL",
                         help="udpout:HOST:PORT (send to a ground station), tcpin:HOST:PORT "
-                        "or udpin:HOST:PORT (listen) (default: udpout:127.0.0.1:14550)")
+                        "or udpin:HOST:PORT (listen), or a serial device[:BAUD] such as "
+                        "/dev/ttyUSB0:57600 (default: udpout:127.0.0.1:14550)")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
     parser.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot",

@@ -123,10 +123,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "[flight] box of --vehicle; one of the two is required); a box stored "
                         "in the trajectory file can only narrow it")
     add_link_arguments(parser)
-    parser.add_argument("--lockstep", action="store_true",
-                        help="test/bench tool: share one simulated clock with `mavsysid sim "
-                        "--lockstep` (same flight idle or overloaded); other vehicles: the "
-                        "wall clock")
     parser.add_argument("--max-tracking-error", type=float, default=1.0, metavar="M",
                         help="abort to hold beyond this distance from the setpoint "
                         "(default: 1.0 m)")
