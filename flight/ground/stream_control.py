@@ -11,13 +11,17 @@ something is wrong, by stopping the stream first and then raising:
 - `ModeTaken`: the HEARTBEAT shows a mode other than the one mavsysid set (a pilot took
   over) or the vehicle disarmed in flight; nothing more is sent, the pilot has control;
 - `TrackingLost`: the vehicle is farther than the limit from the setpoint in effect.
+
+Before that, a tracking error beyond half the limit is reported in one line when it
+happens (again after it has come back under a quarter of the limit), and the motor
+watch it carries (`mavsysid.flight.ground.motor_watch`) is switched off with the guards.
 """
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from mavsysid.flight.autopilot_modes import mode_name
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
@@ -31,9 +35,16 @@ from mavsysid.flight.ground.telemetry_recorder import SetpointHistory, Telemetry
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["FlightGuards", "ModeTaken", "ProgressLine", "SetpointStream", "TrackingLost"]
+if TYPE_CHECKING:
+    from mavsysid.flight.ground.motor_watch import MotorWatch
+
+__all__ = ["TRACKING_WARNING", "FlightGuards", "ModeTaken", "ProgressLine", "SetpointStream",
+           "TrackingLost"]
 
 SetpointSource = Callable[[float], Setpoint]
+
+#: Share of the tracking-error limit from which a tracking error is reported.
+TRACKING_WARNING = 0.5
 
 
 class ModeTaken(JobFailedError):
@@ -118,7 +129,8 @@ class FlightGuards:
     Add `on_message` as a link listener after the recorder's (it reads the recorder's
     latest row). Guards are off until armed: set `expected_mode` (custom_mode) once the
     mode mavsysid set is confirmed, `expect_armed` once armed, `max_tracking_error` (m)
-    while setpoints with feed-forward are flown.
+    while setpoints with feed-forward are flown. `say` receives the tracking reports,
+    `motors` is the flight's motor watch (switched off by `disable`).
     """
 
     def __init__(self, link: MavlinkLink, stream: SetpointStream,
@@ -127,10 +139,25 @@ class FlightGuards:
         self.expected_mode: int | None = None
         self.expect_armed = False
         self.max_tracking_error: float | None = None
+        self.say: Callable[[str], None] = lambda _text: None
+        self.motors: MotorWatch | None = None
+        self._tracking_reported = False
 
     def disable(self) -> None:
         """Turn every guard off (before mavsysid changes the mode itself)."""
         self.expected_mode, self.expect_armed, self.max_tracking_error = None, False, None
+        if self.motors is not None:
+            self.motors.active = False
+
+    def _report_tracking(self, error: float, limit: float, t: float) -> None:
+        """One line when the error first passes `TRACKING_WARNING` of the limit."""
+        if error < 0.5 * TRACKING_WARNING * limit:
+            self._tracking_reported = False
+        elif error >= TRACKING_WARNING * limit and not self._tracking_reported:
+            self._tracking_reported = True
+            self.say(f"warning: tracking error {error:.2f} m at t = {t:.2f} s, past "
+                     f"{100 * TRACKING_WARNING:.0f} % of the {limit:g} m limit "
+                     "(--max-tracking-error)")
 
     def on_message(self, msg: Any, t: float) -> None:
         """Check one message from the vehicle (a link listener)."""
@@ -152,6 +179,8 @@ class FlightGuards:
         elif kind == "LOCAL_POSITION_NED" and self.max_tracking_error is not None:
             latest = self.recorder.latest
             error = None if latest is None else latest.tracking_error
+            if error is not None and latest is not None:
+                self._report_tracking(error, self.max_tracking_error, latest.t)
             if error is not None and error > self.max_tracking_error:
                 self.stream.stop()
                 limit = self.max_tracking_error

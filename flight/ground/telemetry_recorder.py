@@ -6,9 +6,11 @@ vehicle's clock), carrying:
 - the position (NED → ENU) and velocity (``vx, vy, vz``, ENU);
 - the latest attitude received before it: ATTITUDE_QUATERNION (q_ned_frd → q_enu_flu),
   or ATTITUDE's Euler angles until a quaternion has arrived;
-- the latest ESC rpm received before it (ESC_TELEMETRY_1_TO_4 / _5_TO_8, ESC i = rotor
-  i, rpm → rad/s). ESC telemetry carries no timestamp, and an autopilot sends it in the
-  same tick just before the LOCAL_POSITION_NED, so it takes that row's stamp;
+- the latest ESC rpm received before it (ESC_TELEMETRY_1_TO_4 / _5_TO_8, rpm → rad/s),
+  ESC i as the rotor motor output i drives (the vehicle file's ``[autopilot] frame``;
+  without one ESC i is rotor i). ESC telemetry carries no timestamp, and an autopilot
+  sends it in the same tick just before the LOCAL_POSITION_NED, so it takes that row's
+  stamp;
 - the target in effect at the vehicle at that time (``x_ref, y_ref, z_ref, yaw_ref``
   ENU, ``ref_active`` 1/0, ``t_traj`` its trajectory time or −1): the last setpoint
   sent before the row's time mapped onto the streamer's clock, advanced from the time
@@ -37,6 +39,7 @@ from mavsysid.formats.tlog import ESC_TELEMETRY
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
+from mavsysid.vehicle.motor_order import output_order
 
 __all__ = [
     "EXTRA_COLUMNS",
@@ -170,6 +173,8 @@ class TelemetryRecorder:
         self.skipped: Counter[str] = Counter()
         self._k = config.rotor_count
         self._rotors = np.zeros(self._k)
+        self._outputs = output_order(config.rotor_positions, config.rotor_directions,
+                                     config.autopilot_frame)
         self._esc_seen = False
         self._quaternion: np.ndarray | None = None  # ENU/FLU
         self._has_att_q = False
@@ -204,7 +209,7 @@ class TelemetryRecorder:
         elif kind in ESC_TELEMETRY:
             base = ESC_TELEMETRY[kind]
             for j in range(min(4, self._k - base)):
-                self._rotors[base + j] = msg.rpm[j] * RPM_TO_RAD_S
+                self._rotors[self._outputs[base + j]] = msg.rpm[j] * RPM_TO_RAD_S
             self._esc_seen = self._esc_seen or base < self._k
 
     def _row(self, msg: Any) -> None:

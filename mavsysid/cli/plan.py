@@ -34,7 +34,7 @@ from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, load_vehicle
 
 __all__ = ["DEFAULT_ROTOR_HEADROOM", "add_arguments", "format_preview", "format_summary", "main",
-           "saturation_warning"]
+           "next_step", "saturation_warning"]
 
 #: `plan`'s rotor headroom unless --rotor-headroom says otherwise: with it the README's plan
 #: command predicts ≤ 1 % rotor saturation on every shipped vehicle (docs/plan-preview.md).
@@ -234,7 +234,38 @@ def main(args: argparse.Namespace) -> int:
             print(format_preview(preview))
         if (warning := saturation_warning(preview)) is not None:
             print(f"mavsysid plan: warning: {warning}", file=sys.stderr)
+    if args.verbosity >= 0:
+        print(next_step(args.output, settings.box, _limits_link(args)))
     return 0
+
+
+def _limits_link(args: argparse.Namespace) -> str | None:
+    """The link the limits were read from (``--connect``, or a link given as
+    ``--autopilot-limits``), else None."""
+    if args.connect is not None:
+        return str(args.connect)
+    given = args.autopilot_limits
+    if given is None or Path(given).is_file():
+        return None
+    return str(given)
+
+
+def next_step(trajectory: Path, box: tuple[float, ...], link: str | None) -> str:
+    """The one line printed last: how to fly the plan.
+
+    Parameters
+    ----------
+    trajectory : Path
+        The trajectory file written.
+    box : tuple of 6 float
+        The box planned in, m ([x_min, y_min, z_min, x_max, y_max, z_max]), offered as the
+        operator's ``--box``.
+    link : str or None
+        The vehicle's link when the limits were read from it.
+    """
+    shown = ",".join(f"{v:g}" for v in box)
+    connect = f" --connect {link}" if link is not None else " --connect LINK"
+    return f"next: mavsysid stream {trajectory}{connect} --box {shown}"
 
 
 def saturation_warning(preview: PlanPreview) -> str | None:
