@@ -13,12 +13,15 @@ setpoints:
   against that of its mirror, the rotor opposite it through the centre
   (`mavsysid.vehicle.motor_order.mirror_rotors`), which carries the same share in
   trimmed flight. A ratio R means the motor is asked for R times its mirror's thrust: a
-  weak motor or propeller (on a quad, one making 1/R of what its command asks), or the
-  centre of gravity off towards it. Mirrors that spin the same way (a quad X) share the
-  yaw command; mirrors that spin opposite ways (a hexa, an octo) do not, and a yaw
-  manoeuvre alone would load them 1.6 : 1 over seconds, so there the yaw share of the
-  outputs (their projection on the spin directions) is taken out first. Reported from
-  `MotorLimits.imbalance_warning`, aborted from `MotorLimits.imbalance_abort`;
+  weak motor or propeller (one making 1/R of what its command asks, as the mixer's
+  integrators settle), or the centre of gravity off towards it. Mirrors that spin the same
+  way (a quad X) share the yaw command; mirrors that spin opposite ways (a hexa, an octo)
+  do not, and a yaw manoeuvre alone loads them 1.6 : 1 over seconds on the simulated
+  Firefly. A weak motor's share is steady, a manoeuvre's comes and goes: for those pairs
+  the yaw share of the outputs (their projection on the spin directions) is taken out as
+  far as it departs from its mean over `MotorLimits.steady_window`, and they are judged
+  once that much has flown. Reported from `MotorLimits.imbalance_warning`, aborted from
+  `MotorLimits.imbalance_abort`;
 - **saturation**: an output at the top of its range (u ≥ `MotorLimits.saturated`) for
   `MotorLimits.saturation_warning` s in a row is reported, for
   `MotorLimits.saturation_abort` s aborted (the autopilot has lost authority; ArduCopter's
@@ -65,6 +68,8 @@ class MotorLimits:
     window : float
         Averaging window of the imbalance, streamer s (long enough that manoeuvres,
         which load opposite rotors unevenly for a moment, average out).
+    steady_window : float
+        The yaw share's steady part is its mean over this long, streamer s.
     saturated : float
         Share of the output range at which a motor counts as saturated.
     saturation_warning, saturation_abort : float
@@ -74,6 +79,7 @@ class MotorLimits:
     imbalance_warning: float = 1.25
     imbalance_abort: float = 2.0
     window: float = 2.0
+    steady_window: float = 10.0
     saturated: float = 0.98
     saturation_warning: float = 0.25
     saturation_abort: float = 1.0
@@ -122,6 +128,7 @@ class MotorWatch:
         self.findings: list[dict[str, Any]] = []
         self.peak_imbalance = 1.0
         self._samples: deque[tuple[float, np.ndarray]] = deque()
+        self._yaw: deque[tuple[float, float]] = deque()  # the yaw share, steady window
         self._saturated_since: list[float | None] = [None] * self._k
         self._warned: set[tuple[str, int]] = set()
 
@@ -143,14 +150,19 @@ class MotorWatch:
                        dtype=float)
         if not self.active:
             self._samples.clear()
+            self._yaw.clear()
             self._saturated_since = [None] * self._k
             return
         if not self._pwm_outputs(raw):
             return
         u = throttle_from_pwm(raw, *self._pwm)
-        self._samples.append((t, (1.0 - self._e) * u + self._e * u * u))
+        f = (1.0 - self._e) * u + self._e * u * u
+        self._samples.append((t, f))
+        self._yaw.append((t, float(f @ self._spins) / self._k))
         while self._samples and self._samples[0][0] < t - self.limits.window:
             self._samples.popleft()
+        while self._yaw and self._yaw[0][0] < t - self.limits.steady_window:
+            self._yaw.popleft()
         self._saturation(u, t)
         self._imbalance(t)
 
@@ -202,12 +214,16 @@ class MotorWatch:
             return
         f = np.array([f for _, f in self._samples])
         mean = f.mean(axis=0)
-        yaw = float(np.mean(f @ self._spins)) / self._k  # the yaw share, per unit spin
+        # The yaw share's departure from its steady mean: a manoeuvre's, not a weak motor's.
+        yaw = float(np.mean(f @ self._spins)) / self._k - float(np.mean([y for _, y in self._yaw]))
+        steady = t - self._yaw[0][0] >= 0.9 * lim.steady_window
         for i, j in enumerate(self.mirrors):
             if j is None:
                 continue
             mine, theirs = mean[i], mean[j]
             if self._spins[i] != self._spins[j]:
+                if not steady:
+                    continue
                 mine, theirs = mine - self._spins[i] * yaw, theirs - self._spins[j] * yaw
             if theirs <= 0.02:
                 continue
