@@ -9,7 +9,8 @@ wait, the stream never pauses while a command waits for its ACK.
 something is wrong, by stopping the stream first and then raising:
 
 - `ModeTaken`: the HEARTBEAT shows a mode other than the one mavsysid set (a pilot took
-  over) or the vehicle disarmed in flight; nothing more is sent, the pilot has control;
+  over, or the autopilot's own failsafe: its STATUSTEXT of the last seconds is quoted) or
+  the vehicle disarmed in flight; nothing more is sent, the pilot has control;
 - `TrackingLost`: the vehicle is farther than the limit from the setpoint in effect.
 
 Before that, a tracking error beyond half the limit is reported in one line when it
@@ -42,6 +43,9 @@ __all__ = ["TRACKING_WARNING", "FlightGuards", "ModeTaken", "ProgressLine", "Set
            "TrackingLost"]
 
 SetpointSource = Callable[[float], Setpoint]
+
+#: A STATUSTEXT this recent (streamer s) explains a mode change (a failsafe says why).
+_REASON_AGE = 3.0
 
 #: Share of the tracking-error limit from which a tracking error is reported.
 TRACKING_WARNING = 0.5
@@ -142,6 +146,7 @@ class FlightGuards:
         self.say: Callable[[str], None] = lambda _text: None
         self.motors: MotorWatch | None = None
         self._tracking_reported = False
+        self._last_text: tuple[float, str] | None = None
 
     def disable(self) -> None:
         """Turn every guard off (before mavsysid changes the mode itself)."""
@@ -163,14 +168,19 @@ class FlightGuards:
         """Check one message from the vehicle (a link listener)."""
         kind = msg.get_type()
         v = self.link.vehicle
-        if kind == "HEARTBEAT" and v.autopilot is not None:
+        if kind == "STATUSTEXT":
+            self._last_text = (t, str(msg.text).strip())
+        elif kind == "HEARTBEAT" and v.autopilot is not None:
             if self.expected_mode is not None and v.custom_mode != self.expected_mode:
                 expected = mode_name(v.autopilot, self.expected_mode)
                 self.stream.stop()
                 self.disable()
+                said = self._last_text
+                why = ("pilot takeover?" if said is None or t - said[0] > _REASON_AGE
+                       else f"the autopilot said: {said[1]}")
                 raise ModeTaken(f"the flight mode changed from {expected} to {v.mode}, not by "
-                                "mavsysid (pilot takeover?): stopped streaming; the vehicle "
-                                "is in the pilot's hands")
+                                f"mavsysid ({why}): stopped streaming; the vehicle is in the "
+                                "pilot's hands")
             if self.expect_armed and not v.armed:
                 self.stream.stop()
                 self.disable()

@@ -120,8 +120,8 @@ def test_experiment_over_a_serial_link(tmp_path: Path) -> None:
         done = run_mavsysid("experiment", "--connect", f"{cable.ground}:115200", "--vehicle",
                             "quad_x", "--budget", "8", "--samples", "60", "--refine-steps",
                             "50", "--seed", "1", "--box", "-2,-2,0.5,2,2,2.5", "--speedup",
-                            SPEEDUP, "--lockstep", "--log-dir", str(logs), cwd=tmp_path,
-                            timeout=600.0)
+                            SPEEDUP, "--lockstep", "--report", str(tmp_path / "report"),
+                            "--log-dir", str(logs), cwd=tmp_path, timeout=600.0)
     flight = flight_dir(logs)
     meta = json.loads((flight / "meta.json").read_text())
     assert meta["connection"] == f"{cable.ground}:115200"
@@ -129,6 +129,8 @@ def test_experiment_over_a_serial_link(tmp_path: Path) -> None:
     assert (flight / "trajectory.json").is_file() and (flight / "flight.tlog").is_file()
     if done.returncode == 0:
         assert (flight / "estimate.json").is_file()
+        assert (tmp_path / "report" / "index.html").is_file()
+        assert done.stdout.strip().splitlines()[-1].startswith("next: mavsysid diagnose ")
     else:
         last = done.stderr.strip().splitlines()[-1]
         assert done.returncode == 3 and "but no estimate" in last, done.stderr[-3000:]
