@@ -93,6 +93,7 @@ def test_a_serial_device_that_goes_away_ends_the_stream_in_one_line(tmp_path: Pa
     assert meta["status"] == "aborted" and "serial device" in meta["reason"]
 
 
+@pytest.mark.slow
 def test_plan_reads_the_limits_over_a_serial_link(tmp_path: Path, planned, capsys) -> None:
     """``plan --connect DEVICE:BAUD`` reads the autopilot's limits over the serial device."""
     with NullModem() as cable, SimProcess(tmp_path / "sim", "--connect",

@@ -117,6 +117,7 @@ def test_restore_after_kill_9(tmp_path, trajectory):
     assert result.returncode == 0, result.stderr
     assert after == pytest.approx(changed), (after, changed)
     assert diff == {}, diff  # FENCE_TOTAL back to 0 with the fence points
+    assert "fence points as before the flight: 0 (the fence mission cleared)" in result.stdout
     meta = json.loads((directory / "meta.json").read_text())
     assert all(e["restored"] for e in meta["parameters"].values())
     assert meta["restored_by"]["command"] == "mavsysid restore"
