@@ -313,23 +313,22 @@ def upload_fence_items(link: MavlinkLink, items: Sequence[dict[str, float]],
                     return link.enum_name("MAV_MISSION_RESULT", msg.type)
                 requested = True
                 if 0 <= msg.seq < len(items):
-                    link.send(_item_message(mav, v, msg, items[msg.seq], msg.seq))
+                    link.send(_item_message(mav, v, items[msg.seq], msg.seq))
         return f"no MISSION_ACK within {timeout:g} s" if requested else (
             f"no answer to MISSION_COUNT within {timeout:g} s")
     finally:
         link.remove_listener(listen)
 
 
-def _item_message(mav: Any, v: Any, request: Any, item: dict[str, float], seq: int) -> Any:
-    """The MISSION_ITEM_INT (or, asked so, MISSION_ITEM) of one fence point."""
-    common = (v.system, v.component, seq, int(item["frame"]), int(item["command"]), 0, 1,
-              float(item["param1"]), float(item["param2"]), float(item["param3"]),
-              float(item["param4"]))
-    if request.get_type() == "MISSION_REQUEST_INT":
-        return mav.mission_item_int_encode(*common, int(item["x"]), int(item["y"]),
-                                           float(item["z"]), mission_type=_FENCE_MISSION)
-    return mav.mission_item_encode(*common, item["x"] * 1e-7, item["y"] * 1e-7,
-                                   float(item["z"]), mission_type=_FENCE_MISSION)
+def _item_message(mav: Any, v: Any, item: dict[str, float], seq: int) -> Any:
+    """The MISSION_ITEM_INT of one fence point, whichever request asked for it: the float
+    MISSION_ITEM is deprecated, and ArduCopter answers it with "GCS should send
+    MISSION_ITEM_INT"."""
+    return mav.mission_item_int_encode(
+        v.system, v.component, seq, int(item["frame"]), int(item["command"]), 0, 1,
+        float(item["param1"]), float(item["param2"]), float(item["param3"]),
+        float(item["param4"]), int(item["x"]), int(item["y"]), float(item["z"]),
+        mission_type=_FENCE_MISSION)
 
 
 def fence_parameters(autopilot: Autopilot, plan: FencePlan, polygon_ok: bool

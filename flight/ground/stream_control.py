@@ -21,7 +21,8 @@ watch it carries (`mavsysid.flight.ground.motor_watch`) is switched off with the
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, TextIO
 
 from mavsysid.flight.autopilot_modes import mode_name
@@ -52,7 +53,23 @@ TRACKING_WARNING = 0.5
 
 
 class ModeTaken(JobFailedError):
-    """Someone else changed the flight mode, or the vehicle disarmed, mid-flight."""
+    """Someone else changed the flight mode, or the vehicle disarmed, mid-flight.
+
+    Parameters
+    ----------
+    change : str
+        What changed ("the flight mode changed from GUIDED to LAND").
+    texts : sequence of str
+        The autopilot's STATUSTEXT around the change (a failsafe says why); none: maybe a
+        pilot.
+    """
+
+    def __init__(self, change: str, texts: Sequence[str] = ()) -> None:
+        self.change, self.texts = change, tuple(texts)
+        why = ("the autopilot said: " + "; ".join(self.texts) if self.texts
+               else "pilot takeover?")
+        super().__init__(f"{change}, not by mavsysid ({why}): stopped streaming; the vehicle "
+                         "is in the pilot's hands")
 
 
 class TrackingLost(JobFailedError):
@@ -146,7 +163,7 @@ class FlightGuards:
         self.say: Callable[[str], None] = lambda _text: None
         self.motors: MotorWatch | None = None
         self._tracking_reported = False
-        self._last_text: tuple[float, str] | None = None
+        self._texts: deque[tuple[float, str]] = deque(maxlen=8)
 
     def disable(self) -> None:
         """Turn every guard off (before mavsysid changes the mode itself)."""
@@ -169,23 +186,18 @@ class FlightGuards:
         kind = msg.get_type()
         v = self.link.vehicle
         if kind == "STATUSTEXT":
-            self._last_text = (t, str(msg.text).strip())
+            self._texts.append((t, str(msg.text).strip()))
         elif kind == "HEARTBEAT" and v.autopilot is not None:
+            recent = [text for when, text in self._texts if t - when <= _REASON_AGE]
             if self.expected_mode is not None and v.custom_mode != self.expected_mode:
                 expected = mode_name(v.autopilot, self.expected_mode)
                 self.stream.stop()
                 self.disable()
-                said = self._last_text
-                why = ("pilot takeover?" if said is None or t - said[0] > _REASON_AGE
-                       else f"the autopilot said: {said[1]}")
-                raise ModeTaken(f"the flight mode changed from {expected} to {v.mode}, not by "
-                                f"mavsysid ({why}): stopped streaming; the vehicle is in the "
-                                "pilot's hands")
+                raise ModeTaken(f"the flight mode changed from {expected} to {v.mode}", recent)
             if self.expect_armed and not v.armed:
                 self.stream.stop()
                 self.disable()
-                raise ModeTaken(f"the vehicle disarmed in flight (mode {v.mode}): stopped "
-                                "streaming")
+                raise ModeTaken(f"the vehicle disarmed in flight (mode {v.mode})", recent)
         elif kind == "LOCAL_POSITION_NED" and self.max_tracking_error is not None:
             latest = self.recorder.latest
             error = None if latest is None else latest.tracking_error

@@ -127,19 +127,42 @@ class _Flight:
             raise
         except JobFailedError as error:
             self.stream.stop()
+            if isinstance(error, ModeTaken):
+                error = self._explained(error)
             self.s.note_failure(str(error))
             # A lost link or a pilot in control: hands off. Anything else in the air: hold.
             # A stopped continuation has landed already: no BRAKE in the middle of a landing.
             if not isinstance(error, HeartbeatLost | ModeTaken | ContinuationStopped) and \
                     self.link.vehicle.armed:
                 self._hold_after_abort()
-            raise
+            raise error
         finally:
             self.s.note("motor_watch", {
                 "findings": self.motors.findings,
                 "peak_imbalance": round(self.motors.peak_imbalance, 3),
                 "off": self.motors.off_reason})
             restore_parameters(self.s, self.say)
+
+    def _explained(self, taken: ModeTaken) -> ModeTaken:
+        """``taken`` with what the autopilot says in the next second: a failsafe announces
+        itself just after the heartbeat that shows its mode (ArduCopter: "EKF Failsafe:
+        changed to LAND Mode"). Only listens; nothing is sent."""
+        texts = list(taken.texts)
+
+        def listen(msg: Any, _t: float) -> None:
+            if msg.get_type() == "STATUSTEXT":
+                texts.append(str(msg.text).strip())
+
+        self.link.add_listener(listen)
+        try:
+            self.link.poll(1.0)
+        except JobFailedError:
+            pass  # a lost link: what was said so far
+        finally:
+            self.link.remove_listener(listen)
+        if texts == list(taken.texts):
+            return taken
+        return ModeTaken(taken.change, texts)
 
     # --- steps ---------------------------------------------------------------------------
 
