@@ -60,7 +60,8 @@ def test_the_file_the_autopilot_flies_passes(config, autopilot):
 
 
 def test_an_x_file_on_a_plus_autopilot_is_refused_naming_both():
-    """The issue's case: a "+" SITL (FRAME_TYPE 0) flown with the X file."""
+    """A "+" autopilot (FRAME_TYPE 0) flown with the X file: the motor outputs would be read
+    as rotors 45° from where they are."""
     report = check_frame(SITL_QUAD, Autopilot.ARDUPILOT, {"FRAME_CLASS": 1, "FRAME_TYPE": 0})
     (line,) = report.refusals
     assert "flies ardupilot:quad_plus (FRAME_CLASS 1 (Quad), FRAME_TYPE 0 (Plus))" in line
