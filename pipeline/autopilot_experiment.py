@@ -10,7 +10,9 @@ they refuse, in their words. The flight directory keeps everything: the trajecto
 ``autopilot.ulg``, with ``StreamSettings.download_log``), and ``estimate.json`` once θ is
 estimated. The plan is written first as
 ``LOG_DIR/trajectory-seedN.json`` (the flight directory is named after it) and stays there
-when the flight is refused.
+when the flight is refused. A dry run (``stream.dry_run``) reads the limits, plans, and
+runs every check of the flight on the vehicle without arming or changing anything; it
+estimates nothing.
 """
 
 from __future__ import annotations
@@ -54,18 +56,18 @@ class ExperimentOutcome:
         The flight directory and its ``meta.json``.
     trajectory : Path
         The trajectory file flown, in the flight directory.
-    estimate : EstimateRun
-        θ estimated from the flight's log.
-    estimate_file : Path
-        ``estimate.json`` in the flight directory.
+    estimate : EstimateRun or None
+        θ estimated from the flight's log (None after a dry run).
+    estimate_file : Path or None
+        ``estimate.json`` in the flight directory (None after a dry run).
     """
 
     limits: str
     plan: PlanResult
     flight: StreamOutcome
     trajectory: Path
-    estimate: EstimateRun
-    estimate_file: Path
+    estimate: EstimateRun | None
+    estimate_file: Path | None
 
 
 def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
@@ -125,6 +127,8 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
     flight = run_stream(staged, stream, vehicle, say, progress)
     trajectory = flight.directory / "trajectory.json"
     staged.replace(trajectory)
+    if stream.dry_run:
+        return ExperimentOutcome(source, plan, flight, trajectory, None, None)
     log = flight.directory / FLIGHT_LOG
     say(f"estimating θ from {log}")
     try:

@@ -124,7 +124,7 @@ def read_autopilot(source: str | Path, signing_key: bytes | None = None,
         except InputError:
             pass  # not a link: read as a file, which says what is wrong with it
     if signing_key is not None and not is_link:
-        raise InputError(f"--signing-key: only with --autopilot-limits LINK, got the file {text}")
+        raise InputError(f"--signing-key: only with --connect LINK, got the file {text}")
     if is_link:
         autopilot, values = vehicle_limit_values(text, signing_key, heartbeat_timeout, say,
                                                  loop=loop)

@@ -128,11 +128,15 @@ class RestoreOutcome:
         name → original value, already in place.
     read_back : dict
         name → value read from the vehicle afterwards.
+    fence_points : int or None
+        How many fence points were put back (0: the fence mission cleared, as before the
+        flight); None when there were none to put back.
     """
 
     restored: dict[str, tuple[float, float]]
     unchanged: dict[str, float]
     read_back: dict[str, float]
+    fence_points: int | None = None
 
 
 def restore_flight_parameters(directory: str | Path, connect: str,
@@ -140,11 +144,14 @@ def restore_flight_parameters(directory: str | Path, connect: str,
                               heartbeat_timeout: float = 30.0, land: bool = False,
                               land_timeout: float = 60.0,
                               say: Callable[[str], None] | None = None) -> RestoreOutcome:
-    """Put back on the vehicle every parameter a flight's ``meta.json`` lists as changed.
+    """Put back on the vehicle every parameter a flight's ``meta.json`` lists as changed,
+    and the fence points it held before the flight.
 
     For a flight that ended without restoring them: a streamer killed (kill -9) or a link
     lost mid-flight. Each parameter is written to its ``original`` value unless it already
-    holds it, then all are read back; ``meta.json`` records the restore.
+    holds it, then all are read back; the fence points (``fence.points_before``) are
+    uploaded again, or the fence mission cleared when there were none. ``meta.json``
+    records the restore.
 
     Parameters
     ----------
@@ -157,9 +164,10 @@ def restore_flight_parameters(directory: str | Path, connect: str,
     heartbeat_timeout : float
         How long to wait for the vehicle's heartbeat, s.
     land : bool
-        An armed vehicle is sent to LAND and its disarm awaited first (else refused).
+        An armed vehicle is sent to LAND and its landing awaited first, to the disarm
+        (`mavsysid.flight.ground.landing.wait_disarmed`); else it is refused.
     land_timeout : float
-        How long to wait for that disarm, s.
+        Give up the landing after this long with the vehicle coming no lower, s.
     say : callable, optional
         Receives one-line status messages.
 
@@ -168,14 +176,12 @@ def restore_flight_parameters(directory: str | Path, connect: str,
     InputError
         No such flight directory, or an unreadable ``meta.json``.
     JobFailedError
-        No vehicle, a vehicle still armed (without ``land``), or a parameter that could
-        not be written or does not read back as its original value.
+        No vehicle, a vehicle still armed (without ``land``, or a landing that stalled),
+        a parameter that could not be written or does not read back as its original
+        value, or fence points that could not be put back.
     """
     from mavsysid.flight.ground.mavlink_link import MavlinkLink
-    from mavsysid.flight.ground.parameter_session import ParameterSession
     from mavsysid.formats.flight_dir import read_meta, write_meta
-
-    from mavsysid.errors import JobFailedError
 
     say = say or (lambda _text: None)
     directory = Path(directory)
@@ -183,7 +189,9 @@ def restore_flight_parameters(directory: str | Path, connect: str,
     listed = meta.get("parameters") or {}
     originals = {name: float(entry["original"]) for name, entry in listed.items()
                  if isinstance(entry, dict) and "original" in entry}
-    if not originals:
+    fence = meta.get("fence") if isinstance(meta.get("fence"), dict) else None
+    points = None if fence is None or fence.get("points_restored", True) else fence
+    if not originals and points is None:
         say(f"{directory / 'meta.json'} lists no changed parameters: nothing to restore")
         return RestoreOutcome({}, {}, {})
     link = MavlinkLink(connect, None, signing_key=signing_key)
@@ -192,34 +200,65 @@ def restore_flight_parameters(directory: str | Path, connect: str,
         vehicle = link.wait_heartbeat(heartbeat_timeout, say)
         if vehicle.armed:
             _land_first(link, land, land_timeout, say)
-        params = ParameterSession(link)
-        before = params.read(list(originals))
-        missing = [n for n in originals if n not in before]
-        if missing:
-            raise JobFailedError(f"the vehicle did not answer for {', '.join(missing)}: "
-                                 "nothing restored")
-        for name in reversed(list(originals)):  # newest first, as the streamer does
-            params.set(name, originals[name])
-        read_back = params.read(list(originals))
+        outcome = _write_back(link, originals)
+        if points is not None:
+            outcome = _restore_points(link, points, outcome, say)
     finally:
         link.close()
+    for name in originals:
+        listed[name]["restored"] = True
+    meta["restored_by"] = {"command": "mavsysid restore", "connection": connect,
+                           "written": sorted(outcome.restored),
+                           "already_original": sorted(outcome.unchanged),
+                           "fence_points": outcome.fence_points}
+    write_meta(directory / "meta.json", meta)
+    return outcome
+
+
+def _write_back(link: Any, originals: dict[str, float]) -> RestoreOutcome:
+    """Write each parameter's original value (newest first) and read them all back."""
+    from mavsysid.flight.ground.parameter_session import ParameterSession
+
+    from mavsysid.errors import JobFailedError
+
+    if not originals:
+        return RestoreOutcome({}, {}, {})
+    params = ParameterSession(link)
+    before = params.read(list(originals))
+    missing = [n for n in originals if n not in before]
+    if missing:
+        raise JobFailedError(f"the vehicle did not answer for {', '.join(missing)}: "
+                             "nothing restored")
+    for name in reversed(list(originals)):  # newest first, as the streamer does
+        params.set(name, originals[name])
+    read_back = params.read(list(originals))
     wrong = [f"{n} reads {read_back.get(n, float('nan')):g}, not {v:g}"
              for n, v in originals.items() if not _same_value(read_back.get(n), v)]
     if wrong:
         raise JobFailedError("not restored: " + "; ".join(wrong))
     restored = {n: (before[n], v) for n, v in originals.items() if not _same_value(before[n], v)}
     unchanged = {n: v for n, v in originals.items() if n not in restored}
-    for name in originals:
-        listed[name]["restored"] = True
-    meta["restored_by"] = {"command": "mavsysid restore", "connection": connect,
-                           "written": sorted(restored), "already_original": sorted(unchanged)}
-    write_meta(directory / "meta.json", meta)
     return RestoreOutcome(restored, unchanged, read_back)
+
+
+def _restore_points(link: Any, fence: dict[str, Any], outcome: RestoreOutcome,
+                    say: Callable[[str], None]) -> RestoreOutcome:
+    """The fence points of ``meta.json``'s ``fence`` put back (updated in place)."""
+    from mavsysid.flight.ground.flight_safety import put_back_fence_points
+
+    from mavsysid.errors import JobFailedError
+
+    if not put_back_fence_points(link, fence, say):
+        raise JobFailedError("the parameters are back, but not the fence points the vehicle "
+                             "held before the flight")
+    count = len(fence.get("points_before") or [])
+    return RestoreOutcome(outcome.restored, outcome.unchanged, outcome.read_back, count)
 
 
 def _land_first(link: Any, land: bool, land_timeout: float,
                 say: Callable[[str], None]) -> None:
-    """An armed vehicle: refused, or (``land``) sent to LAND and its disarm awaited."""
+    """An armed vehicle: refused, or (``land``) sent to LAND and landed to the disarm."""
+    from mavsysid.flight.ground.landing import LandingLimits, wait_disarmed
     from mavsysid.flight.ground.vehicle_commands import VehicleCommands
 
     from mavsysid.errors import JobFailedError
@@ -227,15 +266,32 @@ def _land_first(link: Any, land: bool, land_timeout: float,
     if not land:
         raise JobFailedError("the vehicle is armed: restore once it has landed (or give "
                              "--land to land it first)")
-    VehicleCommands(link, say=None).set_mode("LAND")
+    commands = VehicleCommands(link, say=None)
+    home_up = _home_height(link, commands)
+    if link.vehicle.mode != "LAND":
+        commands.set_mode("LAND")
     say("the vehicle is armed: landing")
-    deadline = link.clock.now() + land_timeout
-    while link.vehicle.armed:
-        if link.clock.now() > deadline:
-            raise JobFailedError(f"still armed {land_timeout:g} s after LAND: nothing "
-                                 "restored")
-        link.poll(0.1)
-    say("landed and disarmed")
+    if not wait_disarmed(link, commands, say, home_up, LandingLimits(stall=land_timeout)):
+        raise JobFailedError("the vehicle did not land and disarm: nothing restored")
+
+
+def _home_height(link: Any, commands: Any) -> float | None:
+    """Home's height in the vehicle's local frame, m up (HOME_POSITION z), or None."""
+    got: list[float] = []
+
+    def listen(msg: Any, _t: float) -> None:
+        if msg.get_type() == "HOME_POSITION":
+            got.append(-float(msg.z))
+
+    link.add_listener(listen)
+    try:
+        commands.request_message("HOME_POSITION")
+        deadline = link.clock.now() + 3.0
+        while not got and link.clock.now() < deadline:
+            link.poll(0.05)
+    finally:
+        link.remove_listener(listen)
+    return got[-1] if got else None
 
 
 def _same_value(a: float | None, b: float) -> bool:

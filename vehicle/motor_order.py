@@ -42,12 +42,19 @@ import numpy as np
 
 __all__ = [
     "ANGLE_TOLERANCE_DEG",
+    "ARDUPILOT_FRAME_IDS",
     "AUTOPILOT_FRAMES",
     "FRAME_NAMES",
+    "PX4_AIRFRAME_GROUPS",
     "FrameRotor",
     "MotorOrderError",
+    "ardupilot_frame_name",
     "describe_angle",
+    "layout_matches",
+    "mirror_rotors",
+    "output_order",
     "output_to_rotor",
+    "px4_airframe_frame",
 ]
 
 #: How far, degrees, a config rotor may sit from the frame's nominal angle and still match
@@ -116,6 +123,63 @@ AUTOPILOT_FRAMES: dict[str, tuple[FrameRotor, ...]] = {
 
 #: The frame names a vehicle file may give as ``[autopilot] frame``.
 FRAME_NAMES: tuple[str, ...] = tuple(AUTOPILOT_FRAMES)
+
+#: ArduPilot's FRAME_CLASS and FRAME_TYPE of each of its frames above (``AP_Motors_Class.h``:
+#: motor_frame_class QUAD 1, HEXA 2, OCTA 3; motor_frame_type PLUS 0, X 1).
+ARDUPILOT_FRAME_IDS: dict[str, tuple[int, int]] = {
+    "ardupilot:quad_plus": (1, 0), "ardupilot:quad_x": (1, 1),
+    "ardupilot:hexa_plus": (2, 0), "ardupilot:hexa_x": (2, 1),
+    "ardupilot:octa_plus": (3, 0), "ardupilot:octa_x": (3, 1),
+}
+#: ArduPilot's names of FRAME_CLASS and FRAME_TYPE values, for messages
+#: (``libraries/AP_Motors/AP_Motors_Class.h``, enums motor_frame_class and motor_frame_type).
+_ARDUPILOT_CLASSES = {0: "Undefined", 1: "Quad", 2: "Hexa", 3: "Octa", 4: "OctaQuad", 5: "Y6",
+                      6: "Heli", 7: "Tri", 8: "SingleCopter", 9: "CoaxCopter", 10: "Tailsitter",
+                      11: "Heli_Dual", 12: "DodecaHexa", 13: "HeliQuad", 14: "Deca"}
+_ARDUPILOT_TYPES = {0: "Plus", 1: "X", 2: "V", 3: "H", 4: "V-Tail", 5: "A-Tail",
+                    6: "Plus reversed", 10: "Y6B", 11: "Y6F", 12: "BetaFlight X", 13: "DJI X",
+                    14: "clockwise X", 15: "I", 16: "Plus, no yaw torque",
+                    17: "X, no yaw torque", 18: "BetaFlight X reversed", 19: "Y4"}
+#: PX4's airframe groups by SYS_AUTOSTART thousands (``ROMFS/px4fmu_common/init.d/airframes``:
+#: 4xxx quadrotor x, 5xxx quadrotor +, 6xxx hexarotor x, 7xxx hexarotor +, 8xxx octorotor
+#: x, 9xxx octorotor +); within a group the motor order is the group's mixer geometry.
+PX4_AIRFRAME_GROUPS: dict[int, str] = {4: "px4:quad_x", 5: "px4:quad_plus", 6: "px4:hexa_x",
+                                       7: "px4:hexa_plus", 8: "px4:octa_x", 9: "px4:octa_plus"}
+
+
+def ardupilot_frame_name(frame_class: int, frame_type: int) -> tuple[str | None, str]:
+    """The frame of `AUTOPILOT_FRAMES` that ArduPilot's FRAME_CLASS and FRAME_TYPE select.
+
+    Parameters
+    ----------
+    frame_class, frame_type : int
+        The parameters' values.
+
+    Returns
+    -------
+    name : str or None
+        ``"ardupilot:quad_x"`` and so on; None for a frame those tables do not hold (a Y6,
+        an H quad, a BetaFlight motor order, …).
+    words : str
+        The parameters with ArduPilot's names of their values, for messages:
+        ``"FRAME_CLASS 1 (Quad), FRAME_TYPE 0 (Plus)"``.
+    """
+    words = (f"FRAME_CLASS {frame_class} ({_ARDUPILOT_CLASSES.get(frame_class, '?')}), "
+             f"FRAME_TYPE {frame_type} ({_ARDUPILOT_TYPES.get(frame_type, '?')})")
+    wanted = (int(frame_class), int(frame_type))
+    name = next((n for n, ids in ARDUPILOT_FRAME_IDS.items() if ids == wanted), None)
+    return name, words
+
+
+def px4_airframe_frame(sys_autostart: int) -> str | None:
+    """The frame of `AUTOPILOT_FRAMES` of a PX4 airframe (its SYS_AUTOSTART), or None.
+
+    Parameters
+    ----------
+    sys_autostart : int
+        The airframe's SYS_AUTOSTART; its thousands name the group (`PX4_AIRFRAME_GROUPS`).
+    """
+    return PX4_AIRFRAME_GROUPS.get(int(sys_autostart) // 1000)
 
 _SECTORS = ("front", "front right", "right", "rear right", "rear", "rear left", "left",
             "front left")
@@ -215,3 +279,80 @@ def output_to_rotor(positions: np.ndarray, directions: np.ndarray,
                 f"{_spin(int(directions[j]))}")
         order.append(j)
     return tuple(order)
+
+
+def _angles(positions: np.ndarray) -> np.ndarray:
+    """Rotor directions from the centre, degrees clockwise from the nose (body FLU in)."""
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    return np.degrees(np.arctan2(-positions[:, 1], positions[:, 0]))
+
+
+def layout_matches(positions: np.ndarray, frame: str) -> bool:
+    """Whether the rotors sit at the angles of ``frame``'s rotors, in any order.
+
+    Spin directions and numbering are not compared: this tells a "+" layout from an "X"
+    one (rotors 45° apart) whatever order the rotors are listed in.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (k, 3)
+        Rotor positions, m, body FLU.
+    frame : str
+        A name of `FRAME_NAMES`.
+    """
+    layout = AUTOPILOT_FRAMES[frame]
+    angles = list(_angles(positions))
+    if len(angles) != len(layout):
+        return False
+    for rotor in layout:
+        gaps = [_angle_gap(rotor.angle_deg, a) for a in angles]
+        j = int(np.argmin(gaps))
+        if gaps[j] > ANGLE_TOLERANCE_DEG:
+            return False
+        angles.pop(j)
+    return True
+
+
+def output_order(positions: np.ndarray, directions: np.ndarray,
+                 frame: str | None) -> tuple[int, ...]:
+    """`output_to_rotor` for a vehicle's ``[autopilot] frame``; output i is rotor i when None.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (k, 3)
+        The config's rotor positions, m, body FLU.
+    directions : ndarray, shape (k,)
+        Their spin directions ε, ±1.
+    frame : str or None
+        The config's ``autopilot_frame``.
+    """
+    if frame is None:
+        return tuple(range(np.asarray(directions).size))
+    return output_to_rotor(positions, directions, frame)
+
+
+def mirror_rotors(positions: np.ndarray) -> tuple[int | None, ...]:
+    """Each rotor's mirror: the rotor opposite it through the centre, or None.
+
+    The allocation pairs opposite rotors: in hover each carries what its mirror carries,
+    so a motor working much harder than its mirror is weak, or the centre of gravity is
+    off towards it.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (k, 3)
+        Rotor positions, m, body FLU.
+
+    Returns
+    -------
+    tuple of int or None, length k
+        Element i is the index of the rotor within `ANGLE_TOLERANCE_DEG` of 180° from
+        rotor i (None when there is none, as on a tricopter).
+    """
+    angles = _angles(positions)
+    out: list[int | None] = []
+    for i, a in enumerate(angles):
+        gaps = [_angle_gap(a + 180.0, b) if j != i else math.inf for j, b in enumerate(angles)]
+        j = int(np.argmin(gaps))
+        out.append(j if gaps[j] <= ANGLE_TOLERANCE_DEG else None)
+    return tuple(out)

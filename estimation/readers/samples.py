@@ -804,8 +804,9 @@ ACCEL_MEDIAN_RANGE = (0.5 * GRAVITY, 2.0 * GRAVITY)
 #: (deg/s reads 57×) or frame (FRD read as FLU turns the y and z gains negative).
 GYRO_GAIN_RANGE = (0.7, 1.4)
 #: Attitude rates (RMS, rad/s) and their correlation with the gyro below which the gain
-#: is not judged (a flight that hardly turns, or a pose too noisy to differentiate).
-_GYRO_CHECK_RATE, _GYRO_CHECK_CORRELATION = 0.1, 0.5
+#: is not judged (a flight that hardly turns, or a pose too noisy to tell), over windows
+#: of this many seconds (long enough that the attitude's noise does not matter).
+_GYRO_CHECK_RATE, _GYRO_CHECK_CORRELATION, _GYRO_CHECK_WINDOW = 0.1, 0.8, 0.2
 
 
 def _clean_sensor(series: ImuSeries | None, t: np.ndarray, source: str
@@ -823,24 +824,30 @@ def _clean_sensor(series: ImuSeries | None, t: np.ndarray, source: str
     return dataclasses.replace(series, t=ts, values=vs), notes
 
 
-def _pose_rates(t: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Body rates (N-1, 3) from consecutive attitudes, at the midpoints."""
-    dq = quat_multiply(quat_conjugate(q[:-1]), q[1:])
-    return quat_log(dq) / np.diff(t)[:, None]
+def _rotations(t: np.ndarray, q: np.ndarray, gyro: ImuSeries
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Body rotations over windows of about `_GYRO_CHECK_WINDOW` s: from the attitude, and
+    the gyro's integral over the same window, each (M, 3) rad."""
+    step = max(1, int(round(_GYRO_CHECK_WINDOW / float(np.median(np.diff(t))))))
+    i = np.arange(0, t.shape[0] - step, step)
+    attitude = quat_log(quat_multiply(quat_conjugate(q[i]), q[i + step]))
+    cumulative = np.concatenate([[np.zeros(3)], np.cumsum(
+        0.5 * (gyro.values[1:] + gyro.values[:-1]) * np.diff(gyro.t)[:, None], axis=0)])
+    integral = np.column_stack([np.interp(t[i + step], gyro.t, cumulative[:, a])
+                                - np.interp(t[i], gyro.t, cumulative[:, a]) for a in range(3)])
+    return attitude, integral
 
 
 def _check_gyro(gyro: ImuSeries, t: np.ndarray, q: np.ndarray, source: str) -> None:
-    """Refuse a gyro whose rates are not the attitude's (another unit or frame)."""
-    if t.shape[0] < 10:
+    """Refuse a gyro whose rates are not the attitude's (another unit or frame): over
+    windows of a fraction of a second the gyro's integral is the attitude's rotation."""
+    if t[-1] - t[0] < 4.0 * _GYRO_CHECK_WINDOW:
         return
-    rates = _pose_rates(t, q)
-    mid = 0.5 * (t[1:] + t[:-1])
-    measured = np.column_stack([np.interp(mid, gyro.t, gyro.values[:, a]) for a in range(3)])
+    attitude, integral = _rotations(t, q, gyro)
     for axis, name in enumerate("xyz"):
-        ref, got = rates[:, axis] - rates[:, axis].mean(), measured[:, axis]
-        got = got - got.mean()
+        ref, got = attitude[:, axis], integral[:, axis]
         power = float(ref @ ref)
-        if np.sqrt(power / ref.size) < _GYRO_CHECK_RATE:
+        if np.sqrt(power / ref.size) < _GYRO_CHECK_RATE * _GYRO_CHECK_WINDOW:
             continue
         corr = float(ref @ got) / np.sqrt(power * float(got @ got) + 1e-300)
         gain = float(ref @ got) / power

@@ -199,7 +199,7 @@ def limits_from_parameters(values: Mapping[str, float], source: str
                          if mine else f"holds none of the autopilot's position-controller "
                          f"limits ({wanted}, …); a defaults file leaves them unset: save them "
                          "from the running vehicle, or read them from it with "
-                         "--autopilot-limits LINK"))
+                         "--connect LINK"))
     return mine[0], kinematic_limits(mine[0], values)
 
 

@@ -6,11 +6,12 @@
 value, written at once so that a killed streamer leaves the originals on disk).
 
 `restore_parameters` runs when the flight ends, fails or is interrupted: every parameter
-the session's `ParameterSession` changed goes back, newest first. One exception: while
-the vehicle is still armed (hovering with ``--no-land``, held in BRAKE/HOLD after an
-abort, landing after Ctrl-C) the fence and timeout parameters stay in force, since
-switching a fence off under a flying vehicle is the wrong way round; the line printed
-and ``meta.json`` say which ones and their original values.
+the session's `ParameterSession` changed goes back, newest first, and then the fence
+points the vehicle held before (`mavsysid.flight.ground.geofence.restore_fence_points`).
+One exception: while the vehicle is still armed (hovering with ``--no-land``, held in
+BRAKE/HOLD after an abort, landing after Ctrl-C) the fence, its points and the timeout
+parameters stay in force, since switching a fence off under a flying vehicle is the wrong
+way round; the line printed and ``meta.json`` say which ones and their original values.
 """
 
 from __future__ import annotations
@@ -18,11 +19,16 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from mavsysid.flight.ground.geofence import FENCE_MARGIN, SAFETY_PARAMETERS, install_fence
+from mavsysid.flight.ground.geofence import (
+    FENCE_MARGIN,
+    SAFETY_PARAMETERS,
+    install_fence,
+    restore_fence_points,
+)
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
 from mavsysid.flight.ground.trajectory_safety import format_box
 
-__all__ = ["before_arming", "install_safety", "restore_parameters"]
+__all__ = ["before_arming", "install_safety", "put_back_fence_points", "restore_parameters"]
 
 
 def _record(session: Any) -> dict[str, Any]:
@@ -82,13 +88,58 @@ def before_arming(session: Any, home: Sequence[float]) -> str:
             f"take-off point x {x:.2f}, y {y:.2f}, z {z:.2f} m")
 
 
+def put_back_fence_points(link: Any, fence: dict[str, Any] | None,
+                          say: Callable[[str], None]) -> bool:
+    """Put back the fence points a flight replaced (``fence`` as `install_safety` recorded it
+    in ``meta.json``; updated in place). True when nothing is left to put back.
+
+    Parameters
+    ----------
+    link : MavlinkLink
+        The vehicle, disarmed.
+    fence : dict or None
+        ``meta.json``'s ``fence``: ``points_before`` (None: unknown), ``points_restored``.
+    say : callable
+        Receives a line when the points could not be put back.
+    """
+    if not fence or fence.get("points_restored", True):
+        return True
+    before = fence.get("points_before")
+    if before is None:
+        say("warning: the fence points the vehicle held before the flight are unknown; its "
+            "fence points are the flight's")
+        fence["points_restored"] = True
+        return True
+    try:
+        problem = restore_fence_points(link, before)
+    except HeartbeatLost as error:
+        problem = str(error)
+    if problem is not None:
+        say(f"warning: the fence points were not put back ({problem})")
+        return False
+    fence["points_restored"] = True
+    return True
+
+
 def restore_parameters(session: Any, say: Callable[[str], None]) -> None:
     """Put back what the flight changed (see the module docstring); never raises."""
     params = getattr(session, "parameters", None)
-    if params is None or not params.changed:
+    if params is None:
         return
     link = session.link
-    keep = [n for n in params.changed if n in SAFETY_PARAMETERS] if link.vehicle.armed else []
+    if params.changed:
+        _restore_changed(session, params, say)
+    fence = session.meta.get("fence")
+    if not link.vehicle.armed and fence and not fence.get("points_restored", True):
+        if put_back_fence_points(link, fence, say):
+            say(f"fence points restored: {len(fence.get('points_before') or [])} as before")
+        session.note("fence", fence)
+
+
+def _restore_changed(session: Any, params: Any, say: Callable[[str], None]) -> None:
+    """The parameters (the safety ones left in force while the vehicle is armed)."""
+    keep = ([n for n in params.changed if n in SAFETY_PARAMETERS]
+            if session.link.vehicle.armed else [])
     try:
         problems = params.restore(keep=keep)
     except HeartbeatLost as error:  # a link gone while restoring: report, never raise

@@ -20,8 +20,11 @@ Local ENU corners become latitude/longitude through the vehicle's origin of its 
 working fence (parameters missing or refused, no origin) is refused in one line: flying a
 calibration trajectory near the box edges without one is what sent a vehicle 44 m out of a
 4 m box; ``--no-fence`` flies without it, on purpose. Every parameter goes
-through the session's `ParameterSession`, which puts them back after the flight. The
-uploaded polygon stays stored on the vehicle (disabled again by the restored FENCE_ENABLE).
+through the session's `ParameterSession`, which puts them back after the flight. The fence
+points the vehicle held before are read first (`download_fence`) and kept in ``meta.json``
+(``fence.points_before``); once the vehicle is disarmed they are put back
+(`restore_fence_points`: uploaded again, or the fence mission cleared when there was none),
+which returns ArduPilot's FENCE_TOTAL to its value before the flight.
 """
 
 from __future__ import annotations
@@ -39,8 +42,8 @@ from mavsysid.flight.ground.vehicle_commands import VehicleCommands
 from mavsysid.errors import JobFailedError
 
 __all__ = ["FENCE_MARGIN", "GUIDED_TIMEOUT", "SAFETY_PARAMETERS", "FencePlan", "VehicleOrigin",
-           "fence_parameters", "fence_plan", "install_fence", "offset_lat_lon", "read_origin",
-           "upload_fence_polygon"]
+           "download_fence", "fence_parameters", "fence_plan", "install_fence", "offset_lat_lon",
+           "read_origin", "restore_fence_points", "upload_fence_items", "upload_fence_polygon"]
 
 #: Distance from the box to the fence on every side and above, m: more than a tracking
 #: error the streamer tolerates (1 m) so the fence never fires on a flight going well,
@@ -153,9 +156,129 @@ def read_origin(link: MavlinkLink, commands: VehicleCommands, timeout: float = 5
     return got.get("GPS_GLOBAL_ORIGIN") or got.get("HOME_POSITION")
 
 
+#: The fields of a stored fence point, as `download_fence` returns them (MISSION_ITEM_INT).
+_ITEM_FIELDS = ("frame", "command", "param1", "param2", "param3", "param4", "x", "y", "z")
+
+
+def download_fence(link: MavlinkLink, timeout: float = 10.0) -> list[dict[str, float]] | None:
+    """The fence points the vehicle holds (mission type FENCE), or None if it did not say.
+
+    Parameters
+    ----------
+    link : MavlinkLink
+        The vehicle.
+    timeout : float
+        How long the whole download may take, streamer s.
+
+    Returns
+    -------
+    list of dict or None
+        One dict per point, the MISSION_ITEM_INT fields of `_ITEM_FIELDS` (x, y in degE7);
+        an empty list for a vehicle without fence points.
+    """
+    v, mav = link.vehicle, link.mav
+    got: dict[str, Any] = {"items": {}}
+
+    def listen(msg: Any, _t: float) -> None:
+        if getattr(msg, "mission_type", 0) != _FENCE_MISSION:
+            return
+        if msg.get_type() == "MISSION_COUNT":
+            got["count"] = msg.count
+        elif msg.get_type() == "MISSION_ITEM_INT":
+            got["items"][msg.seq] = {name: getattr(msg, name) for name in _ITEM_FIELDS}
+
+    link.add_listener(listen)
+    try:
+        clock = link.clock
+        deadline, asked = clock.now() + timeout, -math.inf
+        while clock.now() < deadline:
+            count = got.get("count")
+            if count is not None and len(got["items"]) >= count:
+                link.send(mav.mission_ack_encode(v.system, v.component, 0,
+                                                 mission_type=_FENCE_MISSION))
+                return [got["items"][i] for i in range(count)]
+            if clock.now() - asked > 1.0:  # ask (again) for what is missing
+                asked = clock.now()
+                if count is None:
+                    link.send(mav.mission_request_list_encode(v.system, v.component,
+                                                              mission_type=_FENCE_MISSION))
+                else:
+                    seq = min(set(range(count)) - set(got["items"]))
+                    link.send(mav.mission_request_int_encode(v.system, v.component, seq,
+                                                             mission_type=_FENCE_MISSION))
+            link.poll(0.05)
+        return None
+    finally:
+        link.remove_listener(listen)
+
+
 def upload_fence_polygon(link: MavlinkLink, polygon: Sequence[tuple[float, float]],
                          timeout: float = 10.0) -> str | None:
     """Upload ``polygon`` (lat, lon deg) as one inclusion polygon, mission type FENCE.
+
+    Returns
+    -------
+    str or None
+        None when the vehicle acknowledged it (MAV_MISSION_ACCEPTED), else why not.
+    """
+    items = [{"frame": _FRAME_GLOBAL, "command": _POLYGON_VERTEX_INCLUSION,
+              "param1": float(len(polygon)), "param2": 0.0, "param3": 0.0, "param4": 0.0,
+              "x": round(lat * 1e7), "y": round(lon * 1e7), "z": 0.0} for lat, lon in polygon]
+    return upload_fence_items(link, items, timeout)
+
+
+def restore_fence_points(link: MavlinkLink, points: Sequence[dict[str, float]],
+                         timeout: float = 10.0) -> str | None:
+    """Put back the fence points ``points`` (`download_fence`): upload them, or clear the
+    fence mission when there were none. None when acknowledged, else why not.
+
+    Parameters
+    ----------
+    link : MavlinkLink
+        The vehicle.
+    points : sequence of dict
+        What the vehicle held before the flight.
+    timeout : float
+        Streamer s for the whole exchange.
+    """
+    if points:
+        return upload_fence_items(link, points, timeout)
+    v, mav = link.vehicle, link.mav
+    acks: list[Any] = []
+
+    def listen(msg: Any, _t: float) -> None:
+        if msg.get_type() == "MISSION_ACK" and getattr(msg, "mission_type", 0) == _FENCE_MISSION:
+            acks.append(msg)
+
+    link.add_listener(listen)
+    try:
+        deadline, sent = link.clock.now() + timeout, -math.inf
+        while link.clock.now() < deadline:
+            if acks:
+                return None if acks[0].type == 0 else link.enum_name("MAV_MISSION_RESULT",
+                                                                       acks[0].type)
+            if link.clock.now() - sent > 1.5:
+                sent = link.clock.now()
+                link.send(mav.mission_clear_all_encode(v.system, v.component,
+                                                       mission_type=_FENCE_MISSION))
+            link.poll(0.05)
+        return f"no MISSION_ACK to MISSION_CLEAR_ALL within {timeout:g} s"
+    finally:
+        link.remove_listener(listen)
+
+
+def upload_fence_items(link: MavlinkLink, items: Sequence[dict[str, float]],
+                       timeout: float = 10.0) -> str | None:
+    """Upload fence points (the fields of `download_fence`), mission type FENCE.
+
+    Parameters
+    ----------
+    link : MavlinkLink
+        The vehicle.
+    items : sequence of dict
+        The points, in order.
+    timeout : float
+        Streamer s for the whole upload.
 
     Returns
     -------
@@ -178,7 +301,7 @@ def upload_fence_polygon(link: MavlinkLink, polygon: Sequence[tuple[float, float
         requested = False
         while clock.now() < deadline:
             if not requested and clock.now() - count_sent > 1.5:  # lost: send again
-                link.send(mav.mission_count_encode(v.system, v.component, len(polygon),
+                link.send(mav.mission_count_encode(v.system, v.component, len(items),
                                                    mission_type=_FENCE_MISSION))
                 count_sent = clock.now()
             link.poll(0.05)
@@ -189,23 +312,23 @@ def upload_fence_polygon(link: MavlinkLink, polygon: Sequence[tuple[float, float
                         return None
                     return link.enum_name("MAV_MISSION_RESULT", msg.type)
                 requested = True
-                if 0 <= msg.seq < len(polygon):
-                    link.send(_vertex(mav, v, msg, polygon, msg.seq))
+                if 0 <= msg.seq < len(items):
+                    link.send(_item_message(mav, v, items[msg.seq], msg.seq))
         return f"no MISSION_ACK within {timeout:g} s" if requested else (
             f"no answer to MISSION_COUNT within {timeout:g} s")
     finally:
         link.remove_listener(listen)
 
 
-def _vertex(mav: Any, v: Any, request: Any, polygon: Sequence[tuple[float, float]],
-            seq: int) -> Any:
-    lat, lon = polygon[seq]
-    common = (v.system, v.component, seq, _FRAME_GLOBAL, _POLYGON_VERTEX_INCLUSION, 0, 1,
-              float(len(polygon)), 0.0, 0.0, 0.0)
-    if request.get_type() == "MISSION_REQUEST_INT":
-        return mav.mission_item_int_encode(*common, round(lat * 1e7), round(lon * 1e7), 0.0,
-                                           mission_type=_FENCE_MISSION)
-    return mav.mission_item_encode(*common, lat, lon, 0.0, mission_type=_FENCE_MISSION)
+def _item_message(mav: Any, v: Any, item: dict[str, float], seq: int) -> Any:
+    """The MISSION_ITEM_INT of one fence point, whichever request asked for it: the float
+    MISSION_ITEM is deprecated, and ArduCopter answers it with "GCS should send
+    MISSION_ITEM_INT"."""
+    return mav.mission_item_int_encode(
+        v.system, v.component, seq, int(item["frame"]), int(item["command"]), 0, 1,
+        float(item["param1"]), float(item["param2"]), float(item["param3"]),
+        float(item["param4"]), int(item["x"]), int(item["y"]), float(item["z"]),
+        mission_type=_FENCE_MISSION)
 
 
 def fence_parameters(autopilot: Autopilot, plan: FencePlan, polygon_ok: bool
@@ -254,6 +377,10 @@ def install_fence(link: MavlinkLink, commands: VehicleCommands, params: Paramete
         raise _refused("it sent neither GPS_GLOBAL_ORIGIN nor HOME_POSITION")
     plan = fence_plan(box, margin, origin, home)
     # A dry run uploads nothing: the polygon counts as accepted.
+    before = None if params.dry_run else download_fence(link)
+    if before is None and not params.dry_run:
+        say("warning: the vehicle did not list its fence points: the ones it holds are "
+            "replaced and cannot be put back after the flight")
     problem = None if params.dry_run else upload_fence_polygon(link, plan.polygon)
     required, optional = fence_parameters(autopilot, plan, problem is None)
     if problem is not None:
@@ -280,7 +407,8 @@ def install_fence(link: MavlinkLink, commands: VehicleCommands, params: Paramete
     return {"kind": kind, "margin_m": margin, "polygon_deg": [list(p) for p in plan.polygon],
             "corners_enu_m": [list(c) for c in plan.corners], "alt_max_m": plan.alt_max,
             "radius_m": plan.radius, "origin": {"lat": origin.lat, "lon": origin.lon,
-                                                "source": origin.source}}
+                                                "source": origin.source},
+            "points_before": before, "points_restored": problem is not None or params.dry_run}
 
 
 def _refused(why: str) -> JobFailedError:

@@ -37,7 +37,8 @@ class HeartbeatLost(JobFailedError):
 
 
 class LinkClosed(HeartbeatLost):
-    """The other end closed the TCP link (pymavlink would print "EOF" on every read)."""
+    """The other end closed the TCP link (pymavlink would print "EOF" on every read), or the
+    serial device failed."""
 
 
 @dataclass

@@ -139,7 +139,34 @@ class MavlinkLink:
             raise JobFailedError(f"cannot open {connect}: {error.strerror or error}") from None
         if device.startswith("tcp:"):  # pymavlink's hooks for a closed socket
             conn.handle_eof = conn.handle_disconnect = self._closed
+        if baud is not None:
+            self._watch_serial(conn)
         return conn
+
+    def _watch_serial(self, conn: Any) -> None:
+        """A serial device that fails (unplugged, the radio's USB reset) ends the link in
+        one line: pymavlink would print to stdout and carry on writing into nothing, and
+        pyserial raise from the next read."""
+        read, write = conn.recv, conn.port.write
+
+        def recv(n: int | None = None) -> bytes:
+            try:
+                return read(n)
+            except OSError as error:
+                raise self._device_gone(error) from None
+
+        def send(buf: bytes) -> int:
+            try:
+                return write(bytes(buf))
+            except OSError as error:
+                raise self._device_gone(error) from None
+
+        conn.recv, conn.write = recv, send
+
+    def _device_gone(self, error: OSError) -> LinkClosed:
+        return LinkClosed(f"the serial device {self.connect} stopped working "
+                          f"({error.strerror or error}); stopped, the vehicle is left to its "
+                          "own failsafe")
 
     def _closed(self) -> None:
         raise LinkClosed(f"the link {self.connect} was closed by the other end; stopped, the "

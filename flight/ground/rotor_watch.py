@@ -1,11 +1,14 @@
 """A warning when the rotor speeds stay zero while the vehicle is armed.
 
 The estimator needs the rotor speeds. Some vehicles report ESC telemetry whose rpm stays
-0 even with the motors spinning: ArduCopter SITL, unless ``SIM_VIB_MOT_MAX`` (or an ESC
-simulation) is set; ESCs without telemetry wired to the autopilot. A log of such a
-flight cannot be estimated from its ESC rpm, so the operator is told during the flight,
-not after. (The streamer also asks for SERVO_OUTPUT_RAW, the motor outputs, which the
-tlog reader uses when a log has no ESC rpm.)
+0 even with the motors spinning: ESCs without telemetry wired to the autopilot, and
+ArduCopter SITL, whose ESC rpm is 0 unless ``SIM_VIB_MOT_MAX`` is set, and then a stand-in
+(the motor command × ``SIM_VIB_MOT_MAX`` × 60, linear in the command where the thrust is
+not), never the rotor speed. A log of such a flight cannot be estimated from its ESC rpm,
+so the operator is told during the flight, not after. Without ESC telemetry at all the
+readers take the motor outputs (SERVO_OUTPUT_RAW, which the streamer asks for) through the
+vehicle file's ``[motor]`` curve: ``vehicle/configs/sitl_quad.parm`` turns SITL's ESC
+telemetry off (``SIM_ESC_TELEM 0``) for that.
 """
 
 from __future__ import annotations
@@ -54,5 +57,7 @@ class RotorWatch:
             self.warned = True
             self.say(f"warning: the ESC telemetry reports rotor speeds of 0 rpm for "
                      f"{t - self._zero_since:.0f} s while armed: the pose log's rotor speeds "
-                     "are zero and cannot be estimated from (ArduCopter SITL: set "
-                     "SIM_VIB_MOT_MAX for ESC rpm)")
+                     "are zero and cannot be estimated from (ArduCopter SITL: its ESC rpm is "
+                     "0, or with SIM_VIB_MOT_MAX a stand-in, never the rotor speed; turn its "
+                     "ESC telemetry off with SIM_ESC_TELEM 0, as vehicle/configs/sitl_quad.parm "
+                     "does, and the motor outputs are read instead)")

@@ -9,15 +9,21 @@ wait, the stream never pauses while a command waits for its ACK.
 something is wrong, by stopping the stream first and then raising:
 
 - `ModeTaken`: the HEARTBEAT shows a mode other than the one mavsysid set (a pilot took
-  over) or the vehicle disarmed in flight; nothing more is sent, the pilot has control;
+  over, or the autopilot's own failsafe: its STATUSTEXT of the last seconds is quoted) or
+  the vehicle disarmed in flight; nothing more is sent, the pilot has control;
 - `TrackingLost`: the vehicle is farther than the limit from the setpoint in effect.
+
+Before that, a tracking error beyond half the limit is reported in one line when it
+happens (again after it has come back under a quarter of the limit), and the motor
+watch it carries (`mavsysid.flight.ground.motor_watch`) is switched off with the guards.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
-from typing import Any, TextIO
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, TextIO
 
 from mavsysid.flight.autopilot_modes import mode_name
 from mavsysid.flight.ground.mavlink_link import MavlinkLink
@@ -31,13 +37,39 @@ from mavsysid.flight.ground.telemetry_recorder import SetpointHistory, Telemetry
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["FlightGuards", "ModeTaken", "ProgressLine", "SetpointStream", "TrackingLost"]
+if TYPE_CHECKING:
+    from mavsysid.flight.ground.motor_watch import MotorWatch
+
+__all__ = ["TRACKING_WARNING", "FlightGuards", "ModeTaken", "ProgressLine", "SetpointStream",
+           "TrackingLost"]
 
 SetpointSource = Callable[[float], Setpoint]
 
+#: A STATUSTEXT this recent (streamer s) explains a mode change (a failsafe says why).
+_REASON_AGE = 3.0
+
+#: Share of the tracking-error limit from which a tracking error is reported.
+TRACKING_WARNING = 0.5
+
 
 class ModeTaken(JobFailedError):
-    """Someone else changed the flight mode, or the vehicle disarmed, mid-flight."""
+    """Someone else changed the flight mode, or the vehicle disarmed, mid-flight.
+
+    Parameters
+    ----------
+    change : str
+        What changed ("the flight mode changed from GUIDED to LAND").
+    texts : sequence of str
+        The autopilot's STATUSTEXT around the change (a failsafe says why); none: maybe a
+        pilot.
+    """
+
+    def __init__(self, change: str, texts: Sequence[str] = ()) -> None:
+        self.change, self.texts = change, tuple(texts)
+        why = ("the autopilot said: " + "; ".join(self.texts) if self.texts
+               else "pilot takeover?")
+        super().__init__(f"{change}, not by mavsysid ({why}): stopped streaming; the vehicle "
+                         "is in the pilot's hands")
 
 
 class TrackingLost(JobFailedError):
@@ -118,7 +150,8 @@ class FlightGuards:
     Add `on_message` as a link listener after the recorder's (it reads the recorder's
     latest row). Guards are off until armed: set `expected_mode` (custom_mode) once the
     mode mavsysid set is confirmed, `expect_armed` once armed, `max_tracking_error` (m)
-    while setpoints with feed-forward are flown.
+    while setpoints with feed-forward are flown. `say` receives the tracking reports,
+    `motors` is the flight's motor watch (switched off by `disable`).
     """
 
     def __init__(self, link: MavlinkLink, stream: SetpointStream,
@@ -127,31 +160,49 @@ class FlightGuards:
         self.expected_mode: int | None = None
         self.expect_armed = False
         self.max_tracking_error: float | None = None
+        self.say: Callable[[str], None] = lambda _text: None
+        self.motors: MotorWatch | None = None
+        self._tracking_reported = False
+        self._texts: deque[tuple[float, str]] = deque(maxlen=8)
 
     def disable(self) -> None:
         """Turn every guard off (before mavsysid changes the mode itself)."""
         self.expected_mode, self.expect_armed, self.max_tracking_error = None, False, None
+        if self.motors is not None:
+            self.motors.active = False
+
+    def _report_tracking(self, error: float, limit: float, t: float) -> None:
+        """One line when the error first passes `TRACKING_WARNING` of the limit."""
+        if error < 0.5 * TRACKING_WARNING * limit:
+            self._tracking_reported = False
+        elif error >= TRACKING_WARNING * limit and not self._tracking_reported:
+            self._tracking_reported = True
+            self.say(f"warning: tracking error {error:.2f} m at t = {t:.2f} s, past "
+                     f"{100 * TRACKING_WARNING:.0f} % of the {limit:g} m limit "
+                     "(--max-tracking-error)")
 
     def on_message(self, msg: Any, t: float) -> None:
         """Check one message from the vehicle (a link listener)."""
         kind = msg.get_type()
         v = self.link.vehicle
-        if kind == "HEARTBEAT" and v.autopilot is not None:
+        if kind == "STATUSTEXT":
+            self._texts.append((t, str(msg.text).strip()))
+        elif kind == "HEARTBEAT" and v.autopilot is not None:
+            recent = [text for when, text in self._texts if t - when <= _REASON_AGE]
             if self.expected_mode is not None and v.custom_mode != self.expected_mode:
                 expected = mode_name(v.autopilot, self.expected_mode)
                 self.stream.stop()
                 self.disable()
-                raise ModeTaken(f"the flight mode changed from {expected} to {v.mode}, not by "
-                                "mavsysid (pilot takeover?): stopped streaming; the vehicle "
-                                "is in the pilot's hands")
+                raise ModeTaken(f"the flight mode changed from {expected} to {v.mode}", recent)
             if self.expect_armed and not v.armed:
                 self.stream.stop()
                 self.disable()
-                raise ModeTaken(f"the vehicle disarmed in flight (mode {v.mode}): stopped "
-                                "streaming")
+                raise ModeTaken(f"the vehicle disarmed in flight (mode {v.mode})", recent)
         elif kind == "LOCAL_POSITION_NED" and self.max_tracking_error is not None:
             latest = self.recorder.latest
             error = None if latest is None else latest.tracking_error
+            if error is not None and latest is not None:
+                self._report_tracking(error, self.max_tracking_error, latest.t)
             if error is not None and error > self.max_tracking_error:
                 self.stream.stop()
                 limit = self.max_tracking_error

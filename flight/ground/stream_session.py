@@ -85,7 +85,11 @@ class StreamSettings:
     position_timeout : float
         How long to wait for a usable local position, s.
     max_tracking_error : float
-        Abort to hold beyond this distance from the setpoint in effect, m.
+        Abort to hold beyond this distance from the setpoint in effect, m (reported from
+        half of it).
+    max_motor_imbalance : float
+        Abort when a motor is asked for this many times the thrust of its mirror
+        (`mavsysid.flight.ground.motor_watch`).
     log_dir : Path
         Root of the flight directories.
     hold_time : float
@@ -96,7 +100,8 @@ class StreamSettings:
         Settled at the start: within the tolerance (m) and below 0.1 m/s for settle_time
         (s); give up waiting after settle_timeout (s).
     land_timeout : float
-        How long to wait for the touchdown, s.
+        Give up waiting for the landing after this long with the vehicle coming no lower
+        (or, on the ground, not disarming), s (`mavsysid.flight.ground.landing`).
     link_loss : float
         The vehicle is lost after this long without any message once its telemetry
         streams, s (`mavsysid.flight.ground.link_state`).
@@ -131,6 +136,7 @@ class StreamSettings:
     heartbeat_loss: float = 3.0
     position_timeout: float = 90.0
     max_tracking_error: float = 1.0
+    max_motor_imbalance: float = 2.0
     log_dir: Path = Path("logs")
     hold_time: float = 2.0
     transfer_speed: float = 1.0
@@ -313,7 +319,8 @@ class StreamSession:
                            "box_source": self.box_source,
                            "start": list(plan.start), "predicted_dopt": plan.predicted_dopt},
             "stream": {"setpoint_rate_hz": s.rate, "telemetry_rate_hz": s.telemetry_rate,
-                       "max_tracking_error_m": s.max_tracking_error, "land": s.land,
+                       "max_tracking_error_m": s.max_tracking_error,
+                       "max_motor_imbalance": s.max_motor_imbalance, "land": s.land,
                        "type_mask": 0, "frame": "MAV_FRAME_LOCAL_NED"},
             "stamping": STAMPING,
             "tlog_time": "tlog_epoch_unix_s + streamer time (wall time x speedup since the "

@@ -41,10 +41,17 @@ from mavsysid.flight.ground.flight_safety import (
     install_safety,
     restore_parameters,
 )
+from mavsysid.flight.ground.frame_check import (
+    check_frame,
+    frame_parameter_names,
+    px4_rotor_parameter_names,
+)
 from mavsysid.flight.ground.imu_telemetry import request_imu
+from mavsysid.flight.ground.landing import LandingLimits, wait_disarmed
 from mavsysid.flight.ground.log_download import log_imu_fast
 from mavsysid.flight.ground.mavlink_link import HeartbeatLost
-from mavsysid.flight.ground.preflight import check_vehicle
+from mavsysid.flight.ground.motor_watch import MotorLimits, MotorWatch
+from mavsysid.flight.ground.preflight import PreflightReport, check_vehicle
 from mavsysid.flight.ground.rotor_watch import RotorWatch
 from mavsysid.flight.ground.setpoints import SmoothMove, hold, trajectory_setpoint
 from mavsysid.flight.ground.stream_control import ModeTaken
@@ -102,6 +109,11 @@ class _Flight:
         self.link, self.commands, self.stream, self.guards = s.link, s.commands, s.stream, s.guards
         self.recorder = s.recorder
         self.link.add_listener(RotorWatch(self.link.vehicle, say).on_message)
+        self.motors = MotorWatch(s.config, say,
+                                 MotorLimits(imbalance_abort=self.settings.max_motor_imbalance))
+        self.link.add_listener(self.motors.on_message)
+        self.guards.motors, self.guards.say = self.motors, say
+        self.home_up: float | None = None  # take-off height, m ENU (the landing's ground)
 
     def run(self) -> None:
         try:
@@ -120,15 +132,42 @@ class _Flight:
             raise
         except JobFailedError as error:
             self.stream.stop()
+            if isinstance(error, ModeTaken):
+                error = self._explained(error)
             self.s.note_failure(str(error))
             # A lost link or a pilot in control: hands off. Anything else in the air: hold.
             # A stopped continuation has landed already: no BRAKE in the middle of a landing.
             if not isinstance(error, HeartbeatLost | ModeTaken | ContinuationStopped) and \
                     self.link.vehicle.armed:
                 self._hold_after_abort()
-            raise
+            raise error
         finally:
+            self.s.note("motor_watch", {
+                "findings": self.motors.findings,
+                "peak_imbalance": round(self.motors.peak_imbalance, 3),
+                "off": self.motors.off_reason})
             restore_parameters(self.s, self.say)
+
+    def _explained(self, taken: ModeTaken) -> ModeTaken:
+        """``taken`` with what the autopilot says in the next second: a failsafe announces
+        itself just after the heartbeat that shows its mode (ArduCopter: "EKF Failsafe:
+        changed to LAND Mode"). Only listens; nothing is sent."""
+        texts = list(taken.texts)
+
+        def listen(msg: Any, _t: float) -> None:
+            if msg.get_type() == "STATUSTEXT":
+                texts.append(str(msg.text).strip())
+
+        self.link.add_listener(listen)
+        try:
+            self.link.poll(1.0)
+        except JobFailedError:
+            pass  # a lost link: what was said so far
+        finally:
+            self.link.remove_listener(listen)
+        if texts == list(taken.texts):
+            return taken
+        return ModeTaken(taken.change, texts)
 
     # --- steps ---------------------------------------------------------------------------
 
@@ -171,7 +210,7 @@ class _Flight:
         self.s.prearm.wait_ready(self.settings.prearm_timeout, self.say)
         report = check_vehicle(self.s.config, self.link.vehicle, self.s.type_name,
                                self.s.last_sys_status, self.s.sensor_names, achieved, rate,
-                               self._pose().position, self.s.box)
+                               self._pose().position, self.s.box) + self._frame_report()
         for warning in report.warnings:
             self.say(f"warning: {warning}")
         report.raise_if_refused()
@@ -181,6 +220,19 @@ class _Flight:
         install_safety(self.s, self._pose().position, self.say)
         self.say(before_arming(self.s, self._pose().position))
         self.link.watch_silence = True  # telemetry streams: a second of silence is a loss
+
+    def _frame_report(self) -> PreflightReport:
+        """The autopilot's frame parameters against the vehicle file (`check_frame`);
+        what it reported goes into meta.json (``autopilot.frame_parameters``)."""
+        autopilot = self.link.vehicle.autopilot
+        assert autopilot is not None
+        values = self.s.parameters.read(list(frame_parameter_names(autopilot)), timeout=3.0)
+        count = int(values.get("CA_ROTOR_COUNT", 0))
+        if count > 0:
+            values.update(self.s.parameters.read(list(px4_rotor_parameter_names(count)),
+                                                 timeout=5.0))
+        self.s.meta["autopilot"]["frame_parameters"] = dict(values)
+        return check_frame(self.s.config, autopilot, values)
 
     def _dry_run_end(self) -> None:
         """Every check passed: list what the flight would change, arm nothing."""
@@ -214,6 +266,7 @@ class _Flight:
     def _take_off(self) -> None:
         start_z = self.s.trajectory.flat_outputs(np.array([0.0])).position[0, 2]
         ground = self._pose()
+        self.home_up = float(ground.position[2])
         if self.link.vehicle.autopilot is Autopilot.ARDUPILOT:
             self._set_mode("GUIDED")
             self.commands.arm(explain=self.s.prearm.reason)
@@ -223,6 +276,7 @@ class _Flight:
             self.commands.takeoff(altitude)
             self.say(f"taking off to {altitude:.2f} m")
             self._wait_altitude(ground.position[2] + altitude)
+            self.motors.active = True
         else:
             here = hold(ground.position, ground.yaw)
             self.stream.start(lambda _t: here)
@@ -233,6 +287,7 @@ class _Flight:
             self.say("armed")
             top = np.array([*ground.position[:2], max(start_z, ground.position[2] + 0.3)])
             self._move(ground.position, ground.yaw, top, ground.yaw, "climbing")
+            self.motors.active = True
 
     def _wait_altitude(self, z: float) -> None:
         timeout = 15.0 + 2.0 * abs(z)
@@ -300,6 +355,7 @@ class _Flight:
         if self.at_end is not None:
             self.at_end(self.s)
         self.guards.max_tracking_error = None
+        self.motors.active = False
         autopilot = self.link.vehicle.autopilot
         if not self.settings.land:
             if autopilot is Autopilot.PX4:
@@ -316,6 +372,7 @@ class _Flight:
     def _land(self) -> None:
         """Stop streaming, LAND, wait for the disarm (see `_wait_landed`)."""
         self.guards.max_tracking_error = None
+        self.motors.active = False
         self.stream.stop()
         self.guards.expect_armed = False
         self._set_mode("LAND")
@@ -323,22 +380,12 @@ class _Flight:
         self._wait_landed()
 
     def _wait_landed(self) -> bool:
-        """Wait until the vehicle disarms (landed): True. False when the operator took over
-        (another mode than the one we set) or the land timeout passed (one line each).
-        A second Ctrl-C ends the wait at once (`StreamSession`)."""
-        ours = self.link.vehicle.custom_mode
-        deadline = self.link.clock.now() + self.settings.land_timeout
-        while self.link.vehicle.armed:
-            if self.link.vehicle.custom_mode != ours:
-                self.say(f"the operator took over (mode {self.link.vehicle.mode}); not "
-                         "waiting for the landing")
-                return False
-            if self.link.clock.now() > deadline:
-                self.say(f"warning: still armed {self.settings.land_timeout:g} s after LAND")
-                return False
-            self.link.poll(0.1)
-        self.say("landed and disarmed")
-        return True
+        """Wait until the vehicle has landed and is disarmed: True. False when the operator
+        took over (another mode than the one we set) or the landing stalled
+        (`mavsysid.flight.ground.landing.wait_disarmed`, one line each). A second Ctrl-C
+        ends the wait at once (`StreamSession`)."""
+        limits = LandingLimits(stall=self.settings.land_timeout)
+        return wait_disarmed(self.link, self.commands, self.say, self.home_up, limits)
 
     # --- failures --------------------------------------------------------------------------
 

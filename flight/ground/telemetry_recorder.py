@@ -6,9 +6,11 @@ vehicle's clock), carrying:
 - the position (NED → ENU) and velocity (``vx, vy, vz``, ENU);
 - the latest attitude received before it: ATTITUDE_QUATERNION (q_ned_frd → q_enu_flu),
   or ATTITUDE's Euler angles until a quaternion has arrived;
-- the latest ESC rpm received before it (ESC_TELEMETRY_1_TO_4 / _5_TO_8, ESC i = rotor
-  i, rpm → rad/s). ESC telemetry carries no timestamp, and an autopilot sends it in the
-  same tick just before the LOCAL_POSITION_NED, so it takes that row's stamp;
+- the latest ESC rpm received before it (ESC_TELEMETRY_1_TO_4 / _5_TO_8, rpm → rad/s),
+  ESC i as the rotor motor output i drives (the vehicle file's ``[autopilot] frame``;
+  without one ESC i is rotor i). ESC telemetry carries no timestamp, and an autopilot
+  sends it in the same tick just before the LOCAL_POSITION_NED, so it takes that row's
+  stamp;
 - with the IMU (``imu``), the latest IMU sample received before it (RAW_IMU, HIGHRES_IMU
   or SCALED_IMU, `mavsysid.flight.ground.imu_telemetry`) in the IMU columns, body FLU;
   the samples between rows are in ``flight.tlog``. Whether the vehicle sends its IMU is
@@ -43,6 +45,7 @@ from mavsysid.formats.tlog import ESC_TELEMETRY
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.constants import RPM_TO_RAD_S
 from mavsysid.vehicle.frames import euler_ned_to_quaternion, ned_to_enu, quaternion_ned_to_enu
+from mavsysid.vehicle.motor_order import output_order
 from mavsysid.vehicle.rotation import quat_yaw
 
 __all__ = [
@@ -184,6 +187,8 @@ class TelemetryRecorder:
         self.skipped: Counter[str] = Counter()
         self._k = config.rotor_count
         self._rotors = np.zeros(self._k)
+        self._outputs = output_order(config.rotor_positions, config.rotor_directions,
+                                     config.autopilot_frame)
         self._esc_seen = False
         self._quaternion: np.ndarray | None = None  # ENU/FLU
         self._has_att_q = False
@@ -255,7 +260,7 @@ class TelemetryRecorder:
         elif kind in ESC_TELEMETRY:
             base = ESC_TELEMETRY[kind]
             for j in range(min(4, self._k - base)):
-                self._rotors[base + j] = msg.rpm[j] * RPM_TO_RAD_S
+                self._rotors[self._outputs[base + j]] = msg.rpm[j] * RPM_TO_RAD_S
             self._esc_seen = self._esc_seen or base < self._k
 
     def _row(self, msg: Any) -> None:

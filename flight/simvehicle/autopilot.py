@@ -11,6 +11,12 @@ none came for COM_OF_LOSS_T (to COM_OBL_RC_ACT's mode); NAV_TAKEOFF switches to 
 and then Hold. Both check their geofence and act on a breach as the real ones do
 (`mavsysid.flight.simvehicle.fence`).
 
+With ``land_detector_fails`` (ArduCopter in strong wind, measured on SITL: its land
+detector waits for the motors at their lower limit, which the attitude controller fighting
+the wind on the ground never lets them reach) a touchdown in LAND is not detected: the
+vehicle rests on the ground armed, reports itself still landing, does not disarm itself
+and refuses a ground station's disarm unless forced (param2 21196).
+
 Modes that need a position estimate are refused (TEMPORARILY_REJECTED) until the
 simulated EKF has one (``--ekf-delay``). STABILIZE/ALT_HOLD/MANUAL/POSCTL have no pilot
 here: in the air they hold the position, as a pilot with centred sticks would roughly.
@@ -102,15 +108,21 @@ class SimAutopilot:
         Sim seconds before a position estimate exists.
     deny_arm : bool
         Refuse every arming request (a simulated pre-arm failure).
+    land_detector_fails : bool
+        A touchdown in LAND goes undetected (see the module docstring).
     """
 
     def __init__(self, vehicle: SimVehicle, autopilot: Autopilot, params: ParameterTable,
-                 ekf_delay: float = 2.0, deny_arm: bool = False) -> None:
+                 ekf_delay: float = 2.0, deny_arm: bool = False,
+                 land_detector_fails: bool = False) -> None:
         self.vehicle = vehicle
         self.autopilot = autopilot
         self.params = params
         self.ekf_delay = float(ekf_delay)
         self.deny_arm = deny_arm
+        self.land_detector_fails = land_detector_fails
+        #: On the ground after a LAND whose touchdown went undetected.
+        self.land_undetected = False
         self.ardupilot = autopilot is Autopilot.ARDUPILOT
         self.modes = _ARDUPILOT if self.ardupilot else _PX4
         #: Mode name → custom_mode of this personality.
@@ -230,6 +242,8 @@ class SimAutopilot:
             if not v.landed and not force:
                 self._say("Disarm: vehicle is flying")
                 return DENIED
+            if self.land_undetected and not force:
+                return FAILED  # ArduCopter: not land_complete, so still "flying"
             self._disarm("Disarming motors")
             return ACCEPTED
         if self.armed:
@@ -326,7 +340,7 @@ class SimAutopilot:
                 self._begin_descent()
         if not v.landed:
             self._check_touchdown()
-        elif self.armed:
+        elif self.armed and not self.land_undetected:
             delay = (self.params.get("DISARM_DELAY", 10.0) if self.ardupilot
                      else self.params.get("COM_DISARM_PRFLT", 10.0))
             if delay > 0.0 and t - max(self._armed_at, self._landed_at) > delay:
@@ -338,6 +352,9 @@ class SimAutopilot:
             v.settle()
             self._landed_at = self.t
             self._landing = False
+            if self.land_detector_fails and self.armed and self.spec.kind == "land":
+                self.land_undetected = True
+                return
             self._say("Land complete", _INFO)
             if self.armed:
                 self._disarm("Disarming motors")
@@ -351,6 +368,7 @@ class SimAutopilot:
     # --- manoeuvres ------------------------------------------------------------------------
     def _disarm(self, text: str) -> None:
         self.armed = False
+        self.land_undetected = False
         self.changed = True
         self._takeoff_height = None
         self._say(text, _INFO)

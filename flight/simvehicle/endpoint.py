@@ -96,7 +96,8 @@ class SimEndpoint:
                                   effects=[hidden_effect(e) for e in s.hidden_effects], imu=imu)
         self.params = default_parameters(s.autopilot, config)
         self.autopilot = SimAutopilot(self.vehicle, s.autopilot, self.params, s.ekf_delay,
-                                      deny_arm=s.deny_arm)
+                                      deny_arm=s.deny_arm,
+                                      land_detector_fails=s.land_detector_fails)
         self.scheduler = MessageScheduler(default_rates(s.autopilot, config.rotor_count))
         self.builder = TelemetryBuilder(self.autopilot)
         self.commands = CommandHandler(self.autopilot, self.scheduler, self.builder)
@@ -115,6 +116,7 @@ class SimEndpoint:
         self._home_sent = False
         self._silent = False
         self._pilot_done = False
+        self._weakened = False
         self._closed = False
         self._dispatch = {
             "COMMAND_LONG": self._on_command, "COMMAND_INT": self._on_command,
@@ -211,6 +213,10 @@ class SimEndpoint:
         s = self.settings
         if s.silent_after is not None and t >= s.silent_after:
             self._silent = True
+        if s.weak_motor is not None and t >= s.weak_motor[2] and not self._weakened:
+            self._weakened = True
+            motor, factor, _ = s.weak_motor
+            self.vehicle.weaken(self.builder.outputs[motor - 1], factor)
         if s.pilot_mode is not None and not self._pilot_done and t >= s.pilot_mode[1]:
             self._pilot_done = True
             self.autopilot.set_mode(self.autopilot.modes_by_name[s.pilot_mode[0]])
@@ -303,6 +309,10 @@ class SimEndpoint:
     def _on_mission(self, msg) -> None:
         for reply in self.missions.handle(msg):
             self._send(reply)
+        if "FENCE_TOTAL" in self.params:  # ArduPilot counts its stored fence points
+            count = len(self.autopilot.fence.items)
+            if self.params["FENCE_TOTAL"] != count:
+                self.params.set("FENCE_TOTAL", count)
 
     def _on_stream(self, msg) -> None:
         self.commands.request_data_stream(msg.req_stream_id, msg.req_message_rate,
@@ -355,6 +365,7 @@ class SimEndpoint:
             "start_enu_m": list(s.start), "sensor_noise": s.sensor_noise,
             "signing": s.signing_key is not None,
             "rates_hz": {"physics": 1000.0, "control": 500.0, "log": 200.0},
+            "faults": _fault_meta(s),
             "pose_csv": "the truth plus a noise draw of the published pose's σ, at the log "
                         "rate (the messages sent draw their own noise)",
             "truth": {
@@ -385,3 +396,20 @@ def _for_us(msg) -> bool:
     system = getattr(msg, "target_system", 0)
     component = getattr(msg, "target_component", 0)
     return system in (0, SYSTEM_ID) and component in (0, COMPONENT_ID)
+
+
+def _fault_meta(settings: SimSettings) -> dict[str, Any]:
+    """The injected faults, for the truth log's meta.json."""
+    out: dict[str, Any] = {}
+    if settings.weak_motor is not None:
+        motor, factor, onset = settings.weak_motor
+        out["weak_motor"] = {"motor_output": motor, "thrust_factor": factor, "from_s": onset}
+    if settings.silent_after is not None:
+        out["silent_after_s"] = settings.silent_after
+    if settings.pilot_mode is not None:
+        out["pilot_mode"] = {"mode": settings.pilot_mode[0], "at_s": settings.pilot_mode[1]}
+    if settings.deny_arm:
+        out["deny_arm"] = True
+    if settings.land_detector_fails:
+        out["land_detector_fails"] = True
+    return out

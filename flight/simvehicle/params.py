@@ -22,8 +22,16 @@ from dataclasses import dataclass
 from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.simvehicle.link import mavlink
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.motor_order import (
+    ARDUPILOT_FRAME_IDS,
+    FRAME_NAMES,
+    PX4_AIRFRAME_GROUPS,
+    layout_matches,
+    output_order,
+)
 
-__all__ = ["Parameter", "ParameterProtocol", "ParameterTable", "default_parameters"]
+__all__ = ["Parameter", "ParameterProtocol", "ParameterTable", "default_parameters",
+           "reported_frame"]
 
 _INT_RANGES = {
     mavlink.MAV_PARAM_TYPE_UINT8: (0, 255, "<B"),
@@ -104,14 +112,57 @@ class ParameterTable:
         return True
 
 
+def reported_frame(autopilot: Autopilot, config: VehicleConfig) -> str | None:
+    """The frame the simulated autopilot says it flies: the vehicle file's ``[autopilot]
+    frame`` in this autopilot's naming, else the frame its rotors sit like (None: none).
+
+    The simulated vehicle's motor outputs are in the file's order (`output_order`), so a
+    file that names a frame gets that frame's numbering, as from the real autopilot.
+
+    Parameters
+    ----------
+    autopilot : Autopilot
+        The personality simulated.
+    config : VehicleConfig
+        The vehicle file: its ``[autopilot] frame`` and rotor positions.
+    """
+    family = autopilot.name.lower()
+    named = config.autopilot_frame
+    if named is not None:
+        return f"{family}:{named.split(':', 1)[1]}"
+    return next((f for f in FRAME_NAMES if f.startswith(family + ":")
+                 and layout_matches(config.rotor_positions, f)), None)
+
+
+def _frame_entries(autopilot: Autopilot, config: VehicleConfig) -> list[tuple[str, float, int]]:
+    """FRAME_CLASS and FRAME_TYPE (ArduPilot), or SYS_AUTOSTART and the control allocation's
+    rotor geometry in output order (PX4), of `reported_frame`."""
+    i8, i32 = mavlink.MAV_PARAM_TYPE_INT8, mavlink.MAV_PARAM_TYPE_INT32
+    frame = reported_frame(autopilot, config)
+    if autopilot is Autopilot.ARDUPILOT:
+        frame_class, frame_type = ARDUPILOT_FRAME_IDS.get(
+            frame or "", ({4: 1, 6: 2, 8: 3, 3: 7}.get(config.rotor_count, 1), 1))
+        return [("FRAME_CLASS", frame_class, i8), ("FRAME_TYPE", frame_type, i8)]
+    group = {v: k for k, v in PX4_AIRFRAME_GROUPS.items()}.get(frame or "", 4)
+    order = output_order(config.rotor_positions, config.rotor_directions,
+                         config.autopilot_frame)
+    entries: list[tuple[str, float, int]] = [("SYS_AUTOSTART", 1000 * group + 1, i32),
+                                             ("CA_ROTOR_COUNT", config.rotor_count, i32)]
+    for i, j in enumerate(order):  # body FRD; KM > 0: counter-clockwise (PX4's sign)
+        x, y, _z = config.rotor_positions[j]
+        entries += [(f"CA_ROTOR{i}_PX", float(x), _REAL32), (f"CA_ROTOR{i}_PY", -float(y), _REAL32),
+                    (f"CA_ROTOR{i}_KM", 0.05 * float(config.rotor_directions[j]), _REAL32)]
+    return entries
+
+
 def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> ParameterTable:
     """The simulated parameter set of ``autopilot`` for the vehicle ``config``."""
     u8, i8, i16, i32 = (mavlink.MAV_PARAM_TYPE_UINT8, mavlink.MAV_PARAM_TYPE_INT8,
                         mavlink.MAV_PARAM_TYPE_INT16, mavlink.MAV_PARAM_TYPE_INT32)
+    frame = _frame_entries(autopilot, config)
     if autopilot is Autopilot.ARDUPILOT:
-        frame_class = {4: 1, 6: 2, 8: 3, 3: 7}.get(config.rotor_count, 1)
         return ParameterTable([
-            ("SYSID_THISMAV", 1, i16), ("FRAME_CLASS", frame_class, i8), ("FRAME_TYPE", 1, i8),
+            ("SYSID_THISMAV", 1, i16), *frame,
             ("GUID_TIMEOUT", 3.0, _REAL32), ("WPNAV_SPEED", 500.0, _REAL32),
             ("WPNAV_SPEED_UP", 250.0, _REAL32), ("WPNAV_SPEED_DN", 150.0, _REAL32),
             ("WPNAV_ACCEL", 250.0, _REAL32), ("LAND_SPEED", 50, i16),
@@ -126,6 +177,8 @@ def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> Parameter
             ("FENCE_ENABLE", 0, i8), ("FENCE_TYPE", 7, i8), ("FENCE_ACTION", 1, i8),
             ("FENCE_ALT_MAX", 100.0, _REAL32), ("FENCE_RADIUS", 300.0, _REAL32),
             ("FENCE_MARGIN", 2.0, _REAL32),
+            # The number of stored fence points, kept by the fence upload (read only).
+            ("FENCE_TOTAL", 0, i8),
             # All pre-arm checks on (Copter's default; the sim does check before arming):
             # ground stations such as MAVProxy warn "Arming checks disabled" without it.
             ("ARMING_CHECK", 1, i32),
@@ -142,8 +195,8 @@ def default_parameters(autopilot: Autopilot, config: VehicleConfig) -> Parameter
         ("MPC_Z_VEL_MAX_UP", 3.0, _REAL32), ("MPC_Z_VEL_MAX_DN", 1.5, _REAL32),
         ("MPC_ACC_HOR", 3.0, _REAL32), ("MPC_LAND_SPEED", 0.7, _REAL32),
         ("MIS_TAKEOFF_ALT", 2.5, _REAL32), ("NAV_DLL_ACT", 0, i32),
-        ("CA_ROTOR_COUNT", config.rotor_count, i32), ("SYS_AUTOSTART", 4001, i32),
-        ("SDLOG_MODE", 0, i32), ("BAT1_CAPACITY", 5000.0, _REAL32), ("COM_ARM_WO_GPS", 1, u8),
+        *frame, ("SDLOG_MODE", 0, i32), ("BAT1_CAPACITY", 5000.0, _REAL32),
+        ("COM_ARM_WO_GPS", 1, u8),
         # The geofence's parameters and defaults (navigator/geofence_params.c).
         ("GF_ACTION", 2, i32), ("GF_MAX_HOR_DIST", 0.0, _REAL32),
         ("GF_MAX_VER_DIST", 0.0, _REAL32),

@@ -184,6 +184,9 @@ class SimVehicle:
         self.y[0:3] = start
         self.y[6], self.y[9] = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
         self.n_cmd = np.zeros(k)
+        # Each motor's speed per commanded speed: 1, or less for a weak motor (`weaken`).
+        self.motor_gains = np.ones(k)
+        self._n_applied = np.zeros(k)
         self.ref = np.zeros(REFERENCE_DIM)
         self.target = np.zeros(TARGET_DIM)
         self.shaper = np.zeros(SHAPER_DIM)
@@ -303,6 +306,20 @@ class SimVehicle:
         return self._imu_reading
 
     # --- transitions -------------------------------------------------------------------
+    def weaken(self, rotor: int, thrust_factor: float) -> None:
+        """Make ``rotor``'s motor weak: at any command it turns at √F of the commanded
+        speed, so its thrust (and drag and moment) is F times what the command asks; the
+        controller's outputs show it working harder (as ArduPilot SITL's SIM_ENGINE_MUL).
+
+        Parameters
+        ----------
+        rotor : int
+            Config rotor index, 0-based.
+        thrust_factor : float
+            F in (0, 1].
+        """
+        self.motor_gains[rotor] = math.sqrt(thrust_factor)
+
     def hold_here(self) -> None:
         """Make the target the current position and heading."""
         hold_target(self.target, self.y[0:3], self.yaw())
@@ -347,6 +364,7 @@ class SimVehicle:
                 self.controller.command(self.y[:STATE_DIM], self.ref, self.n_cmd)
             else:
                 self.n_cmd[:] = 0.0
+        np.multiply(self.n_cmd, self.motor_gains, out=self._n_applied)
         if self._tick_effects and not self.landed:
             self._wrench = summed_effect_wrench(self._tick_effects, t_us * 1e-6, self.y)
         record = self.truth_log is not None
@@ -372,8 +390,8 @@ class SimVehicle:
     def _physics(self, steps: int) -> None:
         if steps <= 0:
             return
-        advance_truth(self.y, self.n_cmd, _PHYSICS_DT_US * 1e-6, steps, self._tau, *self._args,
-                 *self._wrench)
+        advance_truth(self.y, self._n_applied, _PHYSICS_DT_US * 1e-6, steps, self._tau,
+                      *self._args, *self._wrench)
         if self.y[2] <= self.ground_z:
             # Ground contact: no sinking in; a downward world velocity is stopped.
             self.y[2] = self.ground_z
@@ -390,9 +408,9 @@ class SimVehicle:
     def _spin_on_ground(self, dt: float) -> None:
         n = self.y[STATE_DIM:]
         if self._tau > 0.0:
-            n += (self.n_cmd - n) * (1.0 - math.exp(-dt / self._tau))
+            n += (self._n_applied - n) * (1.0 - math.exp(-dt / self._tau))
         else:
-            n[:] = self.n_cmd
+            n[:] = self._n_applied
 
     def _record(self, t_us: int) -> None:
         assert self.truth_log is not None

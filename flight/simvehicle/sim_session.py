@@ -43,10 +43,16 @@ class SimSettings:
         Directory for ``truth.csv``, ``pose.csv`` and ``meta.json``.
     deny_arm : bool
         Refuse every arming request.
+    land_detector_fails : bool
+        A touchdown in LAND goes undetected: the vehicle stays armed on the ground and
+        refuses a disarm unless forced (ArduCopter in strong wind).
     pilot_mode : (str, float) or None
         At this sim time switch to this mode, as a pilot's switch would.
     silent_after : float or None
         At this sim time stop sending anything (a lost link).
+    weak_motor : (int, float, float) or None
+        Motor output N (1-based, the autopilot's numbering) makes F of its thrust from sim
+        time S on: (N, F, S) (`mavsysid.flight.simvehicle.physics.SimVehicle.weaken`).
     hidden_effects : tuple of ModelEffect
         Catalogue effects acting on the truth that the model does not know.
     lockstep : bool
@@ -64,8 +70,10 @@ class SimSettings:
     signing_key: bytes | None = None
     truth_log: Path | None = None
     deny_arm: bool = False
+    land_detector_fails: bool = False
     pilot_mode: tuple[str, float] | None = None
     silent_after: float | None = None
+    weak_motor: tuple[int, float, float] | None = None
     hidden_effects: tuple[ModelEffect, ...] = ()
     lockstep: bool = False
 

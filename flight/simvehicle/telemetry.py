@@ -32,8 +32,10 @@ from mavsysid.flight.simvehicle.fence import ALT_MAX, CIRCLE, POLYGON
 from mavsysid.flight.simvehicle.geodesy import enu_to_lat_lon
 from mavsysid.flight.simvehicle.link import mavlink
 from mavsysid.flight.simvehicle.physics import ORIGIN
+from mavsysid.formats.motor_curve import pwm_from_rotor_speed
 from mavsysid.formats.tlog import STANDARD_GRAVITY
 from mavsysid.vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ned, yaw_enu_to_ned
+from mavsysid.vehicle.motor_order import output_order
 from mavsysid.vehicle.rotation import quat_to_euler
 
 __all__ = [
@@ -56,7 +58,8 @@ _ORDER = (M.MAVLINK_MSG_ID_HEARTBEAT, M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG
           M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
           M.MAVLINK_MSG_ID_FENCE_STATUS,
           M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, *_ESC_IDS,
-          *_IMU_IDS, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+          *_IMU_IDS, M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+          M.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
 #: HIGHRES_IMU.fields_updated: x, y, z of the accelerometer and of the gyro.
 _HIGHRES_IMU_FIELDS = 0b111111
 _POSITION_IDS = frozenset((M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
@@ -87,6 +90,7 @@ def ardupilot_streams() -> dict[int, tuple[int, ...]]:
         M.MAV_DATA_STREAM_POSITION: (M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
                                      M.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
         M.MAV_DATA_STREAM_EXTRA1: (M.MAVLINK_MSG_ID_ATTITUDE,),
+        M.MAV_DATA_STREAM_RC_CHANNELS: (M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,),
         M.MAV_DATA_STREAM_EXTRA3: (M.MAVLINK_MSG_ID_SYSTEM_TIME,
                                    M.MAVLINK_MSG_ID_EKF_STATUS_REPORT, *_ESC_IDS),
         M.MAV_DATA_STREAM_RAW_SENSORS: (M.MAVLINK_MSG_ID_RAW_IMU,),
@@ -171,7 +175,8 @@ def default_rates(autopilot: Autopilot, rotor_count: int) -> dict[int, float]:
     rates = {M.MAVLINK_MSG_ID_HEARTBEAT: 1.0, M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
              M.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
              M.MAVLINK_MSG_ID_ATTITUDE: 4.0, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 0.0,
-             M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 3.0, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 3.0}
+             M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 3.0, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 3.0,
+             M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 0.0}
     for block in range(min(3, -(-rotor_count // 4))):
         rates[_ESC_IDS[block]] = 1.0
     if autopilot is Autopilot.ARDUPILOT:
@@ -195,7 +200,11 @@ class TelemetryBuilder:
     def __init__(self, autopilot: SimAutopilot) -> None:
         self.ap = autopilot
         self.vehicle = autopilot.vehicle
-        k = self.vehicle.config.rotor_count
+        config = self.vehicle.config
+        k = config.rotor_count
+        #: Config rotor of each motor output (the vehicle file's ``[autopilot] frame``).
+        self.outputs = output_order(config.rotor_positions, config.rotor_directions,
+                                    config.autopilot_frame)
         self.mav_type = _MAV_TYPES.get(k, M.MAV_TYPE_GENERIC)
         self._unix0 = time.time()
         self._esc_count = 0
@@ -211,6 +220,7 @@ class TelemetryBuilder:
             M.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
             M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self.gps_global_origin,
             M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
+            M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: self.servo_output_raw,
         }
         for block in range(min(3, -(-k // 4))):
             self._builders[_ESC_IDS[block]] = self._esc_builder(block)
@@ -282,7 +292,9 @@ class TelemetryBuilder:
 
     def extended_sys_state(self):
         ap = self.ap
-        if self.vehicle.landed:
+        if ap.land_undetected:
+            state = M.MAV_LANDED_STATE_LANDING
+        elif self.vehicle.landed:
             state = M.MAV_LANDED_STATE_ON_GROUND
         elif ap.taking_off:
             state = M.MAV_LANDED_STATE_TAKEOFF
@@ -378,10 +390,18 @@ class TelemetryBuilder:
     def raw_imu(self):
         return M.MAVLink_raw_imu_message(self.vehicle.time_us, *self._milli(), 0, 0, 0, 0, 4500)
 
+    def servo_output_raw(self):
+        """The motor outputs, µs: the controller's commanded speeds through the vehicle
+        file's [motor] curve, in motor-output order (a weak motor shows here working
+        harder, while its ESC rpm shows the speed it reaches)."""
+        pwm = pwm_from_rotor_speed(self.vehicle.n_cmd[list(self.outputs)], self.vehicle.config)
+        raw = [round(float(v)) for v in pwm[:16]] + [0] * (16 - min(16, pwm.size))
+        return M.MAVLink_servo_output_raw_message(self.vehicle.time_us & 0xFFFFFFFF, 0, *raw)
+
     def _esc_builder(self, block: int):
         cls = _ESC_CLASSES[block]
         k = self.vehicle.config.rotor_count
-        rotors = [i for i in range(4 * block, 4 * block + 4) if i < k]
+        rotors = [self.outputs[i] for i in range(4 * block, 4 * block + 4) if i < k]
         scale = 60.0 / (2.0 * math.pi)
 
         def build():

@@ -3,7 +3,9 @@
 A thin layer over `mavsysid.pipeline.autopilot_experiment.run_autopilot_experiment`:
 read the position-controller limits from the vehicle on ``--connect``, plan within them,
 fly the plan, estimate θ from the flight's ``flight.tlog``, and print the plan, the flight
-and the estimate. Everything is kept in the flight directory. Exit codes: 0 estimated,
+and the estimate (``--report DIR``: its figures and one-page HTML, as ``estimate
+--report``). Everything is kept in the flight directory. ``--dry-run`` plans and runs every
+check of the flight on the vehicle, arming nothing. Exit codes: 0 estimated (or checked),
 2 bad input, 3 refused at any stage (one line naming it), 130 interrupted after braking
 and landing.
 """
@@ -20,8 +22,10 @@ from mavsysid.cli.options import (
     add_link_arguments,
     allow_negative_values,
     parse_numbers,
+    require_imbalance,
     require_positive,
 )
+from mavsysid.cli.stream import format_dry_run
 from mavsysid.cli.stream import format_summary as flight_summary
 from mavsysid.errors import InputError
 from mavsysid.estimation import (
@@ -34,7 +38,7 @@ from mavsysid.pipeline.autopilot_experiment import ExperimentOutcome, run_autopi
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import load_vehicle
 
-__all__ = ["add_arguments", "format_report", "main"]
+__all__ = ["add_arguments", "format_report", "main", "next_step"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -81,6 +85,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=EstimatorSettings.prior_relative_sigma, metavar="REL",
                         help="the estimate's prior σ relative to the vehicle file's θ "
                         f"(default: {EstimatorSettings.prior_relative_sigma:g})")
+    parser.add_argument("--report", type=Path, metavar="DIR",
+                        help="write the estimate's figures (PNG), history.csv and a one-page "
+                        "HTML report (index.html) into DIR, as `estimate --report`")
+    parser.add_argument("--dry-run", action="store_true",
+                        help="read the limits, plan, connect and run every check of the "
+                        "flight; print the plan, the box, the fence and the parameters the "
+                        "flight would change; arm nothing, change nothing, estimate nothing")
 
 
 def _operator_box(args: argparse.Namespace) -> tuple[float, ...]:
@@ -96,6 +107,9 @@ def _operator_box(args: argparse.Namespace) -> tuple[float, ...]:
 
 def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings]:
     require_positive(args, (*LINK_TIMEOUTS, "prior_sigma"))
+    require_imbalance(args)
+    if args.dry_run and args.report is not None:
+        raise InputError("--dry-run estimates nothing: it takes no --report")
     box = _operator_box(args)
     time = args.time
     if time is None:
@@ -108,7 +122,10 @@ def _settings(args: argparse.Namespace) -> tuple[PlannerSettings, StreamSettings
                             speedup=args.speedup, heartbeat_timeout=args.heartbeat_timeout,
                             position_timeout=args.position_timeout,
                             prearm_timeout=args.prearm_timeout, log_dir=args.log_dir,
-                            fence=not args.no_fence, download_log=not args.no_log_download)
+                            fence=not args.no_fence, lockstep=args.lockstep,
+                            max_tracking_error=args.max_tracking_error,
+                            max_motor_imbalance=args.max_motor_imbalance,
+                            dry_run=args.dry_run, download_log=not args.no_log_download)
     return planner, stream
 
 
@@ -125,7 +142,7 @@ def format_report(outcome: ExperimentOutcome, verbosity: int = 0) -> str:
         ``-v``: the plan, the flight summary and the estimate table.
     """
     if verbosity < 0:
-        return str(outcome.estimate_file)
+        return str(outcome.estimate_file or outcome.flight.directory)
     plan = outcome.plan
     lines = [f"Planned a {plan.trajectory.duration:.1f} s flight of the "
              f"{plan.settings.budget:g} s budget within the limits of {outcome.limits}; "
@@ -134,6 +151,8 @@ def format_report(outcome: ExperimentOutcome, verbosity: int = 0) -> str:
     if plan.shortfall:
         lines.append(f"  warning    {plan.shortfall}")
     run = outcome.estimate
+    if run is None:  # a dry run
+        return "\n".join([*lines, format_dry_run(outcome.flight, verbosity)])
     lines += [flight_summary(outcome.flight, verbosity), "",
               format_table(run.result, run.config, str(run.flight.source)),
               f"wrote estimate {outcome.estimate_file}"]
@@ -159,5 +178,31 @@ def main(args: argparse.Namespace) -> int:
     outcome = run_autopilot_experiment(
         args.vehicle, planner, stream, EstimatorSettings(prior_relative_sigma=args.prior_sigma),
         say, progress=verbose, autopilot_model=args.autopilot_model)
+    if args.report is not None and outcome.estimate is not None:
+        from mavsysid.estimation import write_estimate_report  # matplotlib: slow
+
+        run = outcome.estimate
+        write_estimate_report(args.report, run.result, run.flight, run.config,
+                              str(run.flight.source))
     print(format_report(outcome, args.verbosity))
+    if args.verbosity >= 0:
+        if args.report is not None:
+            print(f"wrote report {args.report}")
+        print(next_step(outcome, args.vehicle))
     return 0
+
+
+def next_step(outcome: ExperimentOutcome, vehicle: str) -> str:
+    """The one line printed last: the command that comes next.
+
+    Parameters
+    ----------
+    outcome : ExperimentOutcome
+        The finished experiment (or dry run).
+    vehicle : str
+        ``--vehicle`` as given.
+    """
+    if outcome.estimate_file is None:
+        return "next: the same command without --dry-run flies it"
+    return (f"next: mavsysid diagnose {outcome.flight.directory / 'flight.tlog'} --vehicle "
+            f"{vehicle} --estimate {outcome.estimate_file}")

@@ -13,7 +13,7 @@ from mavsysid.planner.settings import PlannerSettings
 
 __all__ = ["DEFAULT_BOX", "LINK_TIMEOUTS", "OUTPUT_OPTION", "add_link_arguments",
            "add_log_arguments", "add_output_folder", "add_window_arguments",
-           "allow_negative_values", "parse_numbers", "require_positive"]
+           "allow_negative_values", "parse_numbers", "require_imbalance", "require_positive"]
 
 #: The one name of the output-folder option of every command that writes a folder.
 OUTPUT_OPTION = "--log-dir"
@@ -37,12 +37,14 @@ def add_log_arguments(parser: argparse.ArgumentParser, kinds: str) -> None:
 
 
 #: The positive options of `add_link_arguments` (argparse destinations).
-LINK_TIMEOUTS = ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout")
+LINK_TIMEOUTS = ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout",
+                 "max_tracking_error")
 
 
 def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     """The link options of the commands that fly a vehicle (stream, experiment): signing,
-    clock speed-up, the waits before flying, the fence and the log download.
+    clock speed-up, the waits before flying, the fence, the in-flight guards and the log
+    download.
 
     Parameters
     ----------
@@ -69,6 +71,34 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                         help="after landing, do not download the vehicle's own log of the "
                         "flight (by default it goes into the flight directory as "
                         "autopilot.bin / autopilot.ulg)")
+    parser.add_argument("--max-tracking-error", type=float, default=1.0, metavar="M",
+                        help="abort to hold, then land, beyond this distance from the "
+                        "setpoint; reported from half of it (default: 1.0 m)")
+    parser.add_argument("--max-motor-imbalance", type=float, default=2.0, metavar="R",
+                        help="abort to hold, then land, when a motor is asked for R times the "
+                        "thrust of its mirror (the rotor opposite) over 2 s: a weak motor or "
+                        "propeller; reported from 1.25 (default: 2)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="test/bench tool: share one simulated clock with `mavsysid sim "
+                        "--lockstep` (same flight idle or overloaded); other vehicles: the "
+                        "wall clock")
+
+
+def require_imbalance(args: argparse.Namespace) -> None:
+    """Refuse a ``--max-motor-imbalance`` that is not a finite ratio above 1 (one line).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (``max_motor_imbalance``).
+
+    Raises
+    ------
+    InputError
+    """
+    value = args.max_motor_imbalance
+    if not (value > 1.0 and value < math.inf):
+        raise InputError(f"--max-motor-imbalance {value:g}: expected a ratio above 1")
 
 
 def require_positive(args: argparse.Namespace, options: tuple[str, ...]) -> None:

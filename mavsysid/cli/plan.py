@@ -34,7 +34,7 @@ from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, load_vehicle
 
 __all__ = ["DEFAULT_ROTOR_HEADROOM", "add_arguments", "format_preview", "format_summary", "main",
-           "saturation_warning"]
+           "next_step", "saturation_warning"]
 
 #: `plan`'s rotor headroom unless --rotor-headroom says otherwise: with it the README's plan
 #: command predicts ≤ 1 % rotor saturation on every shipped vehicle (docs/plan-preview.md).
@@ -129,27 +129,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "prior θ plus Z times its first-order spread under the prior (a normal "
                         "quantile, e.g. 1.645: 95 %% per rotor and sample; default: "
                         f"{PlannerSettings.rotor_confidence:g}, at the prior θ only)")
-    parser.add_argument("--autopilot-limits", metavar="FILE|LINK",
+    parser.add_argument("--connect", metavar="LINK",
                         help="plan within the position-controller limits of the autopilot "
-                        "that will fly it, read live from the vehicle on a MAVLink LINK "
-                        "(tcp:HOST:PORT, udp:HOST:PORT, udpout:HOST:PORT, serial:DEVICE[:BAUD] "
-                        "or /dev/…, as `stream --connect`; nothing is changed on it) or from "
-                        "a parameter dump FILE of 'NAME VALUE' lines (ArduPilot .parm / "
-                        "MAVProxy 'param save', Mission Planner 'NAME,VALUE', QGroundControl "
-                        ".params; # comments), in the parameters' own units; ArduPilot "
-                        "WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, ATC_SLEW_YAW, "
-                        "ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, absent ones "
-                        "limit nothing; the plan then passes `stream`'s limit check against "
-                        "the same values")
+                        "that will fly it, read live from the vehicle on this MAVLink link, "
+                        "as `stream --connect` takes it (tcp:HOST:PORT, udp:HOST:PORT, "
+                        "udpout:HOST:PORT, a serial device[:BAUD]); nothing is changed on it. "
+                        "ArduPilot WPNAV_*, PSC_JERK_*, PSC_ANGLE_MAX, ANGLE_MAX, "
+                        "ATC_SLEW_YAW, ATC_RATE_Y_MAX, ATC_ACCEL_*_MAX or PX4 MPC_* are used, "
+                        "absent ones limit nothing; the plan then passes `stream`'s limit "
+                        "check against the same values")
+    parser.add_argument("--autopilot-limits", metavar="FILE|LINK",
+                        help="the same limits from a parameter dump FILE of 'NAME VALUE' lines "
+                        "(ArduPilot .parm / MAVProxy 'param save', Mission Planner "
+                        "'NAME,VALUE', QGroundControl .params; # comments), in the "
+                        "parameters' own units; or, as --connect, a LINK")
     parser.add_argument("--autopilot-model", action="store_true",
-                        help="with --autopilot-limits: also read the autopilot's position- "
-                        "and attitude-controller parameters (ArduCopter PSC_*, ATC_*, "
+                        help="with --connect or --autopilot-limits: also read the autopilot's "
+                        "position- and attitude-controller parameters (ArduCopter PSC_*, ATC_*, "
                         "MOT_THST_HOVER; PX4 MPC_*, MC_*; absent ones at their stock "
                         "defaults) and plan on the flight its closed loop is predicted to fly "
                         "from the setpoints (default: the setpoints count as flown exactly)")
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
-                        help="MAVLink 2 signing for --autopilot-limits LINK: a file holding "
-                        "the passphrase")
+                        help="MAVLink 2 signing for --connect LINK: a file holding the "
+                        "passphrase")
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -172,25 +174,39 @@ def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSe
     elif time == 0.0 and args.samples is not None:
         time = math.inf
     limits = loop = None
-    if args.autopilot_limits is not None:
+    given = _limits_source(args)
+    if given is not None:
         key = None
         if args.signing_key is not None:
             from mavsysid.flight.mavlink_setup import signing_key_from_file
 
             key = signing_key_from_file(args.signing_key)
-        envelope = read_autopilot(args.autopilot_limits, key, say=say,
-                                  loop=args.autopilot_model)
+        envelope = read_autopilot(given, key, say=say, loop=args.autopilot_model)
         limits, loop = envelope.limits, envelope.loop
         say(f"planning within the autopilot limits read from {envelope.source}")
     elif args.signing_key is not None:
-        raise InputError("--signing-key: only with --autopilot-limits LINK")
+        raise InputError("--signing-key: only with --connect LINK")
     elif args.autopilot_model:
-        raise InputError("--autopilot-model: only with --autopilot-limits FILE|LINK")
+        raise InputError("--autopilot-model: only with --connect LINK or --autopilot-limits FILE")
     return PlannerSettings(budget=args.budget, planning_time=time, max_samples=args.samples,
                            box=box, start=start, seed=args.seed,  # type: ignore[arg-type]
                            refine_steps=args.refine_steps, rotor_headroom=args.rotor_headroom,
                            autopilot_limits=limits, rotor_confidence=args.rotor_confidence,
                            autopilot=loop)
+
+
+def _limits_source(args: argparse.Namespace) -> str | None:
+    """Where the autopilot's limits come from: ``--connect LINK`` or ``--autopilot-limits
+    FILE|LINK`` (one of them), else None."""
+    if args.connect is not None and args.autopilot_limits is not None:
+        raise InputError("--connect and --autopilot-limits both name the autopilot's limits: "
+                         "give one")
+    if args.connect is not None:
+        from mavsysid.flight.mavlink_setup import parse_connect
+
+        parse_connect(args.connect)  # a link; a parameter dump is --autopilot-limits FILE
+        return str(args.connect)
+    return args.autopilot_limits
 
 
 def main(args: argparse.Namespace) -> int:
@@ -228,7 +244,38 @@ def main(args: argparse.Namespace) -> int:
             print(format_preview(preview))
         if (warning := saturation_warning(preview)) is not None:
             print(f"mavsysid plan: warning: {warning}", file=sys.stderr)
+    if args.verbosity >= 0:
+        print(next_step(args.output, settings.box, _limits_link(args)))
     return 0
+
+
+def _limits_link(args: argparse.Namespace) -> str | None:
+    """The link the limits were read from (``--connect``, or a link given as
+    ``--autopilot-limits``), else None."""
+    if args.connect is not None:
+        return str(args.connect)
+    given = args.autopilot_limits
+    if given is None or Path(given).is_file():
+        return None
+    return str(given)
+
+
+def next_step(trajectory: Path, box: tuple[float, ...], link: str | None) -> str:
+    """The one line printed last: how to fly the plan.
+
+    Parameters
+    ----------
+    trajectory : Path
+        The trajectory file written.
+    box : tuple of 6 float
+        The box planned in, m ([x_min, y_min, z_min, x_max, y_max, z_max]), offered as the
+        operator's ``--box``.
+    link : str or None
+        The vehicle's link when the limits were read from it.
+    """
+    shown = ",".join(f"{v:g}" for v in box)
+    connect = f" --connect {link}" if link is not None else " --connect LINK"
+    return f"next: mavsysid stream {trajectory}{connect} --box {shown}"
 
 
 def saturation_warning(preview: PlanPreview) -> str | None:

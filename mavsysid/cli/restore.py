@@ -2,8 +2,10 @@
 
 A thin layer over `mavsysid.pipeline.stream.restore_flight_parameters`: after a streamer
 that could not restore them itself (killed, crashed, link lost), write back every
-parameter its ``meta.json`` lists with its original value, and read them back. Exit
-codes: 0 restored (or nothing to restore), 2 bad input, 3 refused or failed.
+parameter its ``meta.json`` lists with its original value, read them back, and put back
+the fence points the vehicle held before the flight. With ``--land`` an armed vehicle is
+landed first, to the disarm. Exit codes: 0 restored (or nothing to restore), 2 bad input,
+3 refused or failed.
 """
 
 from __future__ import annotations
@@ -36,8 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--heartbeat-timeout", type=float, default=30.0, metavar="S",
                         help="how long to wait for the vehicle's heartbeat (default: 30 s)")
     parser.add_argument("--land", action="store_true",
-                        help="an armed vehicle is sent to LAND and restored once disarmed "
-                        "(by default an armed vehicle is refused)")
+                        help="an armed vehicle is sent to LAND, landed to the disarm (forced "
+                        "only when it rests at its take-off height and its land detector "
+                        "missed the touchdown), then restored (by default an armed vehicle "
+                        "is refused)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -65,4 +69,7 @@ def main(args: argparse.Namespace) -> int:
     if outcome.read_back:
         print(f"restored {len(outcome.restored)} parameter(s), {len(outcome.unchanged)} "
               f"already in place; all {len(outcome.read_back)} read back as before the flight")
+    if outcome.fence_points is not None:
+        print(f"fence points as before the flight: {outcome.fence_points}"
+              + (" (the fence mission cleared)" if outcome.fence_points == 0 else ""))
     return 0

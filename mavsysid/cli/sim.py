@@ -27,7 +27,9 @@ from mavsysid.vehicle.model_effects import EFFECTS
 __all__ = ["add_arguments", "main", "settings_from_args"]
 
 _MAX_SPEEDUP = 100.0
-_FAULT_RE = re.compile(r"^(deny-arm|mode:([A-Z_]+)@(\d+(?:\.\d*)?)|silent@(\d+(?:\.\d*)?))$")
+_FAULT_RE = re.compile(r"^(deny-arm|no-land-detect|mode:([A-Z_]+)@(\d+(?:\.\d*)?)|"
+                       r"silent@(\d+(?:\.\d*)?)|"
+                       r"weak-motor:(\d+)=(\d*\.?\d+)(?:@(\d+(?:\.\d*)?))?)$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     allow_negative_values(parser)  # "--start -1,2,0"
     parser.add_argument("--connect", default="udpout:127.0.0.1:14550", metavar="URL",
                         help="udpout:HOST:PORT (send to a ground station), tcpin:HOST:PORT "
-                        "or udpin:HOST:PORT (listen) (default: udpout:127.0.0.1:14550)")
+                        "or udpin:HOST:PORT (listen), or a serial device[:BAUD] such as "
+                        "/dev/ttyUSB0:57600 (default: udpout:127.0.0.1:14550)")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
     parser.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot",
@@ -68,26 +71,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(repeatable), e.g. motor_lag:tau=0.04 or wind:x=2; names: "
                         f"{', '.join(EFFECTS)}")
     parser.add_argument("--fault", action="append", default=[], metavar="FAULT",
-                        help="inject a fault (repeatable): deny-arm; mode:NAME@S (a pilot "
-                        "switches to mode NAME at sim time S); silent@S (the link goes quiet)")
+                        help="inject a fault (repeatable): deny-arm; no-land-detect (a touchdown "
+                        "in LAND goes undetected: armed on the ground, a disarm refused unless "
+                        "forced, as ArduCopter in strong wind); mode:NAME@S (a pilot "
+                        "switches to mode NAME at sim time S); silent@S (the link goes quiet); "
+                        "weak-motor:N=F[@S] (motor output N makes F of its thrust, 0 < F <= 1, "
+                        "from sim time S, default 0; as SITL's SIM_ENGINE_MUL)")
 
 
-def _fault_settings(faults: list[str], autopilot: Autopilot) -> dict:
+def _weak_motor(text: str, match: re.Match[str], rotors: int) -> tuple[int, float, float]:
+    motor, factor = int(match.group(5)), float(match.group(6))
+    if not 1 <= motor <= rotors:
+        raise InputError(f"--fault {text!r}: motor {motor}; the vehicle has motors 1 to "
+                         f"{rotors}")
+    if not 0.0 < factor <= 1.0:
+        raise InputError(f"--fault {text!r}: thrust factor {factor:g}; expected 0 < F <= 1")
+    return motor, factor, float(match.group(7) or 0.0)
+
+
+def _fault_settings(faults: list[str], autopilot: Autopilot, rotors: int) -> dict:
     out: dict = {}
     for text in faults:
         match = _FAULT_RE.match(text)
         if match is None:
-            raise InputError(f"--fault {text!r}: expected deny-arm, mode:NAME@S or silent@S")
+            raise InputError(f"--fault {text!r}: expected deny-arm, no-land-detect, mode:NAME@S, "
+                             "silent@S or weak-motor:N=F[@S]")
         if match.group(1) == "deny-arm":
             out["deny_arm"] = True
+        elif match.group(1) == "no-land-detect":
+            out["land_detector_fails"] = True
         elif match.group(2):
             names = [*autopilot.modes, *(["RTL"] if autopilot is Autopilot.PX4 else [])]
             if match.group(2) not in names:
                 raise InputError(f"--fault {text!r}: unknown {autopilot.name.lower()} mode "
                                  f"{match.group(2)}; expected one of {', '.join(names)}")
             out["pilot_mode"] = (match.group(2), float(match.group(3)))
-        else:
+        elif match.group(4):
             out["silent_after"] = float(match.group(4))
+        else:
+            out["weak_motor"] = _weak_motor(text, match, rotors)
     return out
 
 
@@ -114,11 +136,12 @@ def settings_from_args(args: argparse.Namespace) -> SimSettings:
                          "choose a new directory")
     hidden = parse_hidden_effects(args.hidden_effect)
     key = None if args.signing_key is None else signing_key_from_file(args.signing_key)
+    rotors = load_vehicle(args.vehicle).rotor_count
     return SimSettings(autopilot=autopilot, speedup=args.speedup, ekf_delay=args.ekf_delay,
                        start=start, seed=args.seed, theta_scale=scale,  # type: ignore[arg-type]
                        sensor_noise=not args.no_noise, duration=args.duration, signing_key=key,
                        truth_log=args.truth_log, hidden_effects=hidden, lockstep=args.lockstep,
-                       **_fault_settings(args.fault, autopilot))
+                       **_fault_settings(args.fault, autopilot, rotors))
 
 
 def main(args: argparse.Namespace) -> int:

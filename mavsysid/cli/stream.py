@@ -23,6 +23,7 @@ from mavsysid.cli.options import (
     add_output_folder,
     allow_negative_values,
     parse_numbers,
+    require_imbalance,
     require_positive,
 )
 from mavsysid.errors import InputError
@@ -33,7 +34,7 @@ from mavsysid.pipeline.stream import StreamOutcome, run_stream
 if TYPE_CHECKING:
     from mavsysid.pipeline.replanned_stream import ReplanSettings
 
-__all__ = ["add_arguments", "format_dry_run", "format_summary", "main"]
+__all__ = ["add_arguments", "format_dry_run", "format_summary", "main", "next_step"]
 
 
 def format_summary(outcome: StreamOutcome, verbosity: int = 0) -> str:
@@ -100,6 +101,23 @@ def format_dry_run(outcome: StreamOutcome, verbosity: int = 0) -> str:
     return "\n".join(lines)
 
 
+def next_step(outcome: StreamOutcome, vehicle: str | None) -> str:
+    """The one line printed last: the command that comes next.
+
+    Parameters
+    ----------
+    outcome : StreamOutcome
+        The flight (or dry run) and its ``meta.json``.
+    vehicle : str or None
+        ``--vehicle`` as given; None: the vehicle stored in the trajectory file (named by
+        its name, which ``estimate`` finds when it is a shipped one).
+    """
+    if outcome.meta.get("dry_run"):
+        return "next: the same command without --dry-run flies it"
+    name = vehicle or outcome.meta.get("vehicle", {}).get("name", "VEHICLE")
+    return f"next: mavsysid estimate {outcome.directory / 'flight.tlog'} --vehicle {name}"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mavsysid stream``."""
     allow_negative_values(parser)  # "--box -2,-2,0.5,2,2,2.5"
@@ -123,13 +141,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "[flight] box of --vehicle; one of the two is required); a box stored "
                         "in the trajectory file can only narrow it")
     add_link_arguments(parser)
-    parser.add_argument("--lockstep", action="store_true",
-                        help="test/bench tool: share one simulated clock with `mavsysid sim "
-                        "--lockstep` (same flight idle or overloaded); other vehicles: the "
-                        "wall clock")
-    parser.add_argument("--max-tracking-error", type=float, default=1.0, metavar="M",
-                        help="abort to hold beyond this distance from the setpoint "
-                        "(default: 1.0 m)")
     parser.add_argument("--heartbeat-loss", type=float, default=3.0, metavar="S",
                         help="stop streaming after this long without a heartbeat "
                         "(default: 3 s)")
@@ -161,8 +172,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _settings(args: argparse.Namespace) -> StreamSettings:
-    require_positive(args, ("rate", "telemetry_rate", "max_tracking_error", "heartbeat_loss",
-                            "link_loss", *LINK_TIMEOUTS))
+    require_positive(args, ("rate", "telemetry_rate", "heartbeat_loss", "link_loss",
+                            *LINK_TIMEOUTS))
+    require_imbalance(args)
     if args.rate > 500.0:
         raise InputError(f"--rate {args.rate:g}: at most 500 Hz")
     box = None
@@ -174,6 +186,7 @@ def _settings(args: argparse.Namespace) -> StreamSettings:
         land=not args.no_land, box=box, signing_key=key, speedup=args.speedup,
         heartbeat_timeout=args.heartbeat_timeout, heartbeat_loss=args.heartbeat_loss,
         position_timeout=args.position_timeout, max_tracking_error=args.max_tracking_error,
+        max_motor_imbalance=args.max_motor_imbalance,
         link_loss=args.link_loss, prearm_timeout=args.prearm_timeout,
         log_dir=args.log_dir, lockstep=args.lockstep, fence=not args.no_fence,
         set_limits=args.set_limits, dry_run=args.dry_run,
@@ -229,11 +242,14 @@ def main(args: argparse.Namespace) -> int:
         outcome = run_stream(args.trajectory, settings, args.vehicle, say, progress=verbose)
         print(format_dry_run(outcome, args.verbosity) if settings.dry_run
               else format_summary(outcome, args.verbosity))
+        if args.verbosity >= 0:
+            print(next_step(outcome, args.vehicle))
         return 0
     from mavsysid.pipeline.replanned_stream import run_replanned_stream
 
     outcome = run_replanned_stream(args.trajectory, settings, replan, args.vehicle, say,
                                    progress=verbose)
     print("\n".join([format_summary(outcome, args.verbosity)]
-                    + ([] if args.verbosity < 0 else _segment_lines(outcome.meta))))
+                    + ([] if args.verbosity < 0 else [*_segment_lines(outcome.meta),
+                                                      next_step(outcome, args.vehicle)])))
     return 0

@@ -18,6 +18,9 @@ BAD_OPTIONS = {
     "negative prior sigma": (["--prior-sigma", "-1"], "--prior-sigma"),
     "box with 3 numbers": (["--box", "1,2,3"], "--box"),
     "heartbeat timeout nan": (["--heartbeat-timeout", "nan"], "--heartbeat-timeout"),
+    "tracking limit 0": (["--max-tracking-error", "0"], "--max-tracking-error"),
+    "imbalance 1": (["--max-motor-imbalance", "1"], "--max-motor-imbalance"),
+    "report of a dry run": (["--dry-run", "--report", "r"], "--dry-run estimates nothing"),
 }
 
 
@@ -85,3 +88,32 @@ def test_experiment_against_the_sim_keeps_everything_in_one_directory(tmp_path: 
     else:
         last = err.strip().splitlines()[-1]
         assert code == 3 and f"flown and recorded in {flight}, but no estimate" in last, err
+
+
+@pytest.mark.slow
+def test_dry_run_plans_and_checks_and_arms_nothing(tmp_path: Path, capsys):
+    """``experiment --dry-run``: the limits read, a plan made and every check of the flight
+    run on the vehicle (lock-stepped sim); nothing armed, no estimate; the last line says
+    what comes next."""
+    from tests.support.stream_flights import flight_dir, read_tlog
+
+    port = free_tcp_port()
+    logs = tmp_path / "logs"
+    with SimProcess(tmp_path / "sim", "--connect", f"tcpin:127.0.0.1:{port}", "--vehicle",
+                    "quad_x", "--speedup", "8") as sim:
+        sim.wait_ready(timeout=90.0)
+        code = main(["experiment", "--connect", f"tcp:127.0.0.1:{port}", "--vehicle",
+                     "quad_x", "--budget", "8", "--samples", "40", "--refine-steps", "0",
+                     "--seed", "1", "--speedup", "8", "--lockstep", "--dry-run",
+                     "--log-dir", str(logs)])
+    out, err = capsys.readouterr()
+    assert code == 0, err[-3000:]
+    flight = flight_dir(logs)
+    assert "Dry run of the" in out and out.strip().splitlines()[-1] == (
+        "next: the same command without --dry-run flies it")
+    assert not (flight / "estimate.json").exists() and (flight / "trajectory.json").is_file()
+    meta = json.loads((flight / "meta.json").read_text())
+    assert meta["dry_run"] and meta["status"] == "complete"
+    sent = [m for _, m in read_tlog(flight / "flight.tlog") if m.get_srcSystem() == 255]
+    assert not [m for m in sent if m.get_type() == "COMMAND_LONG" and m.command == 400]
+    assert not [m for m in sent if m.get_type() == "PARAM_SET"]

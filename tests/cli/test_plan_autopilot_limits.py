@@ -52,4 +52,4 @@ def test_the_autopilot_model_reaches_the_planner(tmp_path, capsys, planned):
                  "-o", str(tmp_path / "u.json")]) == 0
     assert planned[-1].autopilot is None
     assert main(["plan", "--autopilot-model", "-o", str(tmp_path / "v.json")]) == 2
-    assert "--autopilot-model: only with --autopilot-limits" in capsys.readouterr().err
+    assert "--autopilot-model: only with --connect" in capsys.readouterr().err

@@ -80,5 +80,34 @@ def test_a_signing_key_without_a_link_exits_2(tmp_path: Path, planned, capsys, l
         dump.write_text("".join(f"{k} {v:g}\n" for k, v in STOCK.items()))
         args += ["--autopilot-limits", str(dump)]
     assert main(args) == 2
-    assert "--signing-key: only with --autopilot-limits LINK" in capsys.readouterr().err
+    assert "--signing-key: only with --connect LINK" in capsys.readouterr().err
     assert not planned
+
+
+def test_connect_and_autopilot_limits_together_exit_2(tmp_path: Path, planned, capsys):
+    """``--connect`` and its alias ``--autopilot-limits`` name the same thing: one of them."""
+    link = f"tcp:127.0.0.1:{free_tcp_port()}"
+    code = main(["plan", "--connect", link, "--autopilot-limits", link, "-o",
+                 str(tmp_path / "t.json")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "give one" in err and "\n" not in err, err
+    assert not planned
+
+
+def test_connect_takes_a_link_not_a_file(tmp_path: Path, planned, capsys):
+    """A parameter dump goes to ``--autopilot-limits FILE``; ``--connect`` wants a link."""
+    dump = tmp_path / "stock.parm"
+    dump.write_text("WPNAV_SPEED 500\n")
+    code = main(["plan", "--connect", str(dump), "-o", str(tmp_path / "t.json")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "--connect" in err and "\n" not in err, err
+    assert not planned
+
+
+def test_no_vehicle_on_connect_exits_3_in_one_line(tmp_path: Path, planned, capsys):
+    """``plan --connect LINK`` with nobody on the link: one line naming it, nothing planned."""
+    link = f"tcp:127.0.0.1:{free_tcp_port()}"
+    assert main(["plan", "--connect", link, "-o", str(tmp_path / "t.json")]) == 3
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and link in err, err
+    assert not planned and not (tmp_path / "t.json").exists()

@@ -110,7 +110,10 @@ def test_signal_closes_the_truth_log_and_reports_rejected_signatures(tmp_path, s
 
 @pytest.mark.parametrize(("options", "message"), [
     (["--speedup", "0"], "--speedup 0"),
-    (["--connect", "serial:/dev/ttyS0"], "--connect"),
+    (["--connect", "serial:/dev/mavsysid-no-such-device:57600"],
+     "--connect 'serial:/dev/mavsysid-no-such-device:57600'"),
+    (["--connect", "udp:127.0.0.1:14550"], "udp:/tcp: are ground-station forms"),
+    (["--connect", "bluetooth:1"], "expected udpout:HOST:PORT"),
     (["--fault", "explode"], "--fault 'explode'"),
     (["--theta-scale", "1,2"], "--theta-scale"),
     (["--signing-key", "/nonexistent/key"], "--signing-key"),

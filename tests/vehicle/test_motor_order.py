@@ -178,3 +178,73 @@ def test_shipped_firefly_maps_once_its_directions_are_the_autopilots() -> None:
     # Motors 1-6: right, left, front left, rear right, front right, rear left.
     assert output_to_rotor(firefly.rotor_positions, -firefly.rotor_directions,
                            "ardupilot:hexa_x") == (4, 1, 0, 3, 5, 2)
+
+
+def _layout(name: str, turn_deg: float = 0.0) -> np.ndarray:
+    """PUBLISHED's rotors of a frame, turned ``turn_deg`` about the vertical, as positions."""
+    c, s = math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))
+    return np.array([[0.2 * (c * x - s * y), 0.2 * (s * x + c * y), 0.0]
+                     for (x, y), _ in PUBLISHED[name]])
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISHED))
+def test_frame_ids_select_the_frame_and_name_it(name):
+    """FRAME_CLASS/FRAME_TYPE select the ArduPilot frame; the words name both values."""
+    from mavsysid.vehicle.motor_order import ARDUPILOT_FRAME_IDS, ardupilot_frame_name
+
+    frame_class, frame_type = ARDUPILOT_FRAME_IDS[f"ardupilot:{name}"]
+    found, words = ardupilot_frame_name(frame_class, frame_type)
+    assert found == f"ardupilot:{name}"
+    kind = {"quad": "Quad", "hexa": "Hexa", "octa": "Octa"}[name.split("_")[0]]
+    assert f"({kind})" in words and ("(X)" if name.endswith("_x") else "(Plus)") in words
+
+
+def test_frames_without_a_motor_table_are_none():
+    """An H quad, a BetaFlight order or a Y6 select no frame of the tables."""
+    from mavsysid.vehicle.motor_order import ardupilot_frame_name
+
+    for ids, word in (((1, 3), "(H)"), ((1, 12), "(BetaFlight X)"), ((5, 10), "(Y6)")):
+        found, words = ardupilot_frame_name(*ids)
+        assert found is None and word in words, words
+
+
+def test_px4_airframe_groups():
+    from mavsysid.vehicle.motor_order import px4_airframe_frame
+
+    assert px4_airframe_frame(4001) == "px4:quad_x"
+    assert px4_airframe_frame(5001) == "px4:quad_plus"
+    assert px4_airframe_frame(6001) == "px4:hexa_x"
+    assert px4_airframe_frame(13000) is None  # a VTOL
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISHED))
+def test_a_layout_matches_its_frame_in_any_order_and_not_turned_45_or_30(name):
+    """Shuffled rotors still sit like the frame; turned by half the spacing they do not."""
+    from mavsysid.vehicle.motor_order import layout_matches
+
+    rotors = _layout(name)
+    rng = np.random.default_rng(3)
+    assert layout_matches(rotors[rng.permutation(len(rotors))], f"ardupilot:{name}")
+    half = 180.0 / len(rotors)
+    assert not layout_matches(_layout(name, half), f"ardupilot:{name}")
+
+
+def test_mirrors_are_the_rotors_opposite():
+    """Quad X: the diagonal; the Firefly: the rotor 180° round; a tricopter has none."""
+    from mavsysid.vehicle.motor_order import mirror_rotors
+
+    assert mirror_rotors(_layout("quad_x")) == (1, 0, 3, 2)  # front right ↔ rear left
+    firefly = load_vehicle("firefly")
+    assert mirror_rotors(firefly.rotor_positions) == (3, 4, 5, 0, 1, 2)
+    tri = np.array([[0.2 * math.cos(a), 0.2 * math.sin(a), 0.0]
+                    for a in np.radians([0.0, 120.0, 240.0])])
+    assert mirror_rotors(tri) == (None, None, None)
+
+
+def test_output_order_is_the_identity_without_a_frame():
+    from mavsysid.vehicle.motor_order import output_order
+
+    config = load_vehicle("sitl_quad")
+    assert output_order(config.rotor_positions, config.rotor_directions, None) == (0, 1, 2, 3)
+    assert output_order(config.rotor_positions, config.rotor_directions,
+                        "ardupilot:quad_x") == (0, 1, 2, 3)

@@ -13,6 +13,8 @@ from mavsysid.flight.ground.geofence import (
     fence_plan,
     install_fence,
     offset_lat_lon,
+    restore_fence_points,
+    upload_fence_polygon,
 )
 from mavsysid.flight.ground.parameter_session import ParameterSession
 from mavsysid.flight.ground.vehicle_commands import VehicleCommands
@@ -49,8 +51,16 @@ def test_plan_is_the_box_grown_by_the_margin():
 
 
 @pytest.mark.parametrize("autopilot", [Autopilot.ARDUPILOT, Autopilot.PX4])
-def test_install_sets_the_fence_and_restore_puts_everything_back(autopilot):
+@pytest.mark.parametrize("stored", [0, 3])
+def test_install_sets_the_fence_and_restore_puts_everything_back(autopilot, stored):
+    """Parameters and fence points (none, or an operator's own triangle) come back as they
+    were, ArduPilot's FENCE_TOTAL with them."""
     with linked_sim(autopilot, speedup=5.0) as (endpoint, link):
+        own = [offset_lat_lon(ORIGIN, 10.0 * math.cos(a), 10.0 * math.sin(a))
+               for a in np.linspace(0.0, 2 * math.pi, stored, endpoint=False)]
+        if own:
+            assert upload_fence_polygon(link, own) is None
+        points_before = endpoint.autopilot.fence.items
         before = {p.name: p.value for p in endpoint.params}
         commands = VehicleCommands(link)
         commands.wait_position(30.0)
@@ -66,9 +76,14 @@ def test_install_sets_the_fence_and_restore_puts_everything_back(autopilot):
             assert after["GF_MAX_VER_DIST"] == 4.0 and after["GF_ACTION"] == 5
             assert after["COM_OF_LOSS_T"] == pytest.approx(GUIDED_TIMEOUT)
         changed = {n for n in after if after[n] != before[n]}
-        assert changed == set(params.changed)
+        counted = {"FENCE_TOTAL"} if autopilot is Autopilot.ARDUPILOT else set()
+        assert changed == set(params.changed) | counted
+        assert len(record["points_before"]) == stored
         assert params.restore() == []
+        assert restore_fence_points(link, record["points_before"]) is None
+        link.poll(0.5)
         assert {p.name: p.value for p in endpoint.params} == before
+        assert endpoint.autopilot.fence.items == points_before
 
 
 def test_a_vehicle_without_fence_parameters_is_refused_in_one_line(monkeypatch):

@@ -222,7 +222,10 @@ def test_zero_rotor_speeds_while_armed_are_warned_once():
     vehicle.base_mode = 128
     for i in range(200, 400):  # 4 s armed at 0 rpm
         watch.on_message(_esc((0, 0, 0, 0)), 0.02 * i)
-    assert len(said) == 1 and "0 rpm" in said[0] and "SIM_VIB_MOT_MAX" in said[0]
+    assert len(said) == 1 and "0 rpm" in said[0]
+    # What is true of SITL: its ESC rpm is never the rotor speed; no telemetry, outputs read.
+    assert "never the rotor speed" in said[0] and "SIM_ESC_TELEM 0" in said[0]
+    assert "set SIM_VIB_MOT_MAX" not in said[0]
 
 
 def test_spinning_rotors_are_not_warned():
@@ -274,3 +277,32 @@ def test_realtime_scheduling_is_taken_when_permitted_and_given_back():
     assert said.startswith(("SCHED_RR", "normal ("))
     assert seen["during"] == (os.SCHED_RR if said.startswith("SCHED_RR") else os.SCHED_OTHER)
     assert seen["after"] == os.SCHED_OTHER
+
+
+@pytest.mark.parametrize("failsafe", [True, False])
+def test_a_mode_the_autopilot_changes_itself_is_quoted_not_called_a_pilot(failsafe):
+    """GUIDED → LAND with ArduCopter's "EKF Failsafe" text just before: the stop names the
+    autopilot's reason; without a text it may be a pilot."""
+    from mavsysid.flight.ground.stream_control import FlightGuards, ModeTaken, SetpointStream
+    from mavsysid.flight.ground.telemetry_recorder import SetpointHistory
+
+    port = free_udp_port()
+    with ScriptedVehicle(port, heartbeat_period=0.05) as peer:
+        peer.custom_mode = 4  # GUIDED
+        link, _, _, _ = _connected(port)
+        with link:
+            guards = FlightGuards(link, SetpointStream(link, SetpointHistory(), 50.0), None)
+            link.add_listener(guards.on_message)
+            link.poll(0.3)
+            guards.expected_mode = 4
+            if failsafe:
+                _text(peer, "EKF Failsafe: changed to LAND Mode")
+            peer.custom_mode = 9  # LAND
+            with pytest.raises(ModeTaken) as taken:
+                link.poll(2.0)
+    text = str(taken.value)
+    assert "from GUIDED to LAND" in text
+    if failsafe:
+        assert "the autopilot said: EKF Failsafe: changed to LAND Mode" in text
+    else:
+        assert "pilot takeover?" in text

@@ -10,8 +10,11 @@ import signal
 from pathlib import Path
 
 import pytest
+from mavsysid.flight.autopilot_modes import Autopilot
 from mavsysid.flight.loopback_ports import free_udp_port
+from mavsysid.flight.simvehicle.params import default_parameters
 from mavsysid.formats.flight_dir import read_meta
+from mavsysid.vehicle.config import load_vehicle
 
 from tests.support.stream_flights import (
     SimProcess,
@@ -43,6 +46,17 @@ def _changed(meta: dict) -> dict[str, float]:
     return {name: entry["original"] for name, entry in meta["parameters"].items()}
 
 
+def _parameter_diff(port: int) -> dict[str, tuple[float, float]]:
+    """Every parameter of the simulated ArduPilot Firefly that differs from its value at
+    boot (read with pymavlink alone, all of them): name → (boot, now)."""
+    boot = {p.name: p.value for p in default_parameters(Autopilot.ARDUPILOT,
+                                                         load_vehicle("firefly"))}
+    now = read_all_parameters(port)
+    return {n: (boot.get(n, float("nan")), now.get(n, float("nan")))
+            for n in boot.keys() | now.keys()
+            if n not in boot or n not in now or now[n] != pytest.approx(boot[n])}
+
+
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_aborted_flight_lands_then_restores_every_parameter(tmp_path, trajectory):
@@ -57,6 +71,7 @@ def test_aborted_flight_lands_then_restores_every_parameter(tmp_path, trajectory
         meta = read_meta(flight_dir(logs) / "meta.json")
         changed = _changed(meta)
         values = read_parameters(port, list(changed))
+        diff = _parameter_diff(port)
     assert result.returncode == 3, result.stderr
     err = result.stderr
     assert "aborted to BRAKE" in err and "aborted: mode LAND" in err
@@ -68,6 +83,10 @@ def test_aborted_flight_lands_then_restores_every_parameter(tmp_path, trajectory
     assert "left in force" not in err
     assert len(changed) >= 6 and all(e["restored"] for e in meta["parameters"].values())
     assert values == pytest.approx(changed), (values, changed)
+    # The full parameter list as at boot: the fence points (FENCE_TOTAL) too.
+    assert "fence points restored: 0 as before" in err
+    assert meta["fence"]["points_before"] == [] and meta["fence"]["points_restored"]
+    assert diff == {}, diff
 
 
 @pytest.mark.slow
@@ -92,13 +111,45 @@ def test_restore_after_kill_9(tmp_path, trajectory):
         result = run_mavsysid("restore", str(directory), "--connect", f"udp:127.0.0.1:{port}",
                               "--land", cwd=tmp_path)
         after = read_parameters(port, list(changed))
+        diff = _parameter_diff(port)
     assert before != pytest.approx(changed)  # the kill left the flight's values
     assert refused.returncode == 3 and "the vehicle is armed" in refused.stderr
     assert result.returncode == 0, result.stderr
     assert after == pytest.approx(changed), (after, changed)
+    assert diff == {}, diff  # FENCE_TOTAL back to 0 with the fence points
+    assert "fence points as before the flight: 0 (the fence mission cleared)" in result.stdout
     meta = json.loads((directory / "meta.json").read_text())
     assert all(e["restored"] for e in meta["parameters"].values())
     assert meta["restored_by"]["command"] == "mavsysid restore"
+    assert meta["restored_by"]["fence_points"] == 0 and meta["fence"]["points_restored"]
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_landing_the_land_detector_misses_ends_disarmed(tmp_path, trajectory):
+    """A vehicle whose land detector misses the touchdown (as ArduCopter's in 8 m/s of wind
+    on SITL) stays armed on the ground and refuses a plain disarm: the streamer's landing,
+    and after a kill -9 `restore --land`, disarm it (forced, once it rests at its take-off
+    height) instead of giving up with it armed; then every parameter is as at boot."""
+    port = free_udp_port()
+    logs = tmp_path / "logs"
+    with SimProcess(tmp_path / "sim", "--connect", f"udpout:127.0.0.1:{port}", "--speedup",
+                    SPEEDUP, "--fault", "no-land-detect"):
+        flown = run_stream(trajectory, *_stream_args(port, logs / "flown"), cwd=tmp_path,
+                           timeout=180)
+        stream = start_stream(trajectory, *_stream_args(port, logs / "killed"), cwd=tmp_path)
+        wait_for(lambda: "streaming" in (tmp_path / "stream.err").read_text(), 90,
+                 "the trajectory to start")
+        stream.send_signal(signal.SIGKILL)
+        stream.wait(timeout=10)
+        result = run_mavsysid("restore", str(flight_dir(logs / "killed")), "--connect",
+                              f"udp:127.0.0.1:{port}", "--land", cwd=tmp_path, timeout=240)
+        diff = _parameter_diff(port)
+    for done in (flown, result):
+        assert done.returncode == 0, done.stderr[-3000:]
+        assert "its land detector has not seen the touchdown" in done.stderr
+        assert "forced disarm" in done.stderr and "landed and disarmed" in done.stderr
+    assert diff == {}, diff
 
 
 def test_restore_with_nothing_listed_needs_no_vehicle(tmp_path, capsys):
