@@ -89,15 +89,17 @@ def read_flown_truth(flight: Path, start: float) -> Flown:
 
 
 def quaternion_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle between attitudes, rad, row by row."""
-    dot = np.abs(np.sum(a * b, axis=1))
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+    """Angle between attitudes, rad, row by row: |Log(a⁻¹ ⊗ b)|."""
+    from mavsysid.vehicle.rotation import quat_conjugate, quat_log, quat_multiply
+
+    return np.linalg.norm(quat_log(quat_multiply(quat_conjugate(a), b)), axis=-1)
 
 
 def yaw_of(q: np.ndarray) -> np.ndarray:
     """Heading of the body x axis, rad, unwrapped."""
-    w, x, y, z = q.T
-    return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+    from mavsysid.vehicle.rotation import quat_yaw
+
+    return np.unwrap(quat_yaw(q))
 
 
 def lag_of(reference: np.ndarray, flown: np.ndarray, step: float, most: float = 1.0) -> float:
@@ -152,6 +154,7 @@ def compare(trajectory, flown: Flown, loop, config, settle: float = 0.5,
     trajectory at the streamer's nominal rate."""
     from mavsysid.vehicle.autopilot_loop import fly, fly_setpoints
     from mavsysid.vehicle.flatness import flat_to_state
+    from mavsysid.vehicle.rotation import wrap_angle
 
     span = trajectory.duration + settle
     if received is None:
@@ -172,7 +175,7 @@ def compare(trajectory, flown: Flown, loop, config, settle: float = 0.5,
     step = float(np.median(np.diff(t)))
     for name, p_pos, p_q in (("model", flight.position[idx], flight.quaternion[idx]),
                              ("setpoints", flat.position, flat.quaternion)):
-        yaw_err = np.angle(np.exp(1j * (yaw_of(q) - yaw_of(p_q))))
+        yaw_err = wrap_angle(yaw_of(q) - yaw_of(p_q))
         out[name] = {
             "position_m": channel_stats(pos - p_pos),
             "attitude_deg": {k: float(np.degrees(v)) for k, v in

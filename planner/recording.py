@@ -35,7 +35,7 @@ import rerun.blueprint as rrb
 from mavsysid.formats.rerun_file import atomic_recording
 from mavsysid.planner.plan_result import PlanResult
 from mavsysid.vehicle.config import PARAMETER_NAMES
-from scipy.spatial.transform import Rotation
+from mavsysid.vehicle.rotation import matrix_to_quat
 
 __all__ = ["APPLICATION_ID", "log_plan", "recording_id_for", "time_colors", "write_plan_rrd"]
 
@@ -134,7 +134,7 @@ def _log_inertia(rec: rr.RecordingStream, result: PlanResult) -> None:
     eigenvalues, vectors = np.linalg.eigh(0.5 * (block + block.T))
     if np.linalg.det(vectors) < 0.0:
         vectors[:, 0] = -vectors[:, 0]  # a rotation needs a right-handed basis
-    xyzw = Rotation.from_matrix(vectors).as_quat()
+    xyzw = np.roll(matrix_to_quat(vectors), -1)  # [w, x, y, z] → rerun's [x, y, z, w]
     rec.log("planner/inertia_covariance",
             rr.Ellipsoids3D(half_sizes=[np.sqrt(np.clip(eigenvalues, 0.0, None))],
                             centers=[[0.0, 0.0, 0.0]], quaternions=[rr.Quaternion(xyzw=xyzw)],

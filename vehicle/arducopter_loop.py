@@ -47,21 +47,23 @@ import numba
 import numpy as np
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.loop_math import (
-    axis_angle_quaternion,
     clamp,
     inverse_sqrt_controller,
     limit_length,
     lowpass_alpha,
-    quaternion_axis_angle,
-    quaternion_conjugate,
-    quaternion_multiply,
-    quaternion_normalized,
-    rotate,
-    rotate_inverse,
     shape_position_1d,
     shape_position_2d,
     sqrt_controller,
     thrust_heading_quaternion,
+)
+from mavsysid.vehicle.rotation import (
+    conjugate_tuple,
+    exp_tuple,
+    log_tuple,
+    multiply_tuple,
+    normalized_tuple,
+    rotate_inverse_tuple,
+    rotate_tuple,
 )
 
 __all__ = ["PARAMETER_COUNT", "RECORD_COLUMNS", "STATE_SIZE", "initial_state", "kernel_parameters",
@@ -136,12 +138,13 @@ def initial_state(position: np.ndarray, velocity: np.ndarray, acceleration: np.n
     q = thrust_heading_quaternion(acceleration[0], acceleration[1], GRAVITY, yaw)
     s[S_Q:S_Q + 4] = q
     s[S_AT_Q:S_AT_Q + 4] = q
-    s[S_AT_W + 2] = s[S_W + 2] = s[S_RATE_T + 2] = yaw_rate * rotate_inverse(q, 0.0, 0.0, 1.0)[2]
+    up_in_body = rotate_inverse_tuple(q, (0.0, 0.0, 1.0))
+    s[S_AT_W + 2] = s[S_W + 2] = s[S_RATE_T + 2] = yaw_rate * up_in_body[2]
     lift = (GRAVITY + acceleration[2]) / GRAVITY
     s[S_THRUST] = GRAVITY + acceleration[2]
     s[S_AZ_I] = hover * (lift - 1.0)
     s[S_THR_IN] = hover * lift
-    s[S_THR_FILT] = hover * lift / max(rotate(q, 0.0, 0.0, 1.0)[2], 0.1)
+    s[S_THR_FILT] = hover * lift / max(rotate_tuple(q, (0.0, 0.0, 1.0))[2], 0.1)
     return s
 
 
@@ -241,19 +244,18 @@ def _thrust_rotation(target, body):
     """The attitude error from ``body`` to ``target`` as a thrust-vector tilt then a
     heading turn: (x, y of the tilt, z of the turn) rad in the body frame, the tilt
     quaternion and its angle."""
-    tx, ty, tz = rotate(target, 0.0, 0.0, 1.0)
-    bx, by, bz = rotate(body, 0.0, 0.0, 1.0)
+    tx, ty, tz = rotate_tuple(target, (0.0, 0.0, 1.0))
+    bx, by, bz = rotate_tuple(body, (0.0, 0.0, 1.0))
     cx, cy, cz = by * tz - bz * ty, bz * tx - bx * tz, bx * ty - by * tx
     angle = math.acos(clamp(bx * tx + by * ty + bz * tz, -1.0, 1.0))
     length = math.sqrt(cx * cx + cy * cy + cz * cz)
     if length < 1e-12 or angle == 0.0:
         cx, cy, cz, length = 0.0, 0.0, 1.0, 1.0
-    ax, ay, az = rotate_inverse(body, cx / length, cy / length, cz / length)
-    tilt = axis_angle_quaternion(ax * angle, ay * angle, az * angle)
-    ex, ey, _ = quaternion_axis_angle(tilt)
-    turn = quaternion_multiply(quaternion_multiply(quaternion_conjugate(tilt),
-                                                   quaternion_conjugate(body)), target)
-    ez = quaternion_axis_angle(turn)[2]
+    ax, ay, az = rotate_inverse_tuple(body, (cx / length, cy / length, cz / length))
+    tilt = exp_tuple((ax * angle, ay * angle, az * angle))
+    ex, ey, _ = log_tuple(tilt)
+    turn = multiply_tuple(multiply_tuple(conjugate_tuple(tilt), conjugate_tuple(body)), target)
+    ez = log_tuple(turn)[2]
     return ex, ey, ez, tilt, angle
 
 
@@ -290,8 +292,8 @@ def _limit_rates(s, base, roll_max, pitch_max, yaw_max):
 def _attitude_target(P, s, dt):
     """Turn the attitude target towards the thrust direction and heading (input shaping)."""
     qt = (s[S_AT_Q], s[S_AT_Q + 1], s[S_AT_Q + 2], s[S_AT_Q + 3])
-    step = axis_angle_quaternion(s[S_AT_W] * dt, s[S_AT_W + 1] * dt, s[S_AT_W + 2] * dt)
-    qt = quaternion_normalized(quaternion_multiply(qt, step))
+    step = exp_tuple((s[S_AT_W] * dt, s[S_AT_W + 1] * dt, s[S_AT_W + 2] * dt))
+    qt = normalized_tuple(multiply_tuple(qt, step))
     slew = P[P_SLEW_YAW]
     heading_rate = clamp(s[S_TYAW_RATE], -slew, slew)
     desired = thrust_heading_quaternion(s[S_ACC_T], s[S_ACC_T + 1], GRAVITY, s[S_TYAW])
@@ -323,8 +325,7 @@ def _attitude_control(P, s, dt):
                                                 heading_accel), _YAW_ERROR_MAX)
         if abs(ez) > error_max:  # the target is held within reach of the yaw loop
             ez = clamp(ez, -error_max, error_max)
-            qt = quaternion_multiply(quaternion_multiply(qb, tilt),
-                                     axis_angle_quaternion(0.0, 0.0, ez))
+            qt = multiply_tuple(multiply_tuple(qb, tilt), exp_tuple((0.0, 0.0, ez)))
             for i in range(4):
                 s[S_AT_Q + i] = qt[i]
     errors = (ex, ey, ez)
@@ -334,8 +335,8 @@ def _attitude_control(P, s, dt):
         limit = clamp(0.5 * accel, low, high) if accel > 0.0 else 0.0
         s[S_RATE_T + i] = sqrt_controller(errors[i], P[P_ANGLE_P + i], limit, dt)
     _limit_rates(s, S_RATE_T, P[P_RATE_MAX], P[P_RATE_MAX + 1], P[P_RATE_MAX + 2])
-    to_body = quaternion_multiply(quaternion_conjugate(qb), qt)
-    fx, fy, fz = rotate(to_body, s[S_AT_W], s[S_AT_W + 1], s[S_AT_W + 2])
+    to_body = multiply_tuple(conjugate_tuple(qb), qt)
+    fx, fy, fz = rotate_tuple(to_body, (s[S_AT_W], s[S_AT_W + 1], s[S_AT_W + 2]))
     s[S_RATE_T] += fx
     s[S_RATE_T + 1] += fy
     s[S_RATE_T + 2] += fz
@@ -362,7 +363,7 @@ def _rate_control(P, s, dt):
 def _plant(P, s, dt):
     """Throttle (boosted by tilt, low-passed) → thrust; the rigid body one step on."""
     q = (s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3])
-    zx, zy, zz = rotate(q, 0.0, 0.0, 1.0)
+    zx, zy, zz = rotate_tuple(q, (0.0, 0.0, 1.0))
     boosted = s[S_THR_IN] / clamp(zz, 0.1, 1.0)
     s[S_THR_FILT] = clamp(s[S_THR_FILT] + lowpass_alpha(dt, P[P_THROTTLE_HZ])
                           * (boosted - s[S_THR_FILT]), 0.0, 1.0)
@@ -381,8 +382,8 @@ def _plant(P, s, dt):
         s[S_V + i] += s[S_ACC + i] * dt
         s[S_P + i] += s[S_V + i] * dt - 0.5 * s[S_ACC + i] * dt * dt
         s[S_W + i] += s[S_WDOT + i] * dt
-    step = axis_angle_quaternion(s[S_W] * dt, s[S_W + 1] * dt, s[S_W + 2] * dt)
-    q = quaternion_normalized(quaternion_multiply(q, step))
+    step = exp_tuple((s[S_W] * dt, s[S_W + 1] * dt, s[S_W + 2] * dt))
+    q = normalized_tuple(multiply_tuple(q, step))
     for i in range(4):
         s[S_Q + i] = q[i]
 

@@ -25,6 +25,7 @@ from mavsysid.vehicle import arducopter_loop, px4_loop
 from mavsysid.vehicle.allocation import allocation_matrix, allocation_pinv
 from mavsysid.vehicle.config_types import VehicleConfig
 from mavsysid.vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
+from mavsysid.vehicle.rotation import continuous_sign, quat_to_matrix, quat_yaw
 from mavsysid.vehicle.trajectory import Trajectory
 
 __all__ = [
@@ -262,21 +263,14 @@ class FlownFlight:
     @property
     def yaw(self) -> np.ndarray:
         """Heading of the body x axis, rad (ENU, unwrapped), shape (S,)."""
-        w, x, y, z = self.quaternion.T
-        return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+        return np.unwrap(quat_yaw(self.quaternion))
 
     def states(self) -> np.ndarray:
         """Model states [p, v_B, q, ω], shape (S, 13)."""
         x = np.empty((self.times.size, STATE_DIM))
         x[:, POS] = self.position
         x[:, ATT] = self.quaternion
-        w, a, b, c = self.quaternion.T
-        R = np.stack([
-            np.stack([1 - 2 * (b * b + c * c), 2 * (a * b - w * c), 2 * (a * c + w * b)], -1),
-            np.stack([2 * (a * b + w * c), 1 - 2 * (a * a + c * c), 2 * (b * c - w * a)], -1),
-            np.stack([2 * (a * c - w * b), 2 * (b * c + w * a), 1 - 2 * (a * a + b * b)], -1)],
-            axis=1)
-        x[:, VEL] = np.einsum("sji,sj->si", R, self.velocity)
+        x[:, VEL] = np.einsum("sji,sj->si", quat_to_matrix(self.quaternion), self.velocity)
         x[:, RATE] = self.body_rates
         return x
 
@@ -396,9 +390,7 @@ def flown_flight(records: np.ndarray, config: VehicleConfig, theta: np.ndarray) 
     theta : ndarray, shape (6,)
         θ, SI.
     """
-    q = records[:, 10:14].copy()
-    flip = np.concatenate([[False], np.sum(q[1:] * q[:-1], axis=1) < 0.0])
-    q[np.logical_xor.accumulate(flip)] *= -1.0
+    q = continuous_sign(records[:, 10:14])
     w, dw = records[:, 14:17], records[:, 17:20]
     J = theta[3:6]
     torque = J * records[:, 28:31] + np.cross(w, J * w)

@@ -20,7 +20,7 @@ from mavsysid.vehicle.allocation import allocation_pinv
 from mavsysid.vehicle.config_types import VehicleConfig
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.dynamics import ATT, POS, RATE, STATE_DIM, VEL
-from mavsysid.vehicle.rotation import matrix_to_quat_kernel
+from mavsysid.vehicle.rotation import continuous_sign_kernel, matrix_to_quat_kernel
 from mavsysid.vehicle.trajectory import FlatOutputs
 
 __all__ = ["SAMPLE_RATE", "SAMPLE_SIZE", "FlatState", "flat_sample", "flat_to_state"]
@@ -168,12 +168,10 @@ def _flat_states_kernel(acc, jerk, snap, yaw, yaw_rate, yaw_acc, velocity, J, ma
     omega, domega = np.full((S, 3), np.nan), np.full((S, 3), np.nan)
     torque, thrust, n2 = np.full((S, 3), np.nan), np.full(S, np.nan), np.full((S, k), np.nan)
     f = np.empty(SAMPLE_SIZE)
-    have_previous = False
     for i in range(S):
         if not flat_sample(acc[i, 0], acc[i, 1], acc[i, 2], jerk[i, 0], jerk[i, 1], jerk[i, 2],
                            snap[i, 0], snap[i, 1], snap[i, 2], yaw[i], yaw_rate[i], yaw_acc[i],
                            J, f):
-            have_previous = False
             continue
         for a in range(3):
             for b in range(3):
@@ -185,17 +183,12 @@ def _flat_states_kernel(acc, jerk, snap, yaw, yaw_rate, yaw_acc, velocity, J, ma
             v_body[i, b] = R[i, 0, b] * velocity[i, 0] + R[i, 1, b] * velocity[i, 1] \
                 + R[i, 2, b] * velocity[i, 2]
         matrix_to_quat_kernel(R[i], quat[i])
-        # Sign-continuous along the samples: consecutive q in the same hemisphere.
-        if have_previous and (quat[i, 0] * quat[i - 1, 0] + quat[i, 1] * quat[i - 1, 1]
-                              + quat[i, 2] * quat[i - 1, 2] + quat[i, 3] * quat[i - 1, 3]) < 0.0:
-            for c in range(4):
-                quat[i, c] = -quat[i, c]
-        have_previous = True
         thrust[i] = mass * f[SAMPLE_NORM]
         # Paper Eq. allocation: [T; J ω̇ + ω × J ω] = A n².
         for r in range(k):
             n2[i, r] = (pinv[r, 0] * thrust[i] + pinv[r, 1] * torque[i, 0]
                         + pinv[r, 2] * torque[i, 1] + pinv[r, 3] * torque[i, 2])
+    continuous_sign_kernel(quat)  # restarts after a singular (NaN) sample
     return R, quat, v_body, omega, domega, thrust, torque, n2
 
 

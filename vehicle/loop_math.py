@@ -4,9 +4,10 @@ The building blocks `mavsysid.vehicle.arducopter_loop` and `mavsysid.vehicle.px4
 assemble: the square-root controller (a P controller whose output's rate of change is
 bounded, ArduPilot's ``sqrt_controller``), jerk-limited kinematic shaping towards a moving
 target (ArduPilot's ``shape_pos_vel_accel``, one axis and the horizontal plane), first-order
-low-pass filters, and quaternion arithmetic on tuples (no arrays are allocated per tick).
-Written from the documented behaviour of those functions; quaternions are [w, x, y, z],
-Hamilton, body → world (`mavsysid.vehicle.rotation`).
+low-pass filters, and the attitude of a thrust direction and heading. Written from the
+documented behaviour of those functions; quaternions are [w, x, y, z], Hamilton, body →
+world, and their arithmetic is `mavsysid.vehicle.rotation`'s tuple forms (nothing is
+allocated per tick).
 """
 
 from __future__ import annotations
@@ -14,19 +15,13 @@ from __future__ import annotations
 import math
 
 import numba
+from mavsysid.vehicle.rotation import exp_tuple, multiply_tuple
 
 __all__ = [
-    "axis_angle_quaternion",
     "clamp",
     "inverse_sqrt_controller",
     "limit_length",
     "lowpass_alpha",
-    "quaternion_axis_angle",
-    "quaternion_conjugate",
-    "quaternion_multiply",
-    "quaternion_normalized",
-    "rotate",
-    "rotate_inverse",
     "shape_position_1d",
     "shape_position_2d",
     "shape_velocity_1d",
@@ -267,105 +262,6 @@ def shape_position_2d(px_in: float, py_in: float, vx_in: float, vy_in: float, ax
 
 
 @numba.njit(cache=True)
-def quaternion_multiply(a: tuple, b: tuple) -> tuple[float, float, float, float]:
-    """a ⊗ b of tuples (w, x, y, z).
-
-    Parameters
-    ----------
-    a, b : tuple of 4 float
-    """
-    return (a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0])
-
-
-@numba.njit(cache=True)
-def quaternion_conjugate(q: tuple) -> tuple[float, float, float, float]:
-    """The inverse rotation of a unit quaternion.
-
-    Parameters
-    ----------
-    q : tuple of 4 float
-    """
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-@numba.njit(cache=True)
-def quaternion_normalized(q: tuple) -> tuple[float, float, float, float]:
-    """``q`` scaled to unit length.
-
-    Parameters
-    ----------
-    q : tuple of 4 float
-    """
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-
-
-@numba.njit(cache=True)
-def rotate(q: tuple, x: float, y: float, z: float) -> tuple[float, float, float]:
-    """R(q) v for v = (x, y, z).
-
-    Parameters
-    ----------
-    q : tuple of 4 float
-        Unit quaternion.
-    x, y, z : float
-        The vector.
-    """
-    w, a, b, c = q[0], q[1], q[2], q[3]
-    tx, ty, tz = 2.0 * (b * z - c * y), 2.0 * (c * x - a * z), 2.0 * (a * y - b * x)
-    return (x + w * tx + b * tz - c * ty, y + w * ty + c * tx - a * tz,
-            z + w * tz + a * ty - b * tx)
-
-
-@numba.njit(cache=True)
-def rotate_inverse(q: tuple, x: float, y: float, z: float) -> tuple[float, float, float]:
-    """R(q)ᵀ v for v = (x, y, z).
-
-    Parameters
-    ----------
-    q : tuple of 4 float
-        Unit quaternion.
-    x, y, z : float
-        The vector.
-    """
-    return rotate(quaternion_conjugate(q), x, y, z)
-
-
-@numba.njit(cache=True)
-def axis_angle_quaternion(x: float, y: float, z: float) -> tuple[float, float, float, float]:
-    """The unit quaternion of a rotation vector.
-
-    Parameters
-    ----------
-    x, y, z : float
-        Rotation vector, rad.
-    """
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle < 1e-12:
-        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
-    s = math.sin(0.5 * angle) / angle
-    return (math.cos(0.5 * angle), s * x, s * y, s * z)
-
-
-@numba.njit(cache=True)
-def quaternion_axis_angle(q: tuple) -> tuple[float, float, float]:
-    """The rotation vector (rad, angle ≤ π) of a unit quaternion.
-
-    Parameters
-    ----------
-    q : tuple of 4 float
-    """
-    sign = -1.0 if q[0] < 0.0 else 1.0
-    w = sign * q[0]
-    n = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    scale = 2.0 / w if n < 1e-9 else 2.0 * math.atan2(n, w) / n
-    return (sign * scale * q[1], sign * scale * q[2], sign * scale * q[3])
-
-
-@numba.njit(cache=True)
 def thrust_heading_quaternion(tx: float, ty: float, tz: float,
                               heading: float) -> tuple[float, float, float, float]:
     """The attitude whose body z axis is along the thrust vector (tx, ty, tz) (world ENU,
@@ -389,6 +285,5 @@ def thrust_heading_quaternion(tx: float, ty: float, tz: float,
     if length < 1e-12:
         tilt = (1.0, 0.0, 0.0, 0.0)
     else:
-        tilt = axis_angle_quaternion(ax / length * angle, ay / length * angle, 0.0)
-    return quaternion_multiply(tilt, (math.cos(0.5 * heading), 0.0, 0.0,
-                                      math.sin(0.5 * heading)))
+        tilt = exp_tuple((ax / length * angle, ay / length * angle, 0.0))
+    return multiply_tuple(tilt, (math.cos(0.5 * heading), 0.0, 0.0, math.sin(0.5 * heading)))

@@ -39,6 +39,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from mavsysid.vehicle.rotation import wrap_angle
 
 __all__ = [
     "ANGLE_TOLERANCE_DEG",
@@ -220,7 +221,7 @@ def _spin(direction: int) -> str:
 
 def _angle_gap(a: float, b: float) -> float:
     """|a − b| in degrees, wrapped into [0, 180]."""
-    return abs((a - b + 180.0) % 360.0 - 180.0)
+    return abs(math.degrees(wrap_angle(math.radians(a - b))))
 
 
 def output_to_rotor(positions: np.ndarray, directions: np.ndarray,

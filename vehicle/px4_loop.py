@@ -34,16 +34,16 @@ import math
 import numba
 import numpy as np
 from mavsysid.vehicle.constants import GRAVITY
-from mavsysid.vehicle.loop_math import (
-    axis_angle_quaternion,
-    clamp,
-    limit_length,
-    lowpass_alpha,
-    quaternion_conjugate,
-    quaternion_multiply,
-    quaternion_normalized,
-    rotate,
-    rotate_inverse,
+from mavsysid.vehicle.loop_math import clamp, limit_length, lowpass_alpha
+from mavsysid.vehicle.rotation import (
+    conjugate_tuple,
+    exp_tuple,
+    log_tuple,
+    matrix_to_quat_tuple,
+    multiply_tuple,
+    normalized_tuple,
+    rotate_inverse_tuple,
+    rotate_tuple,
 )
 
 __all__ = ["PARAMETER_COUNT", "RECORD_COLUMNS", "STATE_SIZE", "initial_state",
@@ -114,9 +114,9 @@ def initial_state(position: np.ndarray, velocity: np.ndarray, acceleration: np.n
     s[S_TYAW], s[S_TYAW_RATE] = yaw, yaw_rate
     q = _attitude_setpoint(acceleration[0], acceleration[1], yaw)
     s[S_Q:S_Q + 4] = s[S_QD:S_QD + 4] = q
-    rate = yaw_rate * rotate_inverse(q, 0.0, 0.0, 1.0)[2]
+    rate = yaw_rate * rotate_inverse_tuple(q, (0.0, 0.0, 1.0))[2]
     s[S_W + 2] = s[S_RATE_T + 2] = s[S_RPID + 8] = rate
-    s[S_THRUST] = (GRAVITY + acceleration[2]) / max(rotate(q, 0.0, 0.0, 1.0)[2], 0.1)
+    s[S_THRUST] = (GRAVITY + acceleration[2]) / max(rotate_tuple(q, (0.0, 0.0, 1.0))[2], 0.1)
     return s
 
 
@@ -130,10 +130,7 @@ def _attitude_setpoint(ax, ay, yaw):
     m = math.sqrt(xx * xx + xy * xy + xz * xz)
     xx, xy, xz = xx / m, xy / m, xz / m
     yx, yy, yz = zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx
-    trace = xx + yy + zz
-    w = math.sqrt(max(1.0 + trace, 1e-12)) * 0.5
-    return quaternion_normalized((w, (yz - zy) / (4 * w), (zx - xz) / (4 * w),
-                                  (xy - yx) / (4 * w)))
+    return matrix_to_quat_tuple(((xx, yx, zx), (xy, yy, zy), (xz, yz, zz)))
 
 
 @numba.njit(cache=True)
@@ -170,23 +167,21 @@ def _attitude(P, s):
     """Tilt first, yaw weighted: the body-rate setpoint, yaw rate fed forward."""
     q = (s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3])
     qd = (s[S_QD], s[S_QD + 1], s[S_QD + 2], s[S_QD + 3])
-    ez = rotate(q, 0.0, 0.0, 1.0)
-    ezd = rotate(qd, 0.0, 0.0, 1.0)
+    ez = rotate_tuple(q, (0.0, 0.0, 1.0))
+    ezd = rotate_tuple(qd, (0.0, 0.0, 1.0))
     cx, cy, cz = ez[1] * ezd[2] - ez[2] * ezd[1], ez[2] * ezd[0] - ez[0] * ezd[2], \
         ez[0] * ezd[1] - ez[1] * ezd[0]
     dot = ez[0] * ezd[0] + ez[1] * ezd[1] + ez[2] * ezd[2]
-    red = quaternion_normalized((1.0 + dot, cx, cy, cz))
-    red = quaternion_multiply(red, q)
-    dyaw = quaternion_multiply(quaternion_conjugate(red), qd)
-    if dyaw[0] < 0.0:
-        dyaw = (-dyaw[0], -dyaw[1], -dyaw[2], -dyaw[3])
-    angle = 2.0 * math.atan2(dyaw[3], dyaw[0]) * P[P_YAW_W]
-    qd = quaternion_multiply(red, (math.cos(0.5 * angle), 0.0, 0.0, math.sin(0.5 * angle)))
-    qe = quaternion_multiply(quaternion_conjugate(q), qd)
+    red = normalized_tuple((1.0 + dot, cx, cy, cz))
+    red = multiply_tuple(red, q)
+    # The rest is a turn about z: its angle, the shorter way, weighted.
+    angle = log_tuple(multiply_tuple(conjugate_tuple(red), qd))[2] * P[P_YAW_W]
+    qd = multiply_tuple(red, (math.cos(0.5 * angle), 0.0, 0.0, math.sin(0.5 * angle)))
+    qe = multiply_tuple(conjugate_tuple(q), qd)
     sign = -2.0 if qe[0] < 0.0 else 2.0
     yaw_gain = P[P_ATT_P + 2] / P[P_YAW_W] if P[P_YAW_W] > 1e-4 else P[P_ATT_P + 2]
     gains = (P[P_ATT_P], P[P_ATT_P + 1], yaw_gain)
-    fx, fy, fz = rotate_inverse(q, 0.0, 0.0, s[S_TYAW_RATE])
+    fx, fy, fz = rotate_inverse_tuple(q, (0.0, 0.0, s[S_TYAW_RATE]))
     ff = (fx, fy, fz)
     for i in range(3):
         rate = sign * qe[1 + i] * gains[i] + ff[i]
@@ -212,7 +207,7 @@ def _rates(P, s, dt):
 @numba.njit(cache=True)
 def _plant(P, s, dt):
     q = (s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3])
-    zx, zy, zz = rotate(q, 0.0, 0.0, 1.0)
+    zx, zy, zz = rotate_tuple(q, (0.0, 0.0, 1.0))
     thrust = s[S_THRUST]
     along = s[S_V] * zx + s[S_V + 1] * zy + s[S_V + 2] * zz
     drag = thrust * P[P_DRAG]
@@ -225,8 +220,8 @@ def _plant(P, s, dt):
         s[S_V + i] += s[S_ACC + i] * dt
         s[S_P + i] += s[S_V + i] * dt - 0.5 * s[S_ACC + i] * dt * dt
         s[S_W + i] += s[S_WDOT + i] * dt
-    step = axis_angle_quaternion(s[S_W] * dt, s[S_W + 1] * dt, s[S_W + 2] * dt)
-    q = quaternion_normalized(quaternion_multiply(q, step))
+    step = exp_tuple((s[S_W] * dt, s[S_W + 1] * dt, s[S_W + 2] * dt))
+    q = normalized_tuple(multiply_tuple(q, step))
     for i in range(4):
         s[S_Q + i] = q[i]
 

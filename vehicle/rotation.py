@@ -1,10 +1,13 @@
 """Quaternion and rotation helpers in mavsysid's conventions, each written once.
 
 Quaternions are Hamilton, stored scalar first ``[w, x, y, z]``, and rotate body → world.
-The numpy functions broadcast over leading dimensions; the ``*_kernel`` functions are their
-single-sample forms for numba code (the numpy forms of q → R and R → q loop over them, so
-each formula is written once). Also here: a quaternion sequence made sign-continuous,
-Euler angles and yaw of a quaternion, angle wrapping, and slerp between samples.
+The numpy functions broadcast over leading dimensions. For numba code there are single-sample
+forms: the ``*_tuple`` functions take arrays or tuples alike and return tuples, so nothing
+is allocated (a closed loop calls them every tick); the ``*_kernel`` functions return or
+fill arrays and are built on them (as are the numpy forms of q → R, R → q and sign
+continuity), so each formula is written once. Also here: a vector rotated by a quaternion,
+a quaternion sequence made sign-continuous, Euler angles and yaw of a quaternion, angle
+wrapping, and slerp between samples.
 """
 
 from __future__ import annotations
@@ -13,13 +16,20 @@ import numba
 import numpy as np
 
 __all__ = [
+    "conjugate_tuple",
     "continuous_sign",
+    "continuous_sign_kernel",
     "exp_kernel",
+    "exp_tuple",
     "interpolate_quaternions",
     "log_kernel",
+    "log_tuple",
     "matrix_to_quat",
     "matrix_to_quat_kernel",
+    "matrix_to_quat_tuple",
     "multiply_kernel",
+    "multiply_tuple",
+    "normalized_tuple",
     "quat_conjugate",
     "quat_exp",
     "quat_log",
@@ -28,8 +38,11 @@ __all__ = [
     "quat_to_euler",
     "quat_to_matrix",
     "quat_yaw",
+    "rotate_inverse_tuple",
+    "rotate_tuple",
     "rotation_kernel",
     "skew",
+    "slerp_tuple",
     "wrap_angle",
     "wrap_angle_kernel",
 ]
@@ -139,9 +152,7 @@ def continuous_sign(q: np.ndarray) -> np.ndarray:
         Quaternions [w, x, y, z] in time order.
     """
     q = np.array(q, dtype=float)
-    if q.shape[0] > 1:
-        flips = np.cumsum(np.r_[False, np.sum(q[1:] * q[:-1], axis=1) < 0.0]) % 2 == 1
-        q[flips] *= -1.0
+    continuous_sign_kernel(q)
     return q
 
 
@@ -259,54 +270,191 @@ def quat_log(q: np.ndarray) -> np.ndarray:
     return scale * v
 
 
-# Scalar versions for compiled loops (the EKF and batch estimator), same conventions.
+# Single-sample forms for numba code, same conventions. The tuple forms index their inputs
+# (arrays or tuples) and return tuples: no allocation per call.
+
+
+@numba.njit(cache=True)
+def multiply_tuple(p, q):
+    """p ⊗ q of single quaternions, as a tuple (w, x, y, z), for numba code.
+
+    Parameters
+    ----------
+    p, q : ndarray or tuple, shape (4,)
+        Quaternions [w, x, y, z].
+    """
+    return (p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+            p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+            p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+            p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0])
+
+
+@numba.njit(cache=True)
+def conjugate_tuple(q):
+    """Conjugate (the inverse of a unit quaternion), as a tuple, for numba code.
+
+    Parameters
+    ----------
+    q : ndarray or tuple, shape (4,)
+        Quaternion [w, x, y, z].
+    """
+    return (q[0], -q[1], -q[2], -q[3])
+
+
+@numba.njit(cache=True)
+def normalized_tuple(q):
+    """``q`` scaled to unit length, its sign kept (unlike `quat_normalize`), as a tuple.
+
+    Parameters
+    ----------
+    q : ndarray or tuple, shape (4,)
+        Quaternion [w, x, y, z], not zero.
+    """
+    n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+@numba.njit(cache=True)
+def exp_tuple(v):
+    """Exp of one rotation vector → unit quaternion, as a tuple, for numba code.
+
+    Parameters
+    ----------
+    v : ndarray or tuple, shape (3,)
+        Rotation vector, rad.
+    """
+    angle = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    # sin(θ/2)/θ with its Taylor series near zero, where the quotient loses precision.
+    sinc = 0.5 - angle * angle / 48.0 if angle < 0.0001 else np.sin(0.5 * angle) / angle
+    return (np.cos(0.5 * angle), sinc * v[0], sinc * v[1], sinc * v[2])
+
+
+@numba.njit(cache=True)
+def log_tuple(q):
+    """Log of one unit quaternion → rotation vector (rad, angle ≤ π), as a tuple.
+
+    Parameters
+    ----------
+    q : ndarray or tuple, shape (4,)
+        Unit quaternion [w, x, y, z].
+    """
+    sign = -1.0 if q[0] < 0.0 else 1.0
+    w = sign * q[0]
+    vn = np.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    # θ / sin(θ/2) → 2 / w (1 + …) near zero; 2/w is exact to O(|v|²).
+    scale = sign * (2.0 / w if vn < 1e-08 else 2.0 * np.arctan2(vn, w) / vn)
+    return (scale * q[1], scale * q[2], scale * q[3])
+
+
+@numba.njit(cache=True)
+def rotate_tuple(q, v):
+    """R(q) v without forming R, as a tuple, for numba code.
+
+    Parameters
+    ----------
+    q : ndarray or tuple, shape (4,)
+        Unit quaternion [w, x, y, z].
+    v : ndarray or tuple, shape (3,)
+        The vector.
+    """
+    w, a, b, c = q[0], q[1], q[2], q[3]
+    x, y, z = v[0], v[1], v[2]
+    # v + w t + u × t with t = 2 u × v, u the vector part.
+    tx, ty, tz = 2.0 * (b * z - c * y), 2.0 * (c * x - a * z), 2.0 * (a * y - b * x)
+    return (x + w * tx + b * tz - c * ty, y + w * ty + c * tx - a * tz,
+            z + w * tz + a * ty - b * tx)
+
+
+@numba.njit(cache=True)
+def rotate_inverse_tuple(q, v):
+    """R(q)ᵀ v (the vector in the frame q rotates from) without forming R, as a tuple.
+
+    Parameters
+    ----------
+    q, v
+        As for `rotate_tuple`.
+    """
+    return rotate_tuple(conjugate_tuple(q), v)
+
+
+@numba.njit(cache=True)
+def slerp_tuple(q0, q1, s):
+    """q0 ⊗ Exp(s Log(q0⁻¹ ⊗ q1)): ``s`` of the way from q0 to q1 along the shorter arc.
+
+    Parameters
+    ----------
+    q0, q1 : ndarray or tuple, shape (4,)
+        Unit quaternions [w, x, y, z].
+    s : float
+        Fraction of the way, 0 at q0 and 1 at q1.
+    """
+    d = log_tuple(multiply_tuple(conjugate_tuple(q0), q1))
+    return multiply_tuple(q0, exp_tuple((s * d[0], s * d[1], s * d[2])))
+
+
+@numba.njit(cache=True)
+def matrix_to_quat_tuple(R):
+    """Unit quaternion (w, x, y, z), w ≥ 0, of a rotation matrix (Shepperd's branch choice:
+    accurate at every angle), as a tuple, for numba code.
+
+    Parameters
+    ----------
+    R : ndarray or tuple of 3 rows, shape (3, 3)
+        Rotation matrix, indexed ``R[i][j]``.
+    """
+    r00, r01, r02 = R[0][0], R[0][1], R[0][2]
+    r10, r11, r12 = R[1][0], R[1][1], R[1][2]
+    r20, r21, r22 = R[2][0], R[2][1], R[2][2]
+    trace = r00 + r11 + r22
+    if trace >= r00 and trace >= r11 and trace >= r22:
+        w, x, y, z = 1.0 + trace, r21 - r12, r02 - r20, r10 - r01
+    elif r00 >= r11 and r00 >= r22:
+        w, x, y, z = r21 - r12, 1.0 + r00 - r11 - r22, r01 + r10, r02 + r20
+    elif r11 >= r22:
+        w, x, y, z = r02 - r20, r01 + r10, 1.0 + r11 - r00 - r22, r12 + r21
+    else:
+        w, x, y, z = r10 - r01, r02 + r20, r12 + r21, 1.0 + r22 - r00 - r11
+    scale = 1.0 / np.sqrt(w * w + x * x + y * y + z * z)
+    if w < 0.0:
+        scale = -scale
+    return (w * scale, x * scale, y * scale, z * scale)
 
 
 @numba.njit(cache=True)
 def multiply_kernel(p, q):
-    """p ⊗ q for single quaternions (4,), for numba code.
+    """p ⊗ q for single quaternions (4,), as an array, for numba code.
 
     Parameters
     ----------
     p, q : ndarray, shape (4,)
         Quaternions [w, x, y, z].
     """
-    return np.array([
-        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
-        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
-        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
-        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
-    ])
+    return np.array(multiply_tuple(p, q))
 
 
 @numba.njit(cache=True)
 def exp_kernel(v):
-    """Exp of one rotation vector (3,) → unit quaternion (4,), for numba code.
+    """Exp of one rotation vector (3,) → unit quaternion (4,), as an array, for numba code.
 
     Parameters
     ----------
     v : ndarray, shape (3,)
         Rotation vector, rad.
     """
-    angle = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    sinc = 0.5 - angle * angle / 48.0 if angle < 0.0001 else np.sin(0.5 * angle) / angle
-    return np.array([np.cos(0.5 * angle), sinc * v[0], sinc * v[1], sinc * v[2]])
+    return np.array(exp_tuple(v))
 
 
 @numba.njit(cache=True)
 def log_kernel(q):
-    """Log of one unit quaternion (4,) → rotation vector (3,) with angle ≤ π, for numba code.
+    """Log of one unit quaternion (4,) → rotation vector (3,) with angle ≤ π, as an array,
+    for numba code.
 
     Parameters
     ----------
     q : ndarray, shape (4,)
         Unit quaternion [w, x, y, z].
     """
-    sign = -1.0 if q[0] < 0.0 else 1.0
-    w = sign * q[0]
-    vn = np.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    scale = 2.0 / w if vn < 1e-08 else 2.0 * np.arctan2(vn, w) / vn
-    return sign * scale * q[1:4]
+    return np.array(log_tuple(q))
 
 
 @numba.njit(cache=True)
@@ -335,8 +483,8 @@ def rotation_kernel(q):
 
 @numba.njit(cache=True)
 def matrix_to_quat_kernel(R, q):
-    """Unit quaternion [w, x, y, z] of a rotation matrix (Shepperd's branch choice), w ≥ 0,
-    into ``q`` (4,), for numba code.
+    """Unit quaternion [w, x, y, z] (w ≥ 0) of a rotation matrix into ``q`` (4,), for numba
+    code (`matrix_to_quat_tuple`).
 
     Parameters
     ----------
@@ -345,24 +493,26 @@ def matrix_to_quat_kernel(R, q):
     q : ndarray, shape (4,)
         Receives the quaternion.
     """
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
-    if trace >= R[0, 0] and trace >= R[1, 1] and trace >= R[2, 2]:
-        q[0] = 1.0 + trace
-        q[1], q[2], q[3] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
-    elif R[0, 0] >= R[1, 1] and R[0, 0] >= R[2, 2]:
-        q[1] = 1.0 + R[0, 0] - R[1, 1] - R[2, 2]
-        q[0], q[2], q[3] = R[2, 1] - R[1, 2], R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]
-    elif R[1, 1] >= R[2, 2]:
-        q[2] = 1.0 + R[1, 1] - R[0, 0] - R[2, 2]
-        q[0], q[1], q[3] = R[0, 2] - R[2, 0], R[0, 1] + R[1, 0], R[1, 2] + R[2, 1]
-    else:
-        q[3] = 1.0 + R[2, 2] - R[0, 0] - R[1, 1]
-        q[0], q[1], q[2] = R[1, 0] - R[0, 1], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1]
-    scale = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if q[0] < 0.0:
-        scale = -scale
-    for i in range(4):
-        q[i] *= scale
+    q[0], q[1], q[2], q[3] = matrix_to_quat_tuple(R)
+
+
+@numba.njit(cache=True)
+def continuous_sign_kernel(q):
+    """`continuous_sign` in place on ``q`` (N, 4), for numba code: each sample takes the
+    sign that makes its dot product with the previous (corrected) one non-negative; a row
+    after a NaN row keeps its sign.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+        Quaternions [w, x, y, z] in time order.
+    """
+    for i in range(1, q.shape[0]):
+        dot = (q[i, 0] * q[i - 1, 0] + q[i, 1] * q[i - 1, 1] + q[i, 2] * q[i - 1, 2]
+               + q[i, 3] * q[i - 1, 3])
+        if dot < 0.0:
+            for c in range(4):
+                q[i, c] = -q[i, c]
 
 
 @numba.njit(cache=True)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from mavsysid.flight.offline.effects import TruthEffect
-from mavsysid.vehicle.rotation import exp_kernel, log_kernel, multiply_kernel
+from mavsysid.vehicle.rotation import exp_tuple, multiply_tuple, normalized_tuple, slerp_tuple
 
 __all__ = ["OnboardPoseEstimate"]
 
@@ -38,8 +38,7 @@ def _interpolate(t0, p0, q0, t1, p1, q1, target, out):
     """The pose at ``target`` between two samples into ``out`` (7,): [p, q] (at t0 before)."""
     s = 0.0 if target <= t0 else min((target - t0) / (t1 - t0), 1.0)
     out[0:3] = p0 + s * (p1 - p0)
-    conj = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
-    out[3:7] = multiply_kernel(q0, exp_kernel(s * log_kernel(multiply_kernel(conj, q1))))
+    out[3:7] = slerp_tuple(q0, q1, s)
 
 
 @numba.njit(cache=True)
@@ -54,14 +53,10 @@ def _estimator_step(state, pose, alpha, a, sigma, nu, first, out):
         state[7:13] = sigma * nu
     else:
         state[0:3] += alpha * (pose[0:3] - state[0:3])
-        q = state[3:7]
-        conj = np.array([q[0], -q[1], -q[2], -q[3]])
-        q = multiply_kernel(q, exp_kernel(alpha * log_kernel(multiply_kernel(conj, pose[3:7]))))
-        state[3:7] = q / np.sqrt(np.sum(q * q))
+        state[3:7] = normalized_tuple(slerp_tuple(state[3:7], pose[3:7], alpha))
         state[7:13] = a * state[7:13] + np.sqrt(1.0 - a * a) * sigma * nu
     out[0:3] = state[0:3] + state[7:10]
-    q = multiply_kernel(state[3:7], exp_kernel(state[10:13]))
-    out[3:7] = q / np.sqrt(np.sum(q * q))
+    out[3:7] = normalized_tuple(multiply_tuple(state[3:7], exp_tuple(state[10:13])))
 
 
 @dataclass

@@ -52,7 +52,7 @@ from mavsysid.formats.flight_log import FlightRecorder
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.dynamics import STATE_DIM
 from mavsysid.vehicle.mav_model import rotor_speed_for_thrust
-from mavsysid.vehicle.rotation import quat_yaw
+from mavsysid.vehicle.rotation import quat_yaw, rotate_inverse_tuple, rotate_tuple
 
 __all__ = [
     "CONTROL_DT_US",
@@ -77,17 +77,6 @@ ORIGIN = (47.397742, 8.545594, 488.0)
 
 #: Shaper limits before the autopilot applies its parameters: ArduPilot's defaults.
 DEFAULT_LIMITS = (4.0, 8.0, 5.0, 2.5, 1.5, 2.5, 2.5, 2.0, 1.5)
-
-
-def _rotate(q: list[float], v: list[float]) -> list[float]:
-    """R(q) v for a unit quaternion [w, x, y, z], on plain floats (numpy is slow at 3-D)."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    # v + 2 w (u × v) + 2 u × (u × v), u = (x, y, z)
-    cx, cy, cz = y * vz - z * vy, z * vx - x * vz, x * vy - y * vx
-    return [vx + 2.0 * (w * cx + y * cz - z * cy),
-            vy + 2.0 * (w * cy + z * cx - x * cz),
-            vz + 2.0 * (w * cz + x * cy - y * cx)]
 
 
 class TruthLog:
@@ -266,7 +255,7 @@ class SimVehicle:
 
     def velocity(self) -> np.ndarray:
         """True velocity, m/s, world ENU."""
-        return np.array(_rotate(self.y[6:10].tolist(), self.y[3:6].tolist()))
+        return np.array(rotate_tuple(self.y[6:10], self.y[3:6]))
 
     def yaw(self) -> float:
         """True heading, rad, ENU."""
@@ -395,12 +384,9 @@ class SimVehicle:
         if self.y[2] <= self.ground_z:
             # Ground contact: no sinking in; a downward world velocity is stopped.
             self.y[2] = self.ground_z
-            q = self.y[6:10].tolist()
-            v = _rotate(q, self.y[3:6].tolist())
-            if v[2] < 0.0:
-                v[2] = 0.0
-                w, x, y, z = q
-                self.y[3:6] = _rotate([w, -x, -y, -z], v)
+            vx, vy, vz = rotate_tuple(self.y[6:10], self.y[3:6])
+            if vz < 0.0:
+                self.y[3:6] = rotate_inverse_tuple(self.y[6:10], (vx, vy, 0.0))
             self.ground_contact += steps * _PHYSICS_DT_US * 1e-6
         else:
             self.ground_contact = 0.0

@@ -19,6 +19,7 @@ from mavsysid.vehicle.autopilot_loop import (
 )
 from mavsysid.vehicle.config import GRAVITY, load_vehicle
 from mavsysid.vehicle.loop_math import inverse_sqrt_controller, sqrt_controller
+from mavsysid.vehicle.rotation import wrap_angle
 from mavsysid.vehicle.trajectory import FlatOutputs
 
 #: The limits `mavsysid sim` reports as ArduPilot (its controller has none of them).
@@ -197,3 +198,15 @@ def test_px4_loop_tilts_within_its_limit_and_arrives(sitl_quad):
     assert np.max(tilt) <= 20.0 + 1.0
     assert np.max(tilt) >= 19.0
     assert flight.position[-1, 0] == pytest.approx(4.0, abs=0.05)
+
+
+def test_px4_loop_holds_a_heading_of_half_a_turn(sitl_quad):
+    """Hovering with the yaw setpoint at π: the attitude setpoint is the half turn about z
+    (its quaternion taken from the largest diagonal term of the attitude matrix, where the
+    trace alone leaves no scalar part), and the vehicle keeps that heading."""
+    loop = AutopilotLoop.from_parameters("px4")
+    hold = Step((0.0, 0.0, 1.5, math.pi), (0.0, 0.0, 1.5, math.pi), duration=2.0)
+    flight = fly(loop, hold, sitl_quad, sample_step=0.01)
+    assert np.max(np.abs(wrap_angle(flight.yaw - math.pi))) < 1e-9
+    np.testing.assert_allclose(np.abs(flight.attitude_target[:, 3]), 1.0, atol=1e-12)
+    assert np.max(np.abs(flight.position - [0.0, 0.0, 1.5])) < 1e-9
