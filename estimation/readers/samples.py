@@ -828,7 +828,7 @@ def _rotations(t: np.ndarray, q: np.ndarray, gyro: ImuSeries
                ) -> tuple[np.ndarray, np.ndarray]:
     """Body rotations over windows of about `_GYRO_CHECK_WINDOW` s: from the attitude, and
     the gyro's integral over the same window, each (M, 3) rad."""
-    step = max(1, int(round(_GYRO_CHECK_WINDOW / float(np.median(np.diff(t))))))
+    step = max(1, round(_GYRO_CHECK_WINDOW / float(np.median(np.diff(t)))))
     i = np.arange(0, t.shape[0] - step, step)
     attitude = quat_log(quat_multiply(quat_conjugate(q[i]), q[i + step]))
     cumulative = np.concatenate([[np.zeros(3)], np.cumsum(
