@@ -22,8 +22,13 @@ equation-error reference. Per estimated quantity (`answer_parameters`):
 * one determines it: that one's value and σ (the filter's only when it followed the
   flight);
 * neither: c_D whose data value lies within `BOUND_SIGMAS` σ of 0 is "at the bound" (drag
-  linear in rotor speed, or none: the value clipped at 0 with the data's σ); anything else
-  is "not determined by this flight" and keeps the prior's value and σ.
+  linear in rotor speed, or none: the value clipped at 0 with the data's σ), unless the
+  filter's value contradicts the balance's (then the model misses a law, and a bound with
+  the balance's σ would be a confident wrong answer); anything else is "not determined by
+  this flight" and keeps the prior's value and σ.
+
+The filter reads the pose, so it estimates θ and the wrench's nuisance quantities; a
+sensor's (the IMU's biases and offset, `with_imu_quantities`) are the balance's alone.
 
 A filter determines a quantity by the balance's own rule
 (`mavsysid.estimation.results.quantity_status`). The covariance keeps the cross terms
@@ -69,6 +74,7 @@ from mavsysid.estimation.results import (
     quantity_status,
 )
 from mavsysid.vehicle.config import VehicleConfig
+from mavsysid.vehicle.imu import imu_quantities
 from mavsysid.vehicle.linearization import MEAS_DIM
 from mavsysid.vehicle.parameters import (
     C_D,
@@ -77,6 +83,7 @@ from mavsysid.vehicle.parameters import (
     PAPER_THETA,
     PARAMETER_NAMES,
     EstimatedQuantity,
+    quantity_names,
 )
 
 from mavsysid.errors import JobFailedError
@@ -133,15 +140,16 @@ def _at_bound(b_val: np.ndarray, b_sig: np.ndarray, prior: ParameterEstimate) ->
 
 def _sources(f_est: ParameterEstimate | None, balance: WrenchBalanceResult | None,
              prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...]
-             ) -> tuple[np.ndarray, list[str]]:
-    """Per quantity, the estimate that answers ("filter", "balance", "prior"), and the
-    disagreements in words (module docstring)."""
+             ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Per quantity, the estimate that answers ("filter", "balance", "prior"), where the
+    filter and the balance disagree, and the disagreements in words (module docstring)."""
     n = len(quantities)
     f_det = (np.zeros(n, bool) if f_est is None
              else quantity_status(f_est.value, f_est.sigma, prior.sigma))
     b_det = np.zeros(n, bool) if balance is None else np.asarray(balance.determined, bool)
     b_val, b_sig = _balance_data(balance, n)
     source = np.full(n, "prior", dtype=object)
+    disagree = np.zeros(n, bool)
     mismatch = []
     for j, quantity in enumerate(quantities):
         if f_det[j] and math.isfinite(b_sig[j]):
@@ -151,6 +159,7 @@ def _sources(f_est: ParameterEstimate | None, balance: WrenchBalanceResult | Non
             stands, apart = _filter_stands(fv, fs, bv, bs, quantity.tolerance)
             source[j] = "filter" if stands else "balance" if b_det[j] else "prior"
             if apart is not None:
+                disagree[j] = True
                 mismatch.append(
                     f"{quantity.name}: filter {fv:.4g} ± {fs:.2g}, balance {bv:.4g} ± "
                     f"{bs:.2g} {quantity.unit} ({apart:.1f} σ apart)")
@@ -158,7 +167,7 @@ def _sources(f_est: ParameterEstimate | None, balance: WrenchBalanceResult | Non
             source[j] = "filter"
         elif b_det[j]:
             source[j] = "balance"
-    return source, mismatch
+    return source, disagree, mismatch
 
 
 def answer_parameters(
@@ -196,10 +205,11 @@ def answer_parameters(
     """
     if filter_result is None and balance is None:
         raise JobFailedError("no estimate to answer from")
-    f_est = None if filter_result is None else filter_result.final
-    source, mismatch = _sources(f_est, balance, prior, quantities)
+    f_est = None if filter_result is None else filter_result.final.on(prior)
+    source, disagree, mismatch = _sources(f_est, balance, prior, quantities)
     b_val, b_sig = _balance_data(balance, len(quantities))
-    bound = _at_bound(b_val, b_sig, prior) & (source == "prior")
+    # A bound is the answer only where nothing contradicts the balance's value.
+    bound = _at_bound(b_val, b_sig, prior) & (source == "prior") & ~disagree
     value = prior.value.astype(float).copy()
     cov = np.diag(prior.sigma**2)
     for name, est in (("filter", f_est), ("balance", None if balance is None
@@ -330,6 +340,7 @@ def estimate(flight: FlightData, config: VehicleConfig,
         (`mavsysid.estimation.checks.check_kinematics`).
     """
     check_kinematics(flight)
+    config = with_imu_quantities(config, flight)
     settings = settings or EstimatorSettings()
     prior = prior_from_config(config, settings)
     if flight.rotor_count == config.rotor_count:
@@ -339,8 +350,12 @@ def estimate(flight: FlightData, config: VehicleConfig,
     if balance is not None and balance_refusal is None:
         report_stage("the force and torque balance answered; checking it with the filter")
         settings = replace(settings, restart_diverged=False)
+    filter_config = _filter_config(config)
+    if reference is not None:
+        reference = reference.subset(quantity_names(filter_config.extra_quantities))
     try:
-        result = (filter_estimate or estimate_parameters)(flight, config, settings, reference)
+        result = (filter_estimate or estimate_parameters)(flight, filter_config, settings,
+                                                          reference)
         check_result(flight.source, result, config.limits.rotor_speed_max)
     except JobFailedError as error:
         reason = str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
@@ -358,6 +373,33 @@ def estimate(flight: FlightData, config: VehicleConfig,
     if balance is None:
         return result
     return _answered(result, None, balance, config, flight, prior)
+
+
+def _filter_config(config: VehicleConfig) -> VehicleConfig:
+    """The vehicle as the filter models it: the nuisance quantities of the wrench only (the
+    filter reads the pose; a sensor's terms are the balance's)."""
+    return replace(config, extra_quantities=tuple(
+        q for q in config.extra_quantities if q.term is None or q.term.channel == "wrench"))
+
+
+def with_imu_quantities(config: VehicleConfig, flight: FlightData) -> VehicleConfig:
+    """The vehicle with the nuisance quantities the flight's IMU brings (its biases, and
+    its offset from the centre of gravity where neither the vehicle file nor the log
+    states it: `mavsysid.vehicle.imu.imu_quantities`).
+
+    Parameters
+    ----------
+    config : VehicleConfig
+    flight : FlightData
+    """
+    imu = flight.imu
+    if imu is None or (imu.gyro is None and imu.accel is None):
+        return config
+    named = {q.name for q in config.extra_quantities}
+    extras = tuple(q for q in imu_quantities(
+        imu.gyro is not None, imu.accel is not None, imu.position is not None,
+        config.noise.gyro_bias_sigma, config.noise.accel_bias_sigma) if q.name not in named)
+    return replace(config, extra_quantities=config.extra_quantities + extras)
 
 
 def _balance(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
@@ -395,6 +437,7 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
         result = balance_only_result(
             balance, prior, (config.noise.position_sigma, config.noise.attitude_sigma),
             flight.pose_source, flight.true_theta, tuple(flight.warnings))
+    result = replace(result, prior=prior)
     if mismatch:
         notes.append("the filter and the force and torque balance disagree on "
                      + "; ".join(mismatch) + ": the balance answers for them (where it "

@@ -113,6 +113,23 @@ class ParameterEstimate:
         six = slice(0, len(PARAMETER_NAMES))
         return ParameterEstimate(self.value[six], self.covariance[six, six])
 
+    def subset(self, names: tuple[str, ...]) -> ParameterEstimate:
+        """The named quantities alone, in the order of ``names`` (each one of ``self.names``)."""
+        idx = [self.names.index(name) for name in names]
+        return ParameterEstimate(self.value[idx], self.covariance[np.ix_(idx, idx)],
+                                 tuple(names))
+
+    def on(self, prior: ParameterEstimate) -> ParameterEstimate:
+        """This estimate on the quantities of ``prior``: a quantity it lacks keeps the prior's
+        value and σ, uncorrelated with the rest."""
+        value = prior.value.astype(float).copy()
+        cov = np.diag(prior.sigma**2)
+        mine = [j for j, name in enumerate(prior.names) if name in self.names]
+        idx = [self.names.index(prior.names[j]) for j in mine]
+        value[mine] = self.value[idx]
+        cov[np.ix_(mine, mine)] = self.covariance[np.ix_(idx, idx)]
+        return ParameterEstimate(value, cov, prior.names)
+
     @property
     def d_optimality(self) -> float:
         """det(Σ_θ)^(1/6) of the paper's θ via log-eigenvalues (paper Eq. dopt,

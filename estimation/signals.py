@@ -47,10 +47,11 @@ from scipy.signal import oaconvolve, savgol_coeffs
 
 from mavsysid.errors import InputError
 
-__all__ = ["MAX_JITTER", "SmoothedPose", "SmootherSettings", "UniformSegment",
-           "acceleration_kernel", "body_force_readout", "body_rotation_readout",
-           "convolve_columns", "fresh_pose", "noise_gain", "savgol_kernel",
-           "smooth_pose", "uniform_segments", "uniform_step"]
+__all__ = ["MAX_JITTER", "ImuSegment", "Segment", "SmoothedPose", "SmootherSettings",
+           "UniformSegment",
+           "acceleration_kernel", "balance_segments", "body_force_readout", "body_rotation_readout",
+           "convolve_columns", "fresh_pose", "imu_segments", "noise_gain", "rate_kernel",
+           "savgol_kernel", "smooth_pose", "uniform_segments", "uniform_step"]
 
 
 #: Largest deviation of a sample interval from the median one, as a fraction of it, that
@@ -303,6 +304,25 @@ def _acceleration_kernel(window: int, polyorder: int, dt: float) -> np.ndarray:
     return h
 
 
+def rate_kernel(settings: SmootherSettings, dt: float) -> np.ndarray:
+    """The first-derivative smoother's action on an angular acceleration, shape (w,).
+
+    The derivative kernel c annihilates constants, so c ∗ ω = h ∗ ω̇ with h = dt ·
+    cumsum(c), the step response of c; averaged over half-sample shifts so that it is
+    centred on the window's odd length (ω sampled, ω̇ the derivative between samples).
+    Filtering the model's ω̇ with h reproduces what differentiating the gyro does.
+    """
+    return _rate_kernel(settings.samples(dt), settings.polyorder, dt)
+
+
+@lru_cache(maxsize=16)
+def _rate_kernel(window: int, polyorder: int, dt: float) -> np.ndarray:
+    h = np.cumsum(savgol_kernel(window, polyorder, 1, dt))[:-1] * dt
+    h = np.concatenate([[0.5 * h[0]], 0.5 * (h[1:] + h[:-1]), [0.5 * h[-1]]])
+    h.setflags(write=False)
+    return h
+
+
 def noise_gain(settings: SmootherSettings, dt: float) -> float:
     """‖c‖ of the second-derivative smoother: acceleration noise per unit position noise.
 
@@ -426,3 +446,148 @@ def uniform_segments(flight: FlightData, min_duration: float) -> list[UniformSeg
         if seg is not None and seg.t[-1] - seg.t[0] >= min_duration:
             out.append(seg)
     return out
+
+
+#: Window of the smoother that gives an IMU segment the pose's velocity, s: the rotor drag
+#: needs the velocity, which changes slowly; a short window passes a 5 Hz GPS pose.
+VELOCITY_WINDOW = 0.4
+
+
+@dataclass(frozen=True)
+class ImuSegment:
+    """One contiguous stretch of a flight on the IMU's uniform grid (M samples).
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        Grid times, s, uniform step ``dt`` (the gyro's median step).
+    dt : float
+        Grid step, s.
+    gyro : ndarray, shape (M, 3)
+        Body rates, rad/s, FLU.
+    accel : ndarray, shape (M, 3)
+        Specific force, m/s², FLU.
+    velocity_body : ndarray, shape (M, 3)
+        The pose's smoothed velocity in the body frame, m/s.
+    position : ndarray, shape (M, 3)
+        m, world ENU.
+    quaternion : ndarray, shape (M, 4)
+        Unit, body → world.
+    rotor_time : ndarray, shape (K,)
+        Times of the logged rotor speeds, s.
+    rotor_samples : ndarray, shape (K, k)
+        Logged rotor speeds, rad/s.
+    flight_start : float
+        The time the flight starts, s.
+    imu_position : ndarray, shape (3,), or None
+        The IMU's stated offset from the centre of gravity, m, body FLU.
+    """
+
+    t: np.ndarray
+    dt: float
+    gyro: np.ndarray
+    accel: np.ndarray
+    velocity_body: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    rotor_time: np.ndarray
+    rotor_samples: np.ndarray
+    flight_start: float = 0.0
+    imu_position: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
+        """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s."""
+        return _interp_columns(self.t - delay, self.rotor_time, self.rotor_samples)
+
+
+def _fresh_imu(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The samples that do not repeat their predecessor exactly (a logger faster than the
+    sensor writes the last reading again)."""
+    keep = np.concatenate([[True], np.any(np.diff(values, axis=0) != 0.0, axis=1)])
+    return t[keep], values[keep]
+
+
+def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float
+                 ) -> ImuSegment | None:
+    imu = flight.imu
+    assert imu is not None and imu.gyro is not None and imu.accel is not None
+    t0, t1 = pose.t[0], pose.t[-1]
+    tg, gyro = _fresh_imu(*_span(imu.gyro.t, imu.gyro.values, t0, t1))
+    ta, accel = _fresh_imu(*_span(imu.accel.t, imu.accel.values, t0, t1))
+    if tg.size < 4 or ta.size < 4:
+        return None
+    start, stop = max(tg[0], ta[0]), min(tg[-1], ta[-1])
+    grid = start + dt * np.arange(int(np.floor((stop - start) / dt)) + 1)
+    settings = SmootherSettings(window=max(VELOCITY_WINDOW, 5 * pose.dt), polyorder=2)
+    if len(pose) < 2 * settings.samples(pose.dt):
+        return None
+    smoothed = smooth_pose(pose.t, pose.position, pose.quaternion, settings, flight.source)
+    q = _interp_columns(grid, pose.t, smoothed.quaternion)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    velocity = _interp_columns(grid, pose.t, smoothed.velocity)
+    velocity_body = np.einsum("nji,nj->ni", quat_to_matrix(q), velocity)
+    return ImuSegment(grid, dt, _interp_columns(grid, tg, gyro), _interp_columns(grid, ta, accel),
+                      velocity_body, _interp_columns(grid, pose.t, smoothed.position), q,
+                      pose.rotor_time, pose.rotor_samples, pose.flight_start,
+                      None if imu.position is None else np.asarray(imu.position, float))
+
+
+def _span(t: np.ndarray, values: np.ndarray, t0: float, t1: float
+          ) -> tuple[np.ndarray, np.ndarray]:
+    keep = (t >= t0) & (t <= t1)
+    return t[keep], values[keep]
+
+
+def imu_segments(flight: FlightData, min_duration: float) -> list[ImuSegment]:
+    """Each segment of ``flight`` spanning at least ``min_duration`` s, on the IMU's grid.
+
+    The pose's segments (`uniform_segments`) bound them; within each, the gyro and the
+    accelerometer (fresh samples) are interpolated onto a grid at the gyro's median step,
+    and the pose's smoothed velocity, position and attitude onto the same grid.
+
+    Parameters
+    ----------
+    flight : FlightData
+        With both IMU sensors (``flight.imu.gyro`` and ``.accel``).
+    min_duration : float
+        Shortest segment kept, s.
+
+    Returns
+    -------
+    list of ImuSegment
+        In time order; empty when the flight has no gyro or no accelerometer.
+    """
+    imu = flight.imu
+    if imu is None or imu.gyro is None or imu.accel is None or len(imu.gyro) < 2:
+        return []
+    tg = imu.gyro.t
+    steps = np.diff(tg)
+    dt = float(np.median(steps[steps > 0.0])) if np.any(steps > 0.0) else 0.0
+    if not dt > 0.0:
+        return []
+    out = []
+    for pose in uniform_segments(flight, min_duration):
+        seg = _imu_segment(flight, pose, dt)
+        if seg is not None and seg.t[-1] - seg.t[0] >= min_duration:
+            out.append(seg)
+    return out
+
+
+#: A stretch of flight the balance reads: the pose's grid, or the IMU's.
+Segment = UniformSegment | ImuSegment
+
+
+def balance_segments(flight: FlightData, min_duration: float) -> list[Segment]:
+    """The flight's segments for the balance: on the IMU's grid where it has a gyro and an
+    accelerometer (`imu_segments`), else on the pose's (`uniform_segments`).
+
+    Parameters
+    ----------
+    flight : FlightData
+    min_duration : float
+        Shortest segment kept, s.
+    """
+    return imu_segments(flight, min_duration) or uniform_segments(flight, min_duration)

@@ -40,10 +40,11 @@ from mavsysid.estimation.balance.rows import (
     TORQUE_COEFFICIENTS,
     BalanceBuilder,
     BalanceRows,
+    builder_for,
 )
 from mavsysid.estimation.results import MAX_RELATIVE_SIGMA, Band, FitChoices
 from mavsysid.estimation.signals import (
-    UniformSegment,
+    Segment,
     savgol_kernel,
 )
 from mavsysid.vehicle.config import VehicleConfig
@@ -324,10 +325,10 @@ def balance_rows_for(builders: list[BalanceBuilder], choices: FitChoices,
     return out
 
 
-def _pilot_bands(segments: list[UniformSegment], config: VehicleConfig, c_d: float
+def _pilot_bands(segments: list[Segment], config: VehicleConfig, c_d: float
                  ) -> tuple[Band | None, Band | None, Band | None]:
     """Roll/pitch, yaw and force bands from the pilot-smoothed rows (coherence)."""
-    rows = [BalanceBuilder(s, config, PILOT_WINDOW).rows(0.0, c_d, magnitude=False)
+    rows = [builder_for(s, config, PILOT_WINDOW).rows(0.0, c_d, magnitude=False)
             for s in segments]
     rows = [r for r in rows if len(r) > 0]
     if not rows:
@@ -384,13 +385,13 @@ def _torque_objective(rows: list[BalanceRows], delay: float, stride: int) -> flo
     return float(np.sum(fit.residual_rms[live] ** 2 / power[live]))
 
 
-def choose_fit(segments: list[UniformSegment], config: VehicleConfig, c_d: float
+def choose_fit(segments: list[Segment], config: VehicleConfig, c_d: float
                ) -> tuple[FitChoices, list[BalanceBuilder]]:
     """Band, window and offset of ``segments`` (module docstring, steps 1–3).
 
     Parameters
     ----------
-    segments : list of UniformSegment
+    segments : list of Segment
     config : VehicleConfig
     c_d : float
         c_D for the rotor drag's moments in the rows, s/m.
@@ -400,11 +401,11 @@ def choose_fit(segments: list[UniformSegment], config: VehicleConfig, c_d: float
     dt = segments[0].dt
     window = smoother_window(max(b.high for b in bands), dt) if bands else PILOT_WINDOW
     # A stretch shorter than two windows has no sample the smoother reaches from both sides.
-    builders = [BalanceBuilder(s, config, window) for s in segments
+    builders = [builder_for(s, config, window) for s in segments
                 if s.t[-1] - s.t[0] >= 2.0 * window + 4.0 * s.dt]
     if not builders:
         window = PILOT_WINDOW
-        builders = [BalanceBuilder(s, config, window) for s in segments]
+        builders = [builder_for(s, config, window) for s in segments]
     choices = FitChoices(window, roll_pitch, yaw, 0.0, c_d, force)
     if roll_pitch is not None or yaw is not None:
         rows = [_dead_axes(b.rows(0.0, c_d, roll_pitch, yaw, force), choices) for b in builders]
@@ -428,13 +429,13 @@ def regress(rows: list[BalanceRows]) -> tuple[LinearFit, LinearFit, dict]:
     return force, torque, reverse
 
 
-def fit_balance(segments: list[UniformSegment], config: VehicleConfig, c_d: float
+def fit_balance(segments: list[Segment], config: VehicleConfig, c_d: float
                 ) -> tuple[BalanceFit, list[BalanceBuilder]]:
     """Choose band, window and offset, then fit (module docstring).
 
     Parameters
     ----------
-    segments : list of UniformSegment
+    segments : list of Segment
         At least one.
     config : VehicleConfig
     c_d : float

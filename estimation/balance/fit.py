@@ -38,6 +38,7 @@ from mavsysid.estimation.balance.rows import (
     FORCE_COEFFICIENTS,
     BalanceBuilder,
     BalanceRows,
+    builder_for,
 )
 from mavsysid.estimation.balance.theta import (
     coefficients_from_theta,
@@ -64,7 +65,8 @@ from mavsysid.estimation.results import (
     quantity_status,
 )
 from mavsysid.estimation.signals import (
-    UniformSegment,
+    Segment,
+    balance_segments,
     uniform_segments,
 )
 from mavsysid.vehicle.config import VehicleConfig
@@ -76,14 +78,14 @@ __all__ = ["SMOOTHING_WINDOW", "WrenchBalanceSettings", "WrenchComparison", "com
            "fit_wrench_balance", "predict_holdout"]
 
 
-def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
+def predict_holdout(segments: list[Segment], config: VehicleConfig,
                     choices: FitChoices, coefficients: np.ndarray,
                     prior_coefficients: np.ndarray) -> HoldoutCheck | None:
     """Predict the held-out segments with the training part's choices and coefficients.
 
     Parameters
     ----------
-    segments : list of UniformSegment
+    segments : list of Segment
         The held-out part.
     config : VehicleConfig
     choices : FitChoices
@@ -98,7 +100,7 @@ def predict_holdout(segments: list[UniformSegment], config: VehicleConfig,
     HoldoutCheck or None
         None when no held-out rows remain after the smoother's edges.
     """
-    builders = [BalanceBuilder(s, config, choices.window) for s in segments
+    builders = [builder_for(s, config, choices.window) for s in segments
                 if len(s) > 4 * choices.window / s.dt]
     rows = balance_rows_for(builders, choices) if builders else []
     if not rows:
@@ -237,8 +239,8 @@ def _band_halves(builders: list[BalanceBuilder], choices: FitChoices
     return low, high
 
 
-def _segments(flight: FlightData, settings: WrenchBalanceSettings) -> list[UniformSegment]:
-    segments = uniform_segments(flight, settings.min_segment)
+def _segments(flight: FlightData, settings: WrenchBalanceSettings) -> list[Segment]:
+    segments = balance_segments(flight, settings.min_segment)
     if not segments:
         raise JobFailedError(f"{flight.source}: no stretch of at least "
                              f"{settings.min_segment:g} s without a gap in which the pose "
@@ -323,13 +325,13 @@ def _holdout(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
     t0, t1 = float(flight.t[0]), float(flight.t[-1])
     cut = t1 - settings.holdout_fraction * (t1 - t0)
     try:
-        train = uniform_segments(flight.time_slice(t0, cut), settings.min_segment)
+        train = balance_segments(flight.time_slice(t0, cut), settings.min_segment)
         fit, _ = fit_balance(train, config, float(prior.value[1])) if train else (None, None)
     except np.linalg.LinAlgError:
         return None
     if fit is None:
         return None
-    test = uniform_segments(flight.time_slice(cut, t1), 4 * fit.choices.window)
+    test = balance_segments(flight.time_slice(cut, t1), 4 * fit.choices.window)
     if not test:
         return None
     model = stack(fit.force.coefficients, fit.torque.coefficients)

@@ -36,19 +36,24 @@ from typing import Protocol
 
 import numpy as np
 from mavsysid.estimation.signals import (
+    ImuSegment,
     SmoothedPose,
     SmootherSettings,
     UniformSegment,
     acceleration_kernel,
     body_force_readout,
     body_rotation_readout,
+    convolve_columns,
+    rate_kernel,
+    savgol_kernel,
     smooth_pose,
 )
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.effect_base import EffectInputs
+from mavsysid.vehicle.imu import lever_arm_acceleration
 from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
 from mavsysid.vehicle.model_effects import ModelEffect, RotorDragLinear, total_wrench
-from mavsysid.vehicle.parameters import INERTIA
+from mavsysid.vehicle.parameters import INERTIA, QuantityTerm
 
 __all__ = [
     "FORCE_COEFFICIENTS",
@@ -60,6 +65,8 @@ __all__ = [
     "BalanceBuilder",
     "BalanceRows",
     "BandFilter",
+    "ImuBalanceBuilder",
+    "builder_for",
     "consistent_accelerations",
     "model_accelerations",
 ]
@@ -141,11 +148,9 @@ def _unit_wrenches(n: np.ndarray, config: VehicleConfig, v_b: np.ndarray, w: np.
     return f_t, f_td - f_t, m_t, m_td - m_t, m_m
 
 
-def _linear_drag_force(n: np.ndarray, config: VehicleConfig, pose: SmoothedPose,
-                       v_b: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _linear_drag_force(n: np.ndarray, config: VehicleConfig, inputs: EffectInputs
+                       ) -> np.ndarray:
     """Body force of the catalogue's linear rotor drag per unit in-plane k (k_z = 0), N."""
-    inputs = EffectInputs(pose.t, pose.position, pose.quaternion, v_b, w, n, np.zeros(6),
-                          config.rotor_positions)
     force, _ = RotorDragLinear(k=1.0, k_z=0.0).wrench(inputs)
     return force
 
@@ -178,6 +183,10 @@ def _thrust_row_as_magnitude(force: np.ndarray, cols: np.ndarray, c_d: float,
 class BalanceBuilder:
     """Builds `BalanceRows` of one segment for any delay, smoothing the pose once.
 
+    Both sides come from the pose: the specific force and the angular acceleration its
+    second derivatives give, and the model's columns through the same smoother
+    (`body_force_readout`, `body_rotation_readout`).
+
     Parameters
     ----------
     segment : UniformSegment
@@ -195,82 +204,84 @@ class BalanceBuilder:
         self.pose = smooth_pose(segment.t, segment.position, segment.quaternion,
                                 self.settings, "flight segment")
         self.kernel = acceleration_kernel(self.settings, self.dt)
-        w = self.pose.rates
-        self._rate_term = body_rotation_readout(self.pose, self.pose, np.zeros_like(w),
-                                                self.kernel)
+        self.rates = self.pose.rates
+        self.velocity_body = self.pose.velocity_body()
+        self._rate_term = body_rotation_readout(self.pose, self.pose,
+                                                np.zeros_like(self.rates), self.kernel)
+        self._gyroscopic = self._gyroscopic_columns()
+
+    def _gyroscopic_columns(self) -> dict[int, np.ndarray]:
+        w = self.rates
         products = np.column_stack([w[:, 1] * w[:, 2], w[:, 2] * w[:, 0], w[:, 0] * w[:, 1]])
-        self._gyroscopic = {col: self._readout(axis, products[:, axis])
-                            for col, axis in ((1, 0), (4, 1), (8, 2))}
+        return {col: self._readout(axis, products[:, axis])
+                for col, axis in ((1, 0), (4, 1), (8, 2))}
 
     def _readout(self, axis: int, values: np.ndarray) -> np.ndarray:
+        """An angular acceleration about ``axis`` as the measured side sees it, (N, 3)."""
         omega_dot = np.zeros((len(values), 3))
         omega_dot[:, axis] = values
+        return self._rotation_readout(omega_dot)
+
+    def _rotation_readout(self, omega_dot: np.ndarray) -> np.ndarray:
         return body_rotation_readout(self.pose, self.pose, omega_dot, self.kernel,
                                      rate_term=False)
 
-    def _extra_columns(self, n: np.ndarray, v_b: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
+    def _force_readout(self, force: np.ndarray) -> np.ndarray:
+        """A body specific force (N, 3) as the measured side sees it."""
+        return body_force_readout(self.pose, self.pose, force, self.kernel)
+
+    def measured(self) -> tuple[np.ndarray, np.ndarray]:
+        """The measured side: specific force and angular acceleration less the rate term."""
+        return self.pose.specific_force(), self.pose.angular_acceleration - self._rate_term
+
+    def _inputs(self, n: np.ndarray) -> EffectInputs:
+        pose = self.pose
+        return EffectInputs(pose.t - self.segment.flight_start, pose.position, pose.quaternion,
+                            self.velocity_body, self.rates, n, self.config.theta,
+                            self.config.rotor_positions,
+                            rotor_directions=self.config.rotor_directions,
+                            angular_acceleration=pose.angular_acceleration)
+
+    def _extra_columns(self, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each nuisance quantity's columns per unit value: force (N, 3, E), torque (N, 3, E).
 
-        Its term's wrench (`mavsysid.vehicle.parameters.QuantityTerm`) at the smoothed
-        states, through the same readouts as the model's; the torque is divided by the
-        prior's inertia (the rows are angular accelerations), so the coefficient is the
-        quantity's value to the ratio of the prior's inertia to the true one.
+        Its term (`mavsysid.vehicle.parameters.QuantityTerm`) at the smoothed states, through
+        the same readouts as the model's: a wrench's force per unit mass and torque over the
+        prior's inertia (the rows are angular accelerations, so the coefficient is the
+        quantity's value to the ratio of the prior's inertia to the true one); what an
+        accelerometer reads, in the force rows where the measured side is an accelerometer.
         """
-        pose, config = self.pose, self.config
-        inputs = EffectInputs(pose.t - self.segment.flight_start, pose.position,
-                              pose.quaternion, v_b, pose.rates, n, config.theta,
-                              config.rotor_positions,
-                              rotor_directions=config.rotor_directions)
+        config = self.config
+        inputs = self._inputs(n)
         inertia = config.theta[INERTIA]
         forces, torques = [], []
         for quantity in config.extra_quantities:
             assert quantity.term is not None
             force, torque = quantity.term.wrench_basis(inputs)
-            forces.append(body_force_readout(pose, pose, force / config.mass, self.kernel))
-            torques.append(body_rotation_readout(pose, pose, torque / inertia, self.kernel,
-                                                 rate_term=False))
+            force = force / config.mass + self._reading_force(quantity.term, inputs)
+            forces.append(self._force_readout(force))
+            torques.append(self._rotation_readout(torque / inertia))
         return np.stack(forces, axis=-1), np.stack(torques, axis=-1)
+
+    def _reading_force(self, term: QuantityTerm, inputs: EffectInputs) -> np.ndarray:
+        """What a sensor term adds to the measured specific force (none from a pose)."""
+        return np.zeros((inputs.t.shape[0], 3))
 
     @property
     def edge(self) -> int:
         """Samples at each end where the smoother is one-sided."""
         return self.settings.samples(self.dt)
 
-    def rows(self, delay: float, c_d: float, roll_pitch: BandFilter | None = None,
-             yaw: BandFilter | None = None, force: BandFilter | None = None,
-             trim: float = 0.0, magnitude: bool = True, drag_linear: float = 0.0,
-             drag_c_d: float = float("nan")) -> BalanceRows:
-        """The balance rows at ``delay`` (module docstring).
-
-        Parameters
-        ----------
-        delay : float
-            The pose lags the rotor speeds by this much, s.
-        c_d : float
-            c_D used to add the rotor drag's roll and pitch moment to the thrust torque,
-            s/m (zero when the rotors lie in the plane of the centre of gravity).
-        roll_pitch, yaw, force : BandFilter, optional
-            Applied to both sides of the ω̇_x, ω̇_y rows, the ω̇_z rows and the force rows.
-        trim : float
-            Time cut off each end, s, beyond the smoother's and the filters' edges.
-        magnitude : bool
-            Make the thrust row the specific force's magnitude (else its z component).
-        drag_linear, drag_c_d : float
-            k / c_T of the linear rotor drag (s·rad/m) and c_D (s/m, NaN: ``c_d``) in the
-            thrust row's magnitude.
-        """
-        n = self.segment.rotor_speeds(delay)
+    def _columns(self, n: np.ndarray, c_d: float) -> tuple[np.ndarray, np.ndarray]:
+        """The model's force (N, 3, 3 + E) and torque (N, 3, 10 + E) columns at speeds n."""
         n_dot = np.gradient(n, self.dt, axis=0)
-        pose, config = self.pose, self.config
-        v_b = pose.velocity_body()
-        f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, v_b, pose.rates)
-        f_l = _linear_drag_force(n, config, pose, v_b, pose.rates)
-        force_cols = np.stack([body_force_readout(pose, pose, f / config.mass, self.kernel)
-                               for f in (f_t, f_d, f_l)], axis=-1)
+        config, v_b, w = self.config, self.velocity_body, self.rates
+        f_t, f_d, m_t, m_d, m_m = _unit_wrenches(n, config, v_b, w)
+        f_l = _linear_drag_force(n, config, self._inputs(n))
+        force_cols = np.stack([self._force_readout(f / config.mass) for f in (f_t, f_d, f_l)],
+                              axis=-1)
         thrust_torque = m_t + c_d * m_d
         spin = n @ config.rotor_directions
-        w = pose.rates
         rotor_cols = {0: (0, thrust_torque[:, 0]), 2: (0, spin * w[:, 1]),
                       3: (1, thrust_torque[:, 1]), 5: (1, spin * w[:, 0]),
                       6: (2, m_m[:, 2]), 7: (2, m_d[:, 2]),
@@ -281,17 +292,44 @@ class BalanceBuilder:
         for col, readout in self._gyroscopic.items():
             torque_cols[:, :, col] = readout
         if config.extra_quantities:
-            extra_force, extra_torque = self._extra_columns(n, v_b)
+            extra_force, extra_torque = self._extra_columns(n)
             force_cols = np.concatenate([force_cols, extra_force], axis=-1)
             torque_cols = np.concatenate([torque_cols, extra_torque], axis=-1)
-        torque = pose.angular_acceleration - self._rate_term
-        specific_force = pose.specific_force()
-        edge, settle = self.edge, trim
+        return force_cols, torque_cols
+
+    def rows(self, delay: float, c_d: float, roll_pitch: BandFilter | None = None,
+             yaw: BandFilter | None = None, force: BandFilter | None = None,
+             trim: float = 0.0, magnitude: bool = True, drag_linear: float = 0.0,
+             drag_c_d: float = float("nan")) -> BalanceRows:
+        """The balance rows at ``delay`` (module docstring).
+
+        Parameters
+        ----------
+        delay : float
+            The measured side lags the rotor speeds by this much, s.
+        c_d : float
+            c_D used to add the rotor drag's roll and pitch moment to the thrust torque,
+            s/m (zero when the rotors lie in the plane of the centre of gravity).
+        roll_pitch, yaw, force : BandFilter, optional
+            Applied to both sides of the ω̇_x, ω̇_y rows, the ω̇_z rows and the force rows.
+        trim : float
+            Time cut off each end, s, beyond the smoother's and the filters' edges.
+        magnitude : bool
+            Make the thrust row the specific force's magnitude (else its z component; an
+            accelerometer's z row needs no magnitude, and never gets one).
+        drag_linear, drag_c_d : float
+            k / c_T of the linear rotor drag (s·rad/m) and c_D (s/m, NaN: ``c_d``) in the
+            thrust row's magnitude.
+        """
+        n = self.segment.rotor_speeds(delay)
+        force_cols, torque_cols = self._columns(n, c_d)
+        specific_force, torque = self.measured()
+        settle = trim
         if force is not None:
             specific_force = force.apply(specific_force, self.dt)
             force_cols = force.apply(force_cols, self.dt)
             settle = max(settle, trim + force.settle())
-        if magnitude:
+        if magnitude and self.magnitude_row:
             specific_force, force_cols = _thrust_row_as_magnitude(specific_force, force_cols,
                 c_d if np.isnan(drag_c_d) else drag_c_d, drag_linear)
         for band, axes in ((roll_pitch, [0, 1]), (yaw, [2])):
@@ -299,9 +337,94 @@ class BalanceBuilder:
                 torque[:, axes] = band.apply(torque[:, axes], self.dt)
                 torque_cols[:, axes] = band.apply(torque_cols[:, axes], self.dt)
                 settle = max(settle, trim + band.settle())
-        edge = max(edge, int(np.ceil(settle / self.dt)))
+        edge = max(self.edge, int(np.ceil(settle / self.dt)))
         rows = BalanceRows(self.segment.t, specific_force, force_cols, torque, torque_cols)
         return rows.rows(slice(edge, max(edge, len(n) - edge)))
+
+    #: Whether the thrust row compares magnitudes (a pose's attitude error shortens the
+    #: z component of its specific force).
+    magnitude_row = True
+
+
+class ImuBalanceBuilder(BalanceBuilder):
+    """Builds `BalanceRows` of one segment from the IMU, for any delay.
+
+    The accelerometer is the specific force itself, in the body frame, and the gyro's
+    first derivative the angular acceleration: no second derivative of the pose, no
+    rotation between frames. Both sides go through one smoother: the accelerometer and the
+    model's forces through the Savitzky–Golay smoother, the gyro through its derivative
+    and the model's angular accelerations through that derivative's action on a rate
+    (`mavsysid.estimation.signals.rate_kernel`). An IMU off the centre of gravity reads
+    ω̇ × p + ω × (ω × p) more: taken off where p is stated, else a nuisance quantity's
+    columns (`mavsysid.vehicle.imu.ImuOffset`); accelerometer biases likewise. The pose
+    gives only the velocity the rotor drag needs.
+
+    Parameters
+    ----------
+    segment : ImuSegment
+        The IMU on a uniform grid, the pose's velocity on it, and the rotor speeds.
+    config : VehicleConfig
+        Mass, rotor positions and spin directions.
+    window : float
+        Savitzky–Golay window (cubic), s.
+    """
+
+    magnitude_row = False
+
+    def __init__(self, segment: ImuSegment, config: VehicleConfig, window: float) -> None:
+        self.segment, self.config, self.dt = segment, config, segment.dt
+        self.settings = SmootherSettings(window=window, polyorder=3)
+        samples = self.settings.samples(self.dt)
+        self.smoother = savgol_kernel(samples, 3, 0, self.dt)
+        self.kernel = rate_kernel(self.settings, self.dt)
+        self.rates = convolve_columns(segment.gyro, self.smoother)
+        self.angular_acceleration = convolve_columns(
+            segment.gyro, savgol_kernel(samples, 3, 1, self.dt))
+        self.velocity_body = segment.velocity_body
+        self._gyroscopic = self._gyroscopic_columns()
+
+    def _rotation_readout(self, omega_dot: np.ndarray) -> np.ndarray:
+        return convolve_columns(omega_dot, self.kernel)
+
+    def _force_readout(self, force: np.ndarray) -> np.ndarray:
+        return convolve_columns(force, self.smoother)
+
+    def measured(self) -> tuple[np.ndarray, np.ndarray]:
+        """The accelerometer (less its lever arm where stated) and the gyro's derivative."""
+        force = convolve_columns(self.segment.accel, self.smoother)
+        if self.segment.imu_position is not None:
+            force = force - lever_arm_acceleration(self.rates, self.angular_acceleration,
+                                                   self.segment.imu_position)
+        return force, self.angular_acceleration.copy()
+
+    def _inputs(self, n: np.ndarray) -> EffectInputs:
+        s = self.segment
+        return EffectInputs(s.t - s.flight_start, s.position, s.quaternion,
+                            self.velocity_body, self.rates, n, self.config.theta,
+                            self.config.rotor_positions,
+                            rotor_directions=self.config.rotor_directions,
+                            angular_acceleration=self.angular_acceleration)
+
+    def _reading_force(self, term: QuantityTerm, inputs: EffectInputs) -> np.ndarray:
+        if term.channel != "accel":
+            return np.zeros((inputs.t.shape[0], 3))
+        return term.reading_basis(inputs)
+
+
+def builder_for(segment: UniformSegment | ImuSegment, config: VehicleConfig, window: float
+                ) -> BalanceBuilder:
+    """The balance builder of a segment: from the IMU when it is an `ImuSegment`.
+
+    Parameters
+    ----------
+    segment : UniformSegment or ImuSegment
+    config : VehicleConfig
+    window : float
+        Savitzky–Golay window, s.
+    """
+    if isinstance(segment, ImuSegment):
+        return ImuBalanceBuilder(segment, config, window)
+    return BalanceBuilder(segment, config, window)
 
 
 def model_accelerations(pose: SmoothedPose, rotor_speeds: np.ndarray, theta: np.ndarray,
