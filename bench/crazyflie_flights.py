@@ -285,7 +285,7 @@ def run_balance(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
     parts = result.sigma_parts
     c = result.choices
     out.update(
-        code=0, seconds=time.perf_counter() - t0, status=list(result.status),
+        code=0, seconds=time.perf_counter() - t0, status=list(result.status[:6]),
         reader_refusal=reader_refusal,
         data=_scored(result.data.value, widened_sigma(parts), reference),
         sigma_parts=parts.tolist(), combinations=result.data.combinations.tolist(),

@@ -62,7 +62,7 @@ def run_seed(seed: int, duration: float, root: Path, sensor_path: bool = True,
     t0 = time.perf_counter()
     try:
         result = run_estimate(flight.pose, vehicle=vehicle).result
-        final = result.final
+        final = result.final.theta
     except MavsysidError as error:
         return {"seed": seed, "code": exit_code(error), "message": str(error),
                 "prior": prior / flight.truth - 1.0, "wall": time.perf_counter() - t0,
@@ -73,7 +73,7 @@ def run_seed(seed: int, duration: float, root: Path, sensor_path: bool = True,
                 "sim": simulated, "rows": flight.rows_kept}
     error = final.value / flight.truth - 1.0
     covered = np.abs(final.value - flight.truth) <= 1.96 * final.sigma
-    status = result.status or ("determined",) * len(PARAMETER_NAMES)
+    status = result.status[:6] or ("determined",) * len(PARAMETER_NAMES)
     return {"seed": seed, "code": 0, "error": error, "covered": covered, "status": status,
             "sigma": final.sigma / flight.truth, "prior": prior / flight.truth - 1.0,
             "wall": time.perf_counter() - t0, "sim": simulated, "rows": flight.rows_kept}

@@ -122,7 +122,7 @@ def run(truth: str, seed: int, root: str, mode: str = "filter"
         if mode == "answer":
             result = estimate(flight, prior)
             determined = np.array([s == "determined" for s in result.status])
-            return config.theta, result.final.value, result.final.sigma, determined
+            return config.theta, result.final.theta.value, result.final.theta.sigma, determined[:6]
         result = (estimate_with_named_effects(flight, prior)[0] if mode == "reestimate"
                   else estimate_parameters(flight, prior))
         # what `mavsysid estimate` refuses

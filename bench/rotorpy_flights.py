@@ -364,7 +364,7 @@ def _estimate(log: Path, vehicle: Path, ref: dict[str, Any], auto: bool, progres
         write_estimate_json(out, run.result, run.config, log)
     result = run.result
     effects = {fe.name: (fe.value, fe.sigma) for fe in result.effects}
-    row = _scored(result.final.value, result.final.sigma, effects, ref)
+    row = _scored(result.final.theta.value, result.final.theta.sigma, effects, ref)
     row.update(refusal=None, time=time.perf_counter() - t0,
                effects={k: (v.tolist(), s.tolist()) for k, (v, s) in effects.items()})
     return row

@@ -383,9 +383,13 @@ def _filter_config(config: VehicleConfig) -> VehicleConfig:
 
 
 def with_imu_quantities(config: VehicleConfig, flight: FlightData) -> VehicleConfig:
-    """The vehicle with the nuisance quantities the flight's IMU brings (its biases, and
-    its offset from the centre of gravity where neither the vehicle file nor the log
-    states it: `mavsysid.vehicle.imu.imu_quantities`).
+    """The vehicle with the nuisance quantities the flight's IMU brings to the balance.
+
+    Where the balance takes the specific force from the accelerometer (a flight without a
+    motion-capture pose, `mavsysid.estimation.signals.balance_segments`), its biases and,
+    where neither the vehicle file nor the log states it, the IMU's offset from the centre
+    of gravity (`mavsysid.vehicle.imu.imu_quantities`). The gyro's bias is measured
+    against the pose's rates and taken off before (`mavsysid.estimation.signals`).
 
     Parameters
     ----------
@@ -393,12 +397,13 @@ def with_imu_quantities(config: VehicleConfig, flight: FlightData) -> VehicleCon
     flight : FlightData
     """
     imu = flight.imu
-    if imu is None or (imu.gyro is None and imu.accel is None):
+    if (imu is None or imu.gyro is None or imu.accel is None
+            or flight.pose_source == "motion_capture"):
         return config
     named = {q.name for q in config.extra_quantities}
     extras = tuple(q for q in imu_quantities(
-        imu.gyro is not None, imu.accel is not None, imu.position is not None,
-        config.noise.gyro_bias_sigma, config.noise.accel_bias_sigma) if q.name not in named)
+        False, True, imu.position is not None, config.noise.gyro_bias_sigma,
+        config.noise.accel_bias_sigma) if q.name not in named)
     return replace(config, extra_quantities=config.extra_quantities + extras)
 
 

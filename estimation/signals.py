@@ -481,6 +481,11 @@ class ImuSegment:
         The time the flight starts, s.
     imu_position : ndarray, shape (3,), or None
         The IMU's stated offset from the centre of gravity, m, body FLU.
+    pose_position : ndarray, shape (M, 3), or None
+        The fresh pose's position interpolated onto the grid, m: where the balance takes
+        the specific force from the pose (motion capture) rather than the accelerometer.
+    pose_quaternion : ndarray, shape (M, 4), or None
+        Its attitude likewise, unit, sign-continuous.
     """
 
     t: np.ndarray
@@ -494,6 +499,8 @@ class ImuSegment:
     rotor_samples: np.ndarray
     flight_start: float = 0.0
     imu_position: np.ndarray | None = None
+    pose_position: np.ndarray | None = None
+    pose_quaternion: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -510,7 +517,7 @@ def _fresh_imu(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return t[keep], values[keep]
 
 
-def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float
+def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float, force_from_pose: bool
                  ) -> ImuSegment | None:
     imu = flight.imu
     assert imu is not None and imu.gyro is not None and imu.accel is not None
@@ -529,10 +536,31 @@ def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     velocity = _interp_columns(grid, pose.t, smoothed.velocity)
     velocity_body = np.einsum("nji,nj->ni", quat_to_matrix(q), velocity)
-    return ImuSegment(grid, dt, _interp_columns(grid, tg, gyro), _interp_columns(grid, ta, accel),
+    gyro = _interp_columns(grid, tg, gyro)
+    gyro = gyro - _gyro_bias(gyro, _interp_columns(grid, pose.t, smoothed.rates),
+                             settings.samples(dt))
+    raw_p = raw_q = None
+    if force_from_pose:
+        raw_p = _interp_columns(grid, pose.t, pose.position)
+        raw_q = _interp_columns(grid, pose.t, pose.quaternion)
+        raw_q /= np.linalg.norm(raw_q, axis=1, keepdims=True)
+    return ImuSegment(grid, dt, gyro, _interp_columns(grid, ta, accel),
                       velocity_body, _interp_columns(grid, pose.t, smoothed.position), q,
                       pose.rotor_time, pose.rotor_samples, pose.flight_start,
-                      None if imu.position is None else np.asarray(imu.position, float))
+                      None if imu.position is None else np.asarray(imu.position, float),
+                      raw_p, raw_q)
+
+
+def _gyro_bias(gyro: np.ndarray, pose_rates: np.ndarray, edge: int) -> np.ndarray:
+    """The gyro's constant bias against the pose's rates, rad/s, shape (3,).
+
+    The balance's gyroscopic terms multiply two rates, so a bias b adds b_z ω_y + b_y ω_z
+    to ω̇_x: at 0.005 rad/s and 1 rad/s of motion, 0.5 % of the roll torque, which biases
+    j_x by as much. The attitude is free of it, and its rates' mean over the segment
+    (the smoother keeps the mean; its one-sided edges are left out) is the gyro's less b.
+    """
+    inner = slice(edge, max(edge + 1, len(gyro) - edge))
+    return np.mean(gyro[inner] - pose_rates[inner], axis=0)
 
 
 def _span(t: np.ndarray, values: np.ndarray, t0: float, t1: float
@@ -541,12 +569,14 @@ def _span(t: np.ndarray, values: np.ndarray, t0: float, t1: float
     return t[keep], values[keep]
 
 
-def imu_segments(flight: FlightData, min_duration: float) -> list[ImuSegment]:
+def imu_segments(flight: FlightData, min_duration: float, force_from_pose: bool = False
+                 ) -> list[ImuSegment]:
     """Each segment of ``flight`` spanning at least ``min_duration`` s, on the IMU's grid.
 
     The pose's segments (`uniform_segments`) bound them; within each, the gyro and the
     accelerometer (fresh samples) are interpolated onto a grid at the gyro's median step,
-    and the pose's smoothed velocity, position and attitude onto the same grid.
+    and the pose's smoothed velocity, position and attitude onto the same grid. The gyro's
+    constant bias, measured against the pose's rates, is taken off (`_gyro_bias`).
 
     Parameters
     ----------
@@ -554,6 +584,9 @@ def imu_segments(flight: FlightData, min_duration: float) -> list[ImuSegment]:
         With both IMU sensors (``flight.imu.gyro`` and ``.accel``).
     min_duration : float
         Shortest segment kept, s.
+    force_from_pose : bool
+        Keep the raw pose on the grid too (`ImuSegment.pose_position`), for a specific
+        force from the pose.
 
     Returns
     -------
@@ -570,7 +603,7 @@ def imu_segments(flight: FlightData, min_duration: float) -> list[ImuSegment]:
         return []
     out = []
     for pose in uniform_segments(flight, min_duration):
-        seg = _imu_segment(flight, pose, dt)
+        seg = _imu_segment(flight, pose, dt, force_from_pose)
         if seg is not None and seg.t[-1] - seg.t[0] >= min_duration:
             out.append(seg)
     return out
@@ -584,10 +617,18 @@ def balance_segments(flight: FlightData, min_duration: float) -> list[Segment]:
     """The flight's segments for the balance: on the IMU's grid where it has a gyro and an
     accelerometer (`imu_segments`), else on the pose's (`uniform_segments`).
 
+    The angular acceleration is then always the gyro's one derivative. The specific force
+    is the pose's second derivative where the pose is motion capture (tied to gravity, free
+    of the accelerometer's bias and scale error, precise at the balance's low band), the
+    accelerometer's where it is an autopilot's own estimate (which fuses that
+    accelerometer, lagged).
+
     Parameters
     ----------
     flight : FlightData
     min_duration : float
         Shortest segment kept, s.
     """
-    return imu_segments(flight, min_duration) or uniform_segments(flight, min_duration)
+    from_pose = flight.pose_source == "motion_capture"
+    return (imu_segments(flight, min_duration, from_pose)
+            or uniform_segments(flight, min_duration))

@@ -122,7 +122,7 @@ def estimate_with_named_effects(
     except JobFailedError as error:
         first, refusal = None, error
     if first is not None:
-        theta = first.final.value
+        theta = first.final.theta.value
         known = tuple(fe.effect for fe in first.effects)
     else:
         theta = config.theta

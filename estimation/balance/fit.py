@@ -65,6 +65,7 @@ from mavsysid.estimation.results import (
     quantity_status,
 )
 from mavsysid.estimation.signals import (
+    ImuSegment,
     Segment,
     balance_segments,
     uniform_segments,
@@ -274,8 +275,20 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     cov[np.ix_(keep, keep)] = corr * np.outer(sigma[keep], sigma[keep])
     result = WrenchBalanceResult(
         ParameterEstimate(value, cov, prior.names), determined, base, parts, combo_sigma, prior,
-        fit.choices, delay_sigma(fit, builders), None, fit.force.rows)
+        fit.choices, delay_sigma(fit, builders), None, fit.force.rows,
+        (_sources_note(segments[0]),))
     return result, fit
+
+
+def _sources_note(segment: Segment) -> str:
+    """Which measurement the balance compared with the model, in words."""
+    if not isinstance(segment, ImuSegment):
+        return ("the balance read the pose alone: its second derivatives for the specific "
+                "force and the angular acceleration")
+    force = ("the pose's second derivative (motion capture)" if segment.pose_position is not None
+             else "the accelerometer")
+    return (f"the balance read the gyro's derivative for the angular acceleration and {force} "
+            "for the specific force")
 
 
 def fit_wrench_balance(flight: FlightData, config: VehicleConfig,

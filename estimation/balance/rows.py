@@ -382,15 +382,26 @@ class ImuBalanceBuilder(BalanceBuilder):
             segment.gyro, savgol_kernel(samples, 3, 1, self.dt))
         self.velocity_body = segment.velocity_body
         self._gyroscopic = self._gyroscopic_columns()
+        self.pose: SmoothedPose | None = None
+        if segment.pose_position is not None and segment.pose_quaternion is not None:
+            self.pose = smooth_pose(segment.t, segment.pose_position, segment.pose_quaternion,
+                                    self.settings, "flight segment")
+            self.force_kernel = acceleration_kernel(self.settings, self.dt)
+            self.magnitude_row = True
 
     def _rotation_readout(self, omega_dot: np.ndarray) -> np.ndarray:
         return convolve_columns(omega_dot, self.kernel)
 
     def _force_readout(self, force: np.ndarray) -> np.ndarray:
+        if self.pose is not None:
+            return body_force_readout(self.pose, self.pose, force, self.force_kernel)
         return convolve_columns(force, self.smoother)
 
     def measured(self) -> tuple[np.ndarray, np.ndarray]:
-        """The accelerometer (less its lever arm where stated) and the gyro's derivative."""
+        """The specific force (the pose's, or the accelerometer's less its lever arm where
+        stated) and the gyro's derivative."""
+        if self.pose is not None:
+            return self.pose.specific_force(), self.angular_acceleration.copy()
         force = convolve_columns(self.segment.accel, self.smoother)
         if self.segment.imu_position is not None:
             force = force - lever_arm_acceleration(self.rates, self.angular_acceleration,
@@ -406,7 +417,7 @@ class ImuBalanceBuilder(BalanceBuilder):
                             angular_acceleration=self.angular_acceleration)
 
     def _reading_force(self, term: QuantityTerm, inputs: EffectInputs) -> np.ndarray:
-        if term.channel != "accel":
+        if term.channel != "accel" or self.pose is not None:
             return np.zeros((inputs.t.shape[0], 3))
         return term.reading_basis(inputs)
 

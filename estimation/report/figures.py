@@ -322,7 +322,7 @@ def write_estimate_report(directory: str | Path, result: EstimationResult,
     plot_rotor_speeds(flight, directory / "rotor_speeds.png")
     choices = None if result.balance is None else result.balance.choices
     fit = {} if choices is None else {"window": choices.window, "delay": choices.delay}
-    plot_wrench(compare_wrench(flight, config, result.final.value, **fit),
+    plot_wrench(compare_wrench(flight, config, result.final.theta.value, **fit),
                 directory / "wrench.png")
     write_history_csv(directory / "history.csv", result.history)
     position_sigma, attitude_sigma = result.measurement_sigma

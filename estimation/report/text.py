@@ -371,7 +371,7 @@ def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleC
     The effects (with their fitted values) replace the config's ``[effects.NAME]`` tables,
     so `estimate` and `sim` use them from then on (save with `save_vehicle`).
     """
-    updated = config.with_parameters(np.asarray(result.final.value, dtype=float))
+    updated = config.with_parameters(np.asarray(result.final.theta.value, dtype=float))
     return replace(updated, effects=tuple(fe.effect for fe in result.effects))
 
 
