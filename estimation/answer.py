@@ -27,8 +27,9 @@ equation-error reference. Per estimated quantity (`answer_parameters`):
   the balance's σ would be a confident wrong answer); anything else is "not determined by
   this flight" and keeps the prior's value and σ.
 
-The filter reads the pose, so it estimates θ and the wrench's nuisance quantities; a
-sensor's (the IMU's biases and offset, `with_imu_quantities`) are the balance's alone.
+The filter reads the pose and, where the flight has one, the IMU
+(`mavsysid.estimation.filter.imu_measurement`): it estimates θ, the wrench's nuisance
+quantities and the IMU's (its biases and offset, `with_imu_quantities`).
 
 A filter determines a quantity by the balance's own rule
 (`mavsysid.estimation.results.quantity_status`). The covariance keeps the cross terms
@@ -83,7 +84,6 @@ from mavsysid.vehicle.parameters import (
     PAPER_THETA,
     PARAMETER_NAMES,
     EstimatedQuantity,
-    quantity_names,
 )
 
 from mavsysid.errors import JobFailedError
@@ -350,12 +350,8 @@ def estimate(flight: FlightData, config: VehicleConfig,
     if balance is not None and balance_refusal is None:
         report_stage("the force and torque balance answered; checking it with the filter")
         settings = replace(settings, restart_diverged=False)
-    filter_config = _filter_config(config)
-    if reference is not None:
-        reference = reference.subset(quantity_names(filter_config.extra_quantities))
     try:
-        result = (filter_estimate or estimate_parameters)(flight, filter_config, settings,
-                                                          reference)
+        result = (filter_estimate or estimate_parameters)(flight, config, settings, reference)
         check_result(flight.source, result, config.limits.rotor_speed_max)
     except JobFailedError as error:
         reason = str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
@@ -373,13 +369,6 @@ def estimate(flight: FlightData, config: VehicleConfig,
     if balance is None:
         return result
     return _answered(result, None, balance, config, flight, prior)
-
-
-def _filter_config(config: VehicleConfig) -> VehicleConfig:
-    """The vehicle as the filter models it: the nuisance quantities of the wrench only (the
-    filter reads the pose; a sensor's terms are the balance's)."""
-    return replace(config, extra_quantities=tuple(
-        q for q in config.extra_quantities if q.term is None or q.term.channel == "wrench"))
 
 
 def with_imu_quantities(config: VehicleConfig, flight: FlightData) -> VehicleConfig:

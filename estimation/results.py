@@ -215,6 +215,9 @@ class EstimationHistory:
         Measurement residuals before each update: position (m) and attitude (rad).
     nis : ndarray, shape (N,)
         Normalised innovation squared yᵀ S⁻¹ y (χ² with 6 degrees of freedom if consistent).
+    imu_nis : ndarray, shape (N,), or None
+        The IMU update's NIS at each sample (χ² with as many degrees of freedom as readings,
+        6 for a gyro and an accelerometer; NaN where none); None: the filter read no IMU.
     """
 
     t: np.ndarray
@@ -224,6 +227,7 @@ class EstimationHistory:
     quaternion: np.ndarray
     innovation: np.ndarray
     nis: np.ndarray
+    imu_nis: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

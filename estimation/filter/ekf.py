@@ -25,12 +25,18 @@ which filters a whole flight in one compiled loop.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
-from mavsysid.estimation.flight import FlightData, step_process_noise
+from mavsysid.estimation.filter.imu_measurement import (
+    ImuSteps,
+    imu_index,
+    imu_steps,
+    imu_update_kernel,
+)
+from mavsysid.estimation.flight import FlightData, Imu, step_process_noise
 from mavsysid.estimation.results import EstimationHistory, ParameterEstimate
 from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.vehicle.covariance import (
@@ -114,7 +120,13 @@ def _update_kernel(x, P, z, R, scale, y, S, SI, K):
     """
     pose_residual_kernel(z, x, y)
     update_covariance_kernel(P, R, S, SI, K)
-    dx = K @ y
+    _correct(x, P, K @ y, scale)
+    return y @ SI @ y
+
+
+@numba.njit(cache=True)
+def _correct(x, P, dx, scale):
+    """Apply an error-state correction dx (D,) to x, and reset P's attitude error to it."""
     # Multiplicative attitude correction and additive everything else.
     x[0:6] += dx[0:6]
     q = multiply_kernel(x[6:10], exp_kernel(dx[6:9]))
@@ -130,19 +142,33 @@ def _update_kernel(x, P, z, R, scale, y, S, SI, K):
     Gam[8, 6], Gam[8, 7] = 0.5 * d[1], -0.5 * d[0]
     P[:] = Gam @ P @ Gam.T
     P[:] = 0.5 * (P + P.T)
-    return y @ SI @ y
 
 
 @numba.njit(cache=True)
-def _filter_kernel(t, z, n, w, basis, x, P, mass, r, eps, scale, Qc, R,
-                   out_x, out_sigma, out_innov, out_nis):
+def _imu_step(k, t, n, w, basis, x0, x, P, mass, r, eps, scale, Qc, F, A, G, imu_z, imu_info,
+              imu_index, imu_position):
+    """The IMU's update at step k (after its prediction from x0); returns (NIS, log N)."""
+    nis, log_n, dx = imu_update_kernel(
+        x, P, x0, n[k - 1], n[k], w[k - 1], w[k], basis[k - 1], basis[k], F, A, G, Qc[k - 1],
+        t[k] - t[k - 1], imu_z[k], imu_info[k], mass, r, eps, scale, imu_index, imu_position)
+    if np.isfinite(nis):
+        _correct(x, P, dx, scale)
+    return nis, log_n
+
+
+@numba.njit(cache=True)
+def _filter_kernel(t, z, n, w, basis, x, P, mass, r, eps, scale, Qc, R, imu_z, imu_info,
+                   imu_index, imu_position, out_x, out_sigma, out_innov, out_nis, out_imu_nis):
     """Filter samples 1..N-1 (sample 0 initialised x, P); histories into the out arrays.
 
     w (N, 6) is the effects' extra body force and torque at every sample (zeros: none);
     basis (N, 6, E) the nuisance quantities' wrench per unit value; Qc (N, 6, 6) the
-    process-noise density of each step (from sample k − 1 to k).
+    process-noise density of each step (from sample k − 1 to k). imu_z (N, 6), imu_info
+    (N, 9): the IMU's mean readings per step (`mavsysid.estimation.filter.imu_measurement`,
+    NaN: none), fused right after each prediction; imu_index (9,), imu_position (3,) where
+    its quantities sit and its stated offset.
 
-    Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k).
+    Returns the log-likelihood of the innovations, Σ log N(y_k; 0, S_k), pose and IMU.
     """
     log_likelihood = 0.0
     d = P.shape[0]
@@ -160,7 +186,10 @@ def _filter_kernel(t, z, n, w, basis, x, P, mass, r, eps, scale, Qc, R,
         out_sigma[0, j] = np.sqrt(P[12 + j, 12 + j]) * scale[j]
     out_innov[0] = 0.0
     out_nis[0] = np.nan
+    out_imu_nis[0] = np.nan
     for k in range(1, t.shape[0]):
+        reads_imu = np.isfinite(imu_z[k, 0]) or np.isfinite(imu_z[k, 3])
+        x0 = x.copy() if reads_imu else x
         _predict_kernel(x, P, n[k - 1], n[k], w[k - 1], w[k], basis[k - 1], basis[k],
                         t[k] - t[k - 1], mass, r, eps, scale, Qc[k - 1], A, G, F, Q)
         # A diverged state overflows: the update would invert a NaN S, or normalise the
@@ -168,6 +197,12 @@ def _filter_kernel(t, z, n, w, basis, x, P, mass, r, eps, scale, Qc, R,
         if not (np.isfinite(np.sum(x)) and np.isfinite(np.trace(P))):
             x[:] = np.nan
             return np.nan
+        out_imu_nis[k] = np.nan
+        if reads_imu:
+            out_imu_nis[k], log_n = _imu_step(k, t, n, w, basis, x0, x, P, mass, r, eps, scale,
+                                              Qc, F, A, G, imu_z, imu_info, imu_index,
+                                              imu_position)
+            log_likelihood += log_n
         out_nis[k] = _update_kernel(x, P, z[k], R, scale, y, S, SI, K)
         if not (np.isfinite(out_nis[k]) and abs(np.sum(x[6:10] * x[6:10]) - 1.0) < 1e-6):
             x[:] = np.nan
@@ -192,6 +227,11 @@ class ParameterEKF(ExtendedKalmanFilter):
         Prior θ (SI) and its covariance; its values also set the θ error units.
     measurement_sigma : tuple of 2 float
         Position σ (m) and attitude σ (rad) of the pose measurements.
+    read_imu : bool, optional
+        Whether `run` reads the flight's IMU (`mavsysid.estimation.filter.imu_measurement`).
+        None (default): each sensor whose biases are among the estimated quantities (the
+        config of `mavsysid.estimation.answer.with_imu_quantities`); True: every logged
+        sensor, a bias not estimated taken as 0; False: the pose alone.
 
     The quantities are θ and the config's ``extra_quantities`` (their prior the last
     entries of ``prior``).
@@ -199,7 +239,7 @@ class ParameterEKF(ExtendedKalmanFilter):
 
     def __init__(
         self, config: VehicleConfig, prior: ParameterEstimate,
-        measurement_sigma: tuple[float, float],
+        measurement_sigma: tuple[float, float], read_imu: bool | None = None,
     ) -> None:
         extras = tuple(config.extra_quantities)
         if prior.value.shape != (len(PAPER_THETA) + len(extras),):
@@ -226,6 +266,8 @@ class ParameterEKF(ExtendedKalmanFilter):
         self._G = np.zeros((dim, 6))
         self._A = np.zeros((dim, dim))
         self._no_basis = np.zeros((6, len(extras)))
+        self.read_imu = read_imu
+        self._step: tuple | None = None  # the last prediction's start, for `update_imu`
 
     # -- filterpy API -----------------------------------------------------------------
 
@@ -256,10 +298,57 @@ class ParameterEKF(ExtendedKalmanFilter):
         w0 = np.zeros(6) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
         w1 = w0 if wrench_next is None else np.ascontiguousarray(wrench_next, dtype=float)
         mass, r, eps, scale = self._kernel_args
+        self._step = (self.x.copy(), u, u1, w0, w1, float(dt))
         _predict_kernel(self.x, self.P, u, u1, w0, w1, self._no_basis, self._no_basis,
                         float(dt), mass, r, eps, scale, self._Qc, self._A, self._G, self.F,
                         self.Q)
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    def update_imu(self, z: np.ndarray, variance: np.ndarray | None = None,
+                   weight: tuple[float, float] = (1.0, 1.0), span: float | None = None,
+                   position: np.ndarray | None = None) -> float:
+        """Correct with the IMU's mean reading over the last `predict` step; call it before
+        that step's pose `update` (the module `mavsysid.estimation.filter.imu_measurement`).
+
+        Parameters
+        ----------
+        z : ndarray, shape (6,)
+            Mean gyro (rad/s) and specific force (m/s²), body FLU; NaN for a sensor
+            without samples in the step.
+        variance : ndarray, shape (6,), optional
+            Sensor-noise variance of each mean; default the config's per-sample σ².
+        weight : tuple of 2 float
+            ᾱ of the gyro's and the accelerometer's samples: the weight of the step's end.
+        span : float, optional
+            Time the accelerometer's samples span, s; default the step.
+        position : ndarray, shape (3,), optional
+            The IMU's stated offset from the centre of gravity, m (default: the ``imu_x..z``
+            quantities, else the centre of gravity).
+
+        Returns
+        -------
+        float
+            The NIS yᵀ S⁻¹ y (NaN: no reading).
+        """
+        if self._step is None:
+            raise RuntimeError("update_imu follows a predict()")
+        x0, u0, u1, w0, w1, dt = self._step
+        nz = self.model.config.noise
+        info = np.zeros(9)
+        info[0:2] = weight
+        info[2:8] = (np.repeat([nz.gyro_sigma**2, nz.accel_sigma**2], 3) if variance is None
+                     else variance)
+        info[8] = dt if span is None else span
+        index, stated = imu_index(self.model.extras, position)
+        mass, r, eps, scale = self._kernel_args
+        nis, _, dx = imu_update_kernel(
+            self.x, self.P, x0, u0, u1, w0, w1, self._no_basis, self._no_basis, self.F, self._A,
+            self._G, self._Qc, dt, np.ascontiguousarray(z, dtype=float), info, mass, r, eps,
+            scale, index, stated)
+        if np.isfinite(nis):
+            _correct(self.x, self.P, dx, scale)
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        return float(nis)
 
     def update(self, z: np.ndarray, R: np.ndarray | None = None) -> None:  # type: ignore[override]
         """Correct with a pose z = [x, y, z, qw, qx, qy, qz] (m, unit quaternion)."""
@@ -309,6 +398,26 @@ class ParameterEKF(ExtendedKalmanFilter):
         self.P[:, :12] = 0.0
         self.initialize(flight.position[i], q0, v_body, rates, state_sigma)
 
+    def reads(self, imu: Imu | None) -> Imu | None:
+        """The part of ``imu`` this filter reads (``read_imu``), None: none of it."""
+        if imu is None or self.read_imu is False:
+            return None
+        if self.read_imu is None:
+            names = set(quantity_names(self.model.extras))
+            gyro = {f"gyro_bias_{a}" for a in "xyz"} <= names
+            accel = {f"accel_bias_{a}" for a in "xyz"} <= names and (
+                imu.position is not None or {f"imu_{a}" for a in "xyz"} <= names)
+            imu = replace(imu, gyro=imu.gyro if gyro else None,
+                          accel=imu.accel if accel else None)
+        return None if imu.gyro is None and imu.accel is None else imu
+
+    def imu_steps(self, flight: FlightData) -> tuple[ImuSteps, np.ndarray, np.ndarray]:
+        """The IMU's readings per step of ``flight`` that `run` fuses, and where its
+        quantities sit (`mavsysid.estimation.filter.imu_measurement.imu_index`)."""
+        imu = self.reads(flight.imu)
+        index, position = imu_index(self.model.extras, None if imu is None else imu.position)
+        return imu_steps(flight.t, imu, self.model.config.noise), index, position
+
     def run(
         self, flight: FlightData, state_sigma: tuple[float, float, float, float],
         wrench: np.ndarray | None = None,
@@ -335,6 +444,8 @@ class ParameterEKF(ExtendedKalmanFilter):
         out_sigma = np.empty((N, self.model.parameter_count))
         out_innov = np.full((N, MEAS_DIM), np.nan)  # NaN: not reached (`FilterOverflow`)
         out_nis = np.empty(N)
+        out_imu_nis = np.full(N, np.nan)
+        imu, imu_index_, imu_position = self.imu_steps(flight)
         mass, r, eps, scale = self._kernel_args
         w = np.zeros((N, 6)) if wrench is None else np.ascontiguousarray(wrench, dtype=float)
         if w.shape != (N, 6):
@@ -352,8 +463,9 @@ class ParameterEKF(ExtendedKalmanFilter):
                     self.start_segment(flight, a, state_sigma)
                 log_likelihood += _filter_kernel(
                     t[a:b], z[a:b], n[a:b], w[a:b], basis[a:b], self.x, self.P, mass, r, eps,
-                    scale, Qc[a:b], self.R, out_x[a:b], out_sigma[a:b], out_innov[a:b],
-                    out_nis[a:b])
+                    scale, Qc[a:b], self.R, imu.z[a:b], imu.info[a:b], imu_index_,
+                    imu_position, out_x[a:b], out_sigma[a:b], out_innov[a:b], out_nis[a:b],
+                    out_imu_nis[a:b])
         except (ZeroDivisionError, np.linalg.LinAlgError) as error:
             # A model that cannot follow the log (wrong vehicle or rotor order) drives the
             # state to overflow; the compiled kernel then fails on a division or on S.
@@ -364,6 +476,7 @@ class ParameterEKF(ExtendedKalmanFilter):
         history = EstimationHistory(
             t=t, theta=out_x[:, STATE_DIM:], theta_sigma=out_sigma, position=out_x[:, 0:3],
             quaternion=out_x[:, 6:10], innovation=out_innov, nis=out_nis,
+            imu_nis=out_imu_nis if imu.steps else None,
         )
         return FilterRun(history, out_x[:, :STATE_DIM], self.estimate, log_likelihood)
 

@@ -11,7 +11,9 @@
 2. Refinement (optional, on by default): the process-noise level is fitted by maximum
    likelihood on the filter's innovations, and a batch MAP estimate of states and θ
    jointly is computed at that level (`mavsysid.estimation.batch.refine`): the *refined*
-   estimate.
+   estimate. The batch reads the pose alone: where the filter reads the IMU
+   (`mavsysid.estimation.filter.imu_measurement`), the refined estimate is the filter's
+   at the fitted noise level instead, so less data never replaces more.
 
 The equation-error θ of the force and torque balance is the guard's reference: the
 restart point, the agreement check, and the widening of σ where the two disagree. The
@@ -361,6 +363,12 @@ def _refine(
         f"process noise fitted to the flight: {scale:.3g} × the configured densities "
         f"(force {nz.force_density:.3g} N·√s, moment {nz.moment_density:.3g} N·m·√s)"
         + ("; at the edge of the search range" if at_bound else ""))
+    if ParameterEKF(noise_cfg, prior, sigma).reads(terms_r.flight.imu) is not None:
+        # The shooting cost has no IMU residuals: its θ would stand on less data than the
+        # filter's and replace it.
+        notes.append("no batch refinement: it reads the pose alone, the filter read the IMU "
+                     "too; the estimate is the filter's at the fitted process noise")
+        return start.estimate, start.log_likelihood
     report_stage("batch refinement")
     flight, states, wrench = terms_r.flight, start.states, terms_r.wrench
     if len(flight.segment_starts) > 1:
