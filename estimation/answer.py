@@ -27,9 +27,10 @@ equation-error reference. Per estimated quantity (`answer_parameters`):
   the balance's σ would be a confident wrong answer); anything else is "not determined by
   this flight" and keeps the prior's value and σ.
 
-The filter reads the pose and, where the flight has one, the IMU
-(`mavsysid.estimation.filter.imu_measurement`): it estimates θ, the wrench's nuisance
-quantities and the IMU's (its biases and offset, `with_imu_quantities`).
+The filter reads the pose, so it estimates θ and the wrench's nuisance quantities; a
+sensor's (the IMU's biases and offset, `with_imu_quantities`) are the balance's. With
+``EstimatorSettings.filter_imu`` it reads the IMU too
+(`mavsysid.estimation.filter.imu_measurement`) and estimates every sensor's quantities.
 
 A filter determines a quantity by the balance's own rule
 (`mavsysid.estimation.results.quantity_status`). The covariance keeps the cross terms
@@ -84,6 +85,7 @@ from mavsysid.vehicle.parameters import (
     PAPER_THETA,
     PARAMETER_NAMES,
     EstimatedQuantity,
+    quantity_names,
 )
 
 from mavsysid.errors import JobFailedError
@@ -340,8 +342,8 @@ def estimate(flight: FlightData, config: VehicleConfig,
         (`mavsysid.estimation.checks.check_kinematics`).
     """
     check_kinematics(flight)
-    config = with_imu_quantities(config, flight)
     settings = settings or EstimatorSettings()
+    config = with_imu_quantities(config, flight, every_sensor=settings.filter_imu)
     prior = prior_from_config(config, settings)
     if flight.rotor_count == config.rotor_count:
         flight, _ = rescale_wrong_rotor(flight, config)
@@ -350,8 +352,12 @@ def estimate(flight: FlightData, config: VehicleConfig,
     if balance is not None and balance_refusal is None:
         report_stage("the force and torque balance answered; checking it with the filter")
         settings = replace(settings, restart_diverged=False)
+    filter_config = config if settings.filter_imu else _pose_filter_config(config)
+    if reference is not None:
+        reference = reference.subset(quantity_names(filter_config.extra_quantities))
     try:
-        result = (filter_estimate or estimate_parameters)(flight, config, settings, reference)
+        result = (filter_estimate or estimate_parameters)(flight, filter_config, settings,
+                                                          reference)
         check_result(flight.source, result, config.limits.rotor_speed_max)
     except JobFailedError as error:
         reason = str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
@@ -371,27 +377,39 @@ def estimate(flight: FlightData, config: VehicleConfig,
     return _answered(result, None, balance, config, flight, prior)
 
 
-def with_imu_quantities(config: VehicleConfig, flight: FlightData) -> VehicleConfig:
-    """The vehicle with the nuisance quantities the flight's IMU brings to the balance.
+def _pose_filter_config(config: VehicleConfig) -> VehicleConfig:
+    """The vehicle as a filter reading the pose alone models it: the nuisance quantities of
+    the wrench only (a sensor's terms are the balance's)."""
+    return replace(config, extra_quantities=tuple(
+        q for q in config.extra_quantities if q.term is None or q.term.channel == "wrench"))
 
-    Where the balance takes the specific force from the accelerometer (a flight without a
-    motion-capture pose, `mavsysid.estimation.signals.balance_segments`), its biases and,
-    where neither the vehicle file nor the log states it, the IMU's offset from the centre
-    of gravity (`mavsysid.vehicle.imu.imu_quantities`). The gyro's bias is measured
-    against the pose's rates and taken off before (`mavsysid.estimation.signals`).
+
+def with_imu_quantities(config: VehicleConfig, flight: FlightData, every_sensor: bool = False
+                        ) -> VehicleConfig:
+    """The vehicle with the nuisance quantities the flight's IMU brings.
+
+    For the balance: where it takes the specific force from the accelerometer (a flight
+    without a motion-capture pose, `mavsysid.estimation.signals.balance_segments`), its
+    biases and, where neither the vehicle file nor the log states it, the IMU's offset from
+    the centre of gravity (`mavsysid.vehicle.imu.imu_quantities`); the gyro's bias is
+    measured against the pose's rates and taken off before (`mavsysid.estimation.signals`).
+    For a filter that reads the IMU (``every_sensor``): every sensor's.
 
     Parameters
     ----------
     config : VehicleConfig
     flight : FlightData
+    every_sensor : bool
+        Both sensors' biases and the offset, whatever the pose.
     """
     imu = flight.imu
-    if (imu is None or imu.gyro is None or imu.accel is None
-            or flight.pose_source == "motion_capture"):
+    if imu is None or imu.gyro is None or imu.accel is None:
+        return config
+    if not every_sensor and flight.pose_source == "motion_capture":
         return config
     named = {q.name for q in config.extra_quantities}
     extras = tuple(q for q in imu_quantities(
-        False, True, imu.position is not None, config.noise.gyro_bias_sigma,
+        every_sensor, True, imu.position is not None, config.noise.gyro_bias_sigma,
         config.noise.accel_bias_sigma) if q.name not in named)
     return replace(config, extra_quantities=config.extra_quantities + extras)
 

@@ -114,14 +114,26 @@ class ParameterEstimate:
         return ParameterEstimate(self.value[six], self.covariance[six, six])
 
     def subset(self, names: tuple[str, ...]) -> ParameterEstimate:
-        """The named quantities alone, in the order of ``names`` (each one of ``self.names``)."""
+        """The named quantities alone, in the order of ``names``.
+
+        Parameters
+        ----------
+        names : tuple of str
+            Each one of ``self.names``.
+        """
         idx = [self.names.index(name) for name in names]
         return ParameterEstimate(self.value[idx], self.covariance[np.ix_(idx, idx)],
                                  tuple(names))
 
     def on(self, prior: ParameterEstimate) -> ParameterEstimate:
         """This estimate on the quantities of ``prior``: a quantity it lacks keeps the prior's
-        value and σ, uncorrelated with the rest."""
+        value and σ, uncorrelated with the rest.
+
+        Parameters
+        ----------
+        prior : ParameterEstimate
+            The quantities to answer and their values where this estimate lacks one.
+        """
         value = prior.value.astype(float).copy()
         cov = np.diag(prior.sigma**2)
         mine = [j for j, name in enumerate(prior.names) if name in self.names]

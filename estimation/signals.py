@@ -311,6 +311,13 @@ def rate_kernel(settings: SmootherSettings, dt: float) -> np.ndarray:
     cumsum(c), the step response of c; averaged over half-sample shifts so that it is
     centred on the window's odd length (ω sampled, ω̇ the derivative between samples).
     Filtering the model's ω̇ with h reproduces what differentiating the gyro does.
+
+    Parameters
+    ----------
+    settings : SmootherSettings
+        The derivative's Savitzky–Golay window and order.
+    dt : float
+        The sample interval, s.
     """
     return _rate_kernel(settings.samples(dt), settings.polyorder, dt)
 
@@ -520,7 +527,13 @@ class ImuSegment:
         return float(np.median(np.diff(self.rotor_time))) if self.rotor_time.size > 1 else 0.0
 
     def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
-        """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s."""
+        """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s.
+
+        Parameters
+        ----------
+        delay : float
+            s by which the IMU lags the rotor speeds (held at the ends).
+        """
         return _interp_columns(self.t - delay, self.rotor_time, self.rotor_samples)
 
 

@@ -399,7 +399,13 @@ class ParameterEKF(ExtendedKalmanFilter):
         self.initialize(flight.position[i], q0, v_body, rates, state_sigma)
 
     def reads(self, imu: Imu | None) -> Imu | None:
-        """The part of ``imu`` this filter reads (``read_imu``), None: none of it."""
+        """The part of ``imu`` this filter reads (``read_imu``), None: none of it.
+
+        Parameters
+        ----------
+        imu : Imu or None
+            The flight's IMU.
+        """
         if imu is None or self.read_imu is False:
             return None
         if self.read_imu is None:
@@ -413,7 +419,13 @@ class ParameterEKF(ExtendedKalmanFilter):
 
     def imu_steps(self, flight: FlightData) -> tuple[ImuSteps, np.ndarray, np.ndarray]:
         """The IMU's readings per step of ``flight`` that `run` fuses, and where its
-        quantities sit (`mavsysid.estimation.filter.imu_measurement.imu_index`)."""
+        quantities sit (`mavsysid.estimation.filter.imu_measurement.imu_index`).
+
+        Parameters
+        ----------
+        flight : FlightData
+            The flight `run` filters.
+        """
         imu = self.reads(flight.imu)
         index, position = imu_index(self.model.extras, None if imu is None else imu.position)
         return imu_steps(flight.t, imu, self.model.config.noise), index, position

@@ -90,6 +90,12 @@ class EstimatorSettings:
     restart_diverged : bool
         Restart a diverged filter from the equation-error θ (else refuse at once: used when
         the force and torque balance answers and the filter only checks it).
+    filter_imu : bool
+        The filter reads the flight's IMU too, its biases and offset as filter states
+        (`mavsysid.estimation.filter.imu_measurement`); the batch refinement, which reads
+        the pose alone, is then left out. Off by default: measured in docs/benchmarks.md
+        ("What the IMU adds"), it tightens θ on simulated flights but costs 2–3× the time,
+        and the force and torque balance reads the IMU either way.
     """
 
     prior_relative_sigma: float = PRIOR_RELATIVE_SIGMA
@@ -101,6 +107,7 @@ class EstimatorSettings:
     guard: bool = True
     start_from_equation_error: bool = False
     restart_diverged: bool = True
+    filter_imu: bool = False
 
 
 def _measurement_sigma(flight: FlightData, config: VehicleConfig,

@@ -104,7 +104,13 @@ class ImuSteps:
 
     @classmethod
     def empty(cls, count: int) -> ImuSteps:
-        """No IMU reading at any of ``count`` steps."""
+        """No IMU reading at any of ``count`` steps.
+
+        Parameters
+        ----------
+        count : int
+            Steps of the flight.
+        """
         return cls(np.full((count, IMU_DIM), np.nan), np.zeros((count, _INFO_DIM)))
 
     @property
@@ -321,6 +327,42 @@ def imu_update_kernel(x, P, x0, n0, n1, w0, w1, b0, b1, F, A, G, Qc, dt, z, info
     P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ − (I − K H) C Kᵀ − K Cᵀ (I − K H)ᵀ, in place; the
     caller applies the correction dx to x (multiplicatively to the attitude, as the
     pose's). A step without a reading leaves P as it was.
+
+    Parameters
+    ----------
+    x : ndarray, shape (13 + Q,)
+        The state after the step's prediction: position, attitude quaternion, velocity,
+        body rates, then the Q estimated quantities (θ first), SI.
+    P : ndarray, shape (D, D)
+        Its error covariance (12 error states, then the quantities), updated in place.
+    x0 : ndarray, shape (13 + Q,)
+        The state the step started from.
+    n0, n1 : ndarray, shape (k,)
+        Rotor speeds at the step's ends, rad/s.
+    w0, w1 : ndarray, shape (6,)
+        The effects' known body force (N) and torque (N m) at the step's ends.
+    b0, b1 : ndarray, shape (6, E)
+        The nuisance quantities' wrench per unit value at the step's ends.
+    F, A, G : ndarray, shape (D, D), (D, D), (D, 6)
+        The step's transition, its continuous Jacobian and the noise input matrix.
+    Qc : ndarray, shape (6, 6)
+        The step's process-noise density (force, torque).
+    dt : float
+        The step's length, s.
+    z : ndarray, shape (6,)
+        The step's mean gyro (rad/s) and specific force (m/s²); NaN where not read.
+    info : ndarray, shape (9,)
+        The readings' weights within the step, their variances and span (`imu_steps`).
+    mass : float
+        kg.
+    r, eps : ndarray
+        The rotors' positions (m) and spin directions (`mavsysid.vehicle.dynamics`).
+    scale : ndarray, shape (Q,)
+        The quantities' scales (the filter's states are the quantities divided by them).
+    index : ndarray of int, shape (9,)
+        Where the IMU's quantities sit (`imu_index`).
+    position : ndarray, shape (3,)
+        The IMU's stated offset from the centre of gravity, m.
 
     Returns
     -------

@@ -87,6 +87,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(default: 0.5)")
     parser.add_argument("--no-refine", action="store_true",
                         help="report the filter only (skip noise fit and batch refinement)")
+    parser.add_argument("--filter-imu", action="store_true",
+                        help="the parameter filter reads the flight's IMU too, its biases "
+                        "and offset as states (the force and torque balance reads it "
+                        "either way; 2–3× slower, no batch refinement)")
     parser.add_argument("--fixed-effects", action="store_true",
                         help="hold the vehicle config's model effects ([effects.NAME]) at "
                         "their values instead of fitting their parameters with θ")
@@ -120,7 +124,8 @@ def format_truth(final: ParameterEstimate, truth: np.ndarray) -> str:
 def main(args: argparse.Namespace) -> int:
     """Run the command; returns the exit code."""
     settings = EstimatorSettings(prior_relative_sigma=args.prior_sigma,
-                                 refine=not args.no_refine, fit_effects=not args.fixed_effects)
+                                 refine=not args.no_refine, fit_effects=not args.fixed_effects,
+                                 filter_imu=args.filter_imu)
     truth = None if args.truth is None else read_truth(
         args.log.parent if args.truth == _OWN_TRUTH else Path(args.truth))
     show = progress_wanted(args.verbosity, sys.stderr)

@@ -56,7 +56,7 @@ def _run(flight: FlightData, with_bias_states: bool, read_imu: bool | None) -> F
     cfg = scaled_noise(_vehicle(), NOISE_SCALE)
     cfg = cfg.with_parameters(cfg.theta * np.array([1.3, 0.7, 1.3, 0.7, 0.7, 0.7]))
     if with_bias_states:
-        cfg = with_imu_quantities(cfg, flight)
+        cfg = with_imu_quantities(cfg, flight, every_sensor=True)
     sigma = (cfg.noise.position_sigma, cfg.noise.attitude_sigma)
     ekf = ParameterEKF(cfg, prior_from_config(cfg, EstimatorSettings()), sigma,
                        read_imu=read_imu)
@@ -114,7 +114,7 @@ def test_step_by_step_equals_the_compiled_run(imu_flight):
     """predict(), update_imu() and update() per sample reach run()'s x and P."""
     flight, _ = imu_flight
     flight = flight.time_slice(0.0, 1.0)
-    cfg = with_imu_quantities(_vehicle(), flight)
+    cfg = with_imu_quantities(_vehicle(), flight, every_sensor=True)
     sigma = (cfg.noise.position_sigma, cfg.noise.attitude_sigma)
     state_sigma = flight_initial_state_sigma(flight, sigma)
     prior = prior_from_config(cfg, EstimatorSettings())
