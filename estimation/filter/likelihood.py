@@ -49,7 +49,8 @@ from mavsysid.errors import JobFailedError
 __all__ = ["NOISE_SCALE_BOUNDS", "NOISE_SCALE_LIMITS", "NOISE_SCALE_TOLERANCE", "EffectFit",
            "EffectFitSettings", "ModelTerms", "NoiseFit", "WrenchReference",
            "fit_effect_parameters", "fit_noise_scale", "fit_scales", "has_wrench",
-           "in_model_terms", "model_terms", "reference_terms", "scaled_noise"]
+           "in_model_terms", "maximise_log_scale", "model_terms", "reference_terms",
+           "scaled_noise"]
 
 
 #: Range of the noise scale searched first.
@@ -152,14 +153,32 @@ def _uphill(f: Callable[[float], float], x0: float, edges: tuple[float, float],
     raise AssertionError("unreachable: the steps grow until an edge")
 
 
-def _maximise_log_scale(f: Callable[[float], float], x0: float,
-                        edges: tuple[float, float], rising: bool) -> float:
+def maximise_log_scale(f: Callable[[float], float], x0: float,
+                       edges: tuple[float, float], rising: bool) -> float:
     """The maximum of a unimodal f over [edges] to `NOISE_SCALE_TOLERANCE`, from x0.
 
     A bracket from walking uphill (first the way ``rising`` says), then parabolas through
-    the bracket (`_vertex`; golden sections where a parabola points outside it) until the
-    next vertex lies within the tolerance of the best point of a bracket at most `_NARROW`
-    wide. ``f`` is called once per point.
+    the bracket (`_vertex`; golden sections where a parabola points outside it or leaves
+    it lopsided) until the next vertex lies within the tolerance of the best point of a
+    bracket at most `_NARROW` wide.
+
+    Parameters
+    ----------
+    f : callable
+        log10 s → the log-likelihood (−inf where it cannot be evaluated); called once per
+        point.
+    x0 : float
+        Start, log10 s, within ``edges``.
+    edges : tuple of 2 float
+        The range searched, log10 s; a maximum within `_EDGE` of an edge is returned as
+        that edge.
+    rising : bool
+        Step up first (else down).
+
+    Returns
+    -------
+    float
+        log10 s of the best point evaluated.
     """
     values: dict[float, float] = {}
 
@@ -222,7 +241,7 @@ def fit_noise_scale(
     Notes
     -----
     Each filter pass is the cost of the fit (≈ 0.5 s of CPU per 30 000 samples), so the
-    search spends few (`_maximise_log_scale`): from scale 1 (or the range's nearest edge)
+    search spends few (`maximise_log_scale`): from scale 1 (or the range's nearest edge)
     it steps a third of a decade the way the innovations ask (a mean NIS above the
     measurement dimension asks for more noise), lengthens its steps until the likelihood
     falls, then interpolates parabolas to `NOISE_SCALE_TOLERANCE` decades: 3 to 6 passes
@@ -258,7 +277,7 @@ def fit_noise_scale(
         rising = bool(np.nanmean(run_at(x0).history.nis) > MEAS_DIM)
     except JobFailedError:
         rising = False
-    x = _maximise_log_scale(log_likelihood, x0, (lo, far_hi), rising)
+    x = maximise_log_scale(log_likelihood, x0, (lo, far_hi), rising)
     at_bound = bool(min(x - lo, far_hi - x) < 0.05)
     scale = 10.0 ** x
     return NoiseFit(scale, scaled_noise(config, scale), run_at(x), at_bound,

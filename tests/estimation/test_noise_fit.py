@@ -11,8 +11,8 @@ from mavsysid.estimation.filter.estimator import (
 )
 from mavsysid.estimation.filter.likelihood import (
     NOISE_SCALE_TOLERANCE,
-    _maximise_log_scale,
     fit_noise_scale,
+    maximise_log_scale,
     scaled_noise,
 )
 from mavsysid.estimation.results import prior_from_config
@@ -102,6 +102,6 @@ def test_scale_search_finds_the_maximum_in_few_steps(name, ell, expected):
             points.append(v)
             return float(ell(v))
 
-        x = _maximise_log_scale(f, 0.0, (-3.0, 3.0), rising)
+        x = maximise_log_scale(f, 0.0, (-3.0, 3.0), rising)
         assert abs(x - expected) <= NOISE_SCALE_TOLERANCE, name
         assert len(points) == len(set(points)) <= 12, name
