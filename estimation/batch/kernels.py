@@ -104,32 +104,99 @@ class BlockSystem:
 
 
 @numba.njit(cache=True)
+def _cholesky_inverse(A, Li):
+    """Li = L⁻¹ of A = L Lᵀ (n, n), A's lower triangle overwritten by L; False if A is not
+    positive definite.
+
+    Written out for the 12 × 12 node blocks: LAPACK's per-call overhead, not the
+    arithmetic, made up most of the factorisation's time.
+    """
+    n = A.shape[0]
+    for j in range(n):
+        s = A[j, j]
+        for m in range(j):
+            s -= A[j, m] * A[j, m]
+        if not s > 0.0:
+            return False
+        A[j, j] = np.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for m in range(j):
+                s -= A[i, m] * A[j, m]
+            A[i, j] = s / A[j, j]
+    for j in range(n):
+        Li[j, j] = 1.0 / A[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for m in range(j, i):
+                s -= A[i, m] * Li[m, j]
+            Li[i, j] = s / A[i, i]
+        for i in range(j):
+            Li[i, j] = 0.0
+    return True
+
+
+@numba.njit(cache=True)
+def _eliminate(Dk, Bt, Cp, Pp):
+    """Dk −= Cp Cpᵀ (lower triangle) and Bt −= Pp Cpᵀ: node k's blocks less node k − 1's."""
+    for i in range(12):
+        for j in range(i + 1):
+            s = 0.0
+            for m in range(12):
+                s += Cp[i, m] * Cp[j, m]
+            Dk[i, j] -= s
+        for a in range(Bt.shape[0]):
+            s = 0.0
+            for m in range(12):
+                s += Pp[a, m] * Cp[i, m]
+            Bt[a, i] -= s
+
+
+@numba.njit(cache=True)
 def _factor_kernel(D, U, B, T, dn, dt, lam, Linv, C, P):
     """Block Cholesky of the Jacobi-scaled matrix with λ·diag added; returns S (P, P).
 
     Linv[k] = L_kk⁻¹, C[k] = L_{k+1,k}, P[k] = L_{θ,k}; S is the Schur complement of θ.
-    Raises numba's LinAlgError if a block is not positive definite.
+    Raises LinAlgError if a block is not positive definite.
     """
-    K = D.shape[0]
+    K, p = D.shape[0], T.shape[0]
     S = T * np.outer(dt, dt)
-    for j in range(T.shape[0]):
+    for j in range(p):
         S[j, j] += lam * max(T[j, j], 1e-12) * dt[j] * dt[j]
+    Dk, Bt = np.empty((12, 12)), np.empty((p, 12))
     for k in range(K):
-        Dk = D[k] * np.outer(dn[k], dn[k])
-        for j in range(12):
-            Dk[j, j] += lam * max(D[k, j, j], 1e-12) * dn[k, j] * dn[k, j]
-        Bt = np.ascontiguousarray((B[k] * np.outer(dn[k], dt)).T)
+        for i in range(12):
+            for j in range(12):
+                Dk[i, j] = D[k, i, j] * dn[k, i] * dn[k, j]
+            Dk[i, i] += lam * max(D[k, i, i], 1e-12) * dn[k, i] * dn[k, i]
+            for a in range(p):
+                Bt[a, i] = B[k, i, a] * dn[k, i] * dt[a]
         if k > 0:
-            Ct = np.ascontiguousarray(C[k - 1].T)
-            Dk -= C[k - 1] @ Ct
-            Bt -= P[k - 1] @ Ct
-        Li = np.linalg.inv(np.linalg.cholesky(Dk))
-        LiT = np.ascontiguousarray(Li.T)
-        Linv[k] = Li
-        P[k] = Bt @ LiT
-        S -= P[k] @ np.ascontiguousarray(P[k].T)
-        if k < K - 1:
-            C[k] = np.ascontiguousarray((U[k] * np.outer(dn[k], dn[k + 1])).T) @ LiT
+            _eliminate(Dk, Bt, C[k - 1], P[k - 1])
+        if not _cholesky_inverse(Dk, Linv[k]):
+            raise np.linalg.LinAlgError("Matrix is not positive definite.")
+        Li = Linv[k]
+        for a in range(p):  # P[k] = Bt Liᵀ
+            for i in range(12):
+                s = 0.0
+                for m in range(i + 1):
+                    s += Bt[a, m] * Li[i, m]
+                P[k, a, i] = s
+        for a in range(p):  # S −= P[k] P[k]ᵀ
+            for c in range(a + 1):
+                s = 0.0
+                for m in range(12):
+                    s += P[k, a, m] * P[k, c, m]
+                S[a, c] -= s
+                if c != a:
+                    S[c, a] -= s
+        if k < K - 1:  # C[k] = (scaled U[k])ᵀ Liᵀ
+            for i in range(12):
+                for j in range(12):
+                    s = 0.0
+                    for m in range(j + 1):
+                        s += U[k, m, i] * dn[k, m] * Li[j, m]
+                    C[k, i, j] = s * dn[k + 1, i]
     return S
 
 
@@ -138,21 +205,43 @@ def _solve_kernel(Linv, C, P, Lt_inv, bn, bt):
     """Solve L Lᵀ X = B with the factors of `_factor_kernel` (scaled units), for m
     right-hand sides at once: bn (K, 12, m), bt (P, m)."""
     K = Linv.shape[0]
-    y = np.empty_like(bn)
-    yt = bt.copy()
+    p, m = bt.shape
+    y, yt = np.empty_like(bn), bt.copy()
     for k in range(K):
-        rhs = bn[k].copy()
-        if k > 0:
-            rhs -= C[k - 1] @ y[k - 1]
-        y[k] = Linv[k] @ rhs
-        yt -= P[k] @ y[k]
+        for c in range(m):
+            for i in range(12):
+                s = bn[k, i, c]
+                if k > 0:
+                    for j in range(12):
+                        s -= C[k - 1, i, j] * y[k - 1, j, c]
+                y[k, i, c] = s
+            for i in range(11, -1, -1):  # y ← L_kk⁻¹ y, lower triangular, from the bottom
+                s = 0.0
+                for j in range(i + 1):
+                    s += Linv[k, i, j] * y[k, j, c]
+                y[k, i, c] = s
+            for a in range(p):
+                s = 0.0
+                for j in range(12):
+                    s += P[k, a, j] * y[k, j, c]
+                yt[a, c] -= s
     xt = np.ascontiguousarray(Lt_inv.T) @ (Lt_inv @ yt)
-    x = np.empty_like(bn)
+    x, r = np.empty_like(bn), np.empty(12)
     for k in range(K - 1, -1, -1):
-        rhs = y[k] - np.ascontiguousarray(P[k].T) @ xt
-        if k < K - 1:
-            rhs -= np.ascontiguousarray(C[k].T) @ x[k + 1]
-        x[k] = np.ascontiguousarray(Linv[k].T) @ rhs
+        for c in range(m):
+            for i in range(12):
+                s = y[k, i, c]
+                for a in range(p):
+                    s -= P[k, a, i] * xt[a, c]
+                if k < K - 1:
+                    for j in range(12):
+                        s -= C[k, j, i] * x[k + 1, j, c]
+                r[i] = s
+            for i in range(12):  # x = L_kk⁻ᵀ r
+                s = 0.0
+                for j in range(i, 12):
+                    s += Linv[k, j, i] * r[j]
+                x[k, i, c] = s
     return x, xt
 
 
