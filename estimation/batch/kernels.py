@@ -399,6 +399,92 @@ def _accumulate_at_node(res, row, sig_p, sig_a, k, D, g, E, Etn):
 
 
 @numba.njit(cache=True)
+def _accumulate_defect(W, Phi, r, E, row, k, normal, probe):
+    """Interval k's defect rows J = [−W Φ₁₂ | W] (node k and θ, node k+1) with residuals r
+    (12,) into the normal equations and Jᵀ E, through M = Wᵀ W.
+
+    JᵀJ's blocks are Φᵀ M Φ, −Φᵀ M and M, and Jᵀ r is [−Φᵀ; I] Wᵀ r: about half the
+    products of forming J's 12 × (24 + P) rows and multiplying them out.
+    """
+    D, U, B, T, g, gt = normal
+    _, Etn, Ett = probe
+    p = T.shape[0]
+    dim = 12 + p
+    M, MPhi, Wr = np.empty((12, 12)), np.empty((12, dim)), np.empty(12)
+    for i in range(12):
+        for j in range(i + 1):
+            s = 0.0
+            for m in range(12):
+                s += W[m, i] * W[m, j]
+            M[i, j] = s
+            M[j, i] = s
+        s = 0.0
+        for m in range(12):
+            s += W[m, i] * r[m]
+        Wr[i] = s
+    for i in range(12):
+        for c in range(dim):
+            s = 0.0
+            for j in range(12):
+                s += M[i, j] * Phi[j, c]
+            MPhi[i, c] = s
+    for i in range(dim):  # Φᵀ M Φ: node k (D, B) and θ (T); Φᵀ Wᵀ r
+        for c in range(i, dim):
+            s = 0.0
+            for j in range(12):
+                s += Phi[j, i] * MPhi[j, c]
+            if c < 12:
+                D[k, i, c] += s
+                if c != i:
+                    D[k, c, i] += s
+            elif i < 12:
+                B[k, i, c - 12] += s
+            else:
+                T[i - 12, c - 12] += s
+                if c != i:
+                    T[c - 12, i - 12] += s
+        s = 0.0
+        for j in range(12):
+            s += Phi[j, i] * Wr[j]
+        if i < 12:
+            g[k, i] -= s
+        else:
+            gt[i - 12] -= s
+    for i in range(12):  # −Φᵀ M into U[k] and B[k+1]; M and Wᵀ r into node k+1
+        for c in range(12):
+            U[k, i, c] -= MPhi[c, i]
+            D[k + 1, i, c] += M[i, c]
+        for a in range(p):
+            B[k + 1, i, a] -= MPhi[i, 12 + a]
+        g[k + 1, i] += Wr[i]
+    if E.shape[1]:
+        _probe_defect(W, Phi, E, row, k, Etn, Ett)
+
+
+@numba.njit(cache=True)
+def _probe_defect(W, Phi, E, row, k, Etn, Ett):
+    """The defect rows' share of Jᵀ E: [−Φᵀ; I] Wᵀ E (E's rows from ``row``)."""
+    p, d = Ett.shape
+    WE = np.empty((12, d))
+    for i in range(12):
+        for e in range(d):
+            s = 0.0
+            for m in range(12):
+                s += W[m, i] * E[row + m, e]
+            WE[i, e] = s
+            Etn[k + 1, i, e] += s
+    for i in range(12 + p):
+        for e in range(d):
+            s = 0.0
+            for j in range(12):
+                s += Phi[j, i] * WE[j, e]
+            if i < 12:
+                Etn[k, i, e] -= s
+            else:
+                Ett[i - 12, e] -= s
+
+
+@numba.njit(cache=True)
 def _probe_rows(Jr, m, ncols, row, k, E, Etn, Ett):
     """Add the rows' share of Jᵀ E (E's rows from ``row``) to Etn[k] (Etn[k+1]) and Ett."""
     p = Ett.shape[0]
@@ -526,7 +612,10 @@ def shoot_kernel(nodes, theta, t, z, n, w, basis, node_idx, mass, r, eps, scale,
                 whiten_kernel(Qacc[0:12, 0:12], W[k])
             difference_kernel(nodes[k + 1], x, d)
             res[row:row + 12] = W[k] @ d
-            if want_jac:
+            if mode == MODE_NORMAL:
+                _accumulate_defect(W[k], Phi, res[row:row + 12], probe[0], row, k, normal,
+                                   probe)
+            elif want_jac:
                 _defect_rows(W[k], Phi, dim, Jr)
                 e = _row_group(Jr, 12, dim + 12, row, k, node_idx[k + 1] - 1, False, mode, res,
                                sig, coo, e, normal, probe, influence)
