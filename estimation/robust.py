@@ -22,14 +22,14 @@ model disagree beyond `DISAGREEMENT_SIGMAS` combined σ.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["DISAGREEMENT_SIGMAS", "andrews_bartlett_bandwidth", "disagreement_widening",
-           "hac_covariance", "inflated_theta_covariance", "influence_by_sample",
-           "robust_theta_covariance", "widened"]
+           "hac_covariance", "inflated_theta_covariance", "inflation_from_scores",
+           "influence_by_sample", "robust_theta_covariance", "widened"]
 
 
 #: Two estimators that are both consistent under a correct model differ by more than this
@@ -211,18 +211,44 @@ def inflated_theta_covariance(
     E[theta_columns, np.arange(len(theta_columns))] = 1.0
     B = solve(E)
     naive = B[theta_columns]
-    naive = 0.5 * (naive + naive.T)
     scores = influence_by_sample(jacobian, residuals, B, sample, n_samples)
-    bandwidth = andrews_bartlett_bandwidth(scores)
     prior_rows = np.flatnonzero(np.asarray(sample) < 0)
     G_prior = np.asarray(jacobian[prior_rows] @ B)
-    prior = G_prior.T @ G_prior
-    data = np.diag(hac_covariance(scores, bandwidth) + prior)
     eps = np.random.default_rng(seed).standard_normal((jacobian.shape[0], draws))
     white = eps - np.asarray(jacobian @ solve(np.asarray(jacobian.T @ eps)))
-    reference = np.mean([np.diag(hac_covariance(
-        influence_by_sample(jacobian, white[:, i], B, sample, n_samples), bandwidth) + prior)
-        for i in range(draws)], axis=0)
+    white_scores = [influence_by_sample(jacobian, white[:, i], B, sample, n_samples)
+                    for i in range(draws)]
+    return inflation_from_scores(0.5 * (naive + naive.T), scores, white_scores,
+                                 G_prior.T @ G_prior)
+
+
+def inflation_from_scores(
+    naive: np.ndarray, scores: np.ndarray, white_scores: Sequence[np.ndarray] | np.ndarray,
+    prior: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`inflated_theta_covariance` from the influence series, however they were formed.
+
+    Parameters
+    ----------
+    naive : ndarray, shape (P, P)
+        The θ block of H⁻¹.
+    scores : ndarray, shape (T, P)
+        Each time sample's influence on θ̂ with the fitted residuals (`influence_by_sample`).
+    white_scores : sequence of ndarray, each shape (T, P)
+        The same with each Monte-Carlo draw of projected white residuals (I − P) ε.
+    prior : ndarray, shape (P, P)
+        G_pᵀ G_p of the prior rows (independent of the flight).
+
+    Returns
+    -------
+    covariance : ndarray, shape (P, P)
+    inflation : ndarray, shape (P,)
+        As `inflated_theta_covariance`.
+    """
+    bandwidth = andrews_bartlett_bandwidth(scores)
+    data = np.diag(hac_covariance(scores, bandwidth) + prior)
+    reference = np.mean([np.diag(hac_covariance(w, bandwidth) + prior) for w in white_scores],
+                        axis=0)
     inflation = np.sqrt(np.maximum(1.0, data / reference))
     return naive * np.outer(inflation, inflation), inflation
 

@@ -51,6 +51,7 @@ from mavsysid.vehicle.config import VehicleConfig
 from scipy.signal import coherence, freqz
 
 __all__ = [
+    "COARSE_DELAY_PERIODS",
     "MAIN_COLUMNS",
     "MAX_DELAY",
     "MIN_COHERENCE",
@@ -219,10 +220,14 @@ def smoother_cutoff(window: float, dt: float, gain: float = 0.5, polyorder: int 
 MAX_DELAY = 0.1
 #: Coarsest grid step, s.
 GRID_STEP = 0.002
+#: The offset scan's first pass steps by this share of the period of the highest torque
+#: band's top frequency: the torque residual's minimum in δ is half a period wide there.
+COARSE_DELAY_PERIODS = 1.0 / 8.0
 
 
 def scan_delay(objective: Callable[[float], float], dt: float,
-               max_delay: float = MAX_DELAY) -> tuple[float, np.ndarray, np.ndarray]:
+               max_delay: float = MAX_DELAY, coarse: float | None = None,
+               ) -> tuple[float, np.ndarray, np.ndarray]:
     """The δ minimising ``objective`` over a grid, refined by a parabola.
 
     Parameters
@@ -233,27 +238,74 @@ def scan_delay(objective: Callable[[float], float], dt: float,
         Sample interval, s (the grid step is at least this).
     max_delay : float
         Half-width of the grid, s.
+    coarse : float, optional
+        A coarser step, s, well below the half-width of the objective's minimum: the grid
+        is first evaluated at this step, then at the grid point nearest the vertex of the
+        parabola through the coarse minimum and its neighbours, and from the lower of the
+        two down to a minimum of the grid's own (`_descend`): the same δ as the whole grid
+        wherever the objective has one minimum within a coarse step. None: every grid
+        point.
 
     Returns
     -------
     delay : float
         s.
     grid, values : ndarray
-        The grid (s) and the objective on it.
+        The grid (s) and the objective on it (NaN where not evaluated).
     """
     step = max(GRID_STEP, dt)
     grid = np.arange(-max_delay, max_delay + 0.5 * step, step)
-    values = np.array([objective(float(d)) for d in grid])
+    values = np.full(grid.size, np.nan)
+    stride = 1 if coarse is None else max(1, int(coarse / step))
+    first = np.unique(np.append(np.arange(0, grid.size, stride), grid.size - 1))
+    values[first] = [objective(float(grid[i])) for i in first]
     finite = np.isfinite(values)
     if not finite.any():
         return 0.0, grid, values
     i = int(np.nanargmin(np.where(finite, values, np.inf)))
+    if stride > 1:
+        i = _descend(objective, grid, values, _coarse_vertex(objective, grid, values, i, stride))
+    finite = np.isfinite(values)
     if 0 < i < len(grid) - 1 and np.all(finite[i - 1:i + 2]):
         a, b, c = values[i - 1:i + 2]
         curvature = a - 2.0 * b + c
         if curvature > 0.0:
             return float(grid[i] + 0.5 * step * (a - c) / curvature), grid, values
     return float(grid[i]), grid, values
+
+
+def _coarse_vertex(objective: Callable[[float], float], grid: np.ndarray, values: np.ndarray,
+                   i: int, stride: int) -> int:
+    """The grid index nearest the vertex of the parabola through the coarse points i − stride,
+    i, i + stride (evaluated into ``values``) if it is lower there than at i; else i."""
+    if not (i - stride >= 0 and i + stride < grid.size):
+        return i
+    a, b, c = values[i - stride], values[i], values[i + stride]
+    curvature = a - 2.0 * b + c
+    if not (np.isfinite(curvature) and curvature > 0.0):
+        return i
+    j = int(np.clip(round(i + 0.5 * stride * (a - c) / curvature), 0, grid.size - 1))
+    if np.isnan(values[j]):
+        values[j] = objective(float(grid[j]))
+    return j if values[j] < b else i
+
+
+def _descend(objective: Callable[[float], float], grid: np.ndarray, values: np.ndarray,
+             i: int) -> int:
+    """From grid index i, step to the lower neighbour (evaluated into ``values`` as
+    needed) until neither is lower; returns that local minimum's index."""
+    def at(j: int) -> float:
+        if not 0 <= j < grid.size:
+            return np.inf
+        if np.isnan(values[j]):
+            values[j] = objective(float(grid[j]))
+        return values[j] if np.isfinite(values[j]) else np.inf
+
+    while True:
+        lower = min((i - 1, i + 1), key=at)
+        if not at(lower) < at(i):
+            return i
+        i = lower
 
 
 #: Pilot Savitzky–Golay window for the coherence, s: passes attitude dynamics up to about
@@ -280,12 +332,15 @@ class BalanceFit:
     reverse : dict
         ``{"force": {column: value}, "torque": {column: value}}``, the Frisch reverse
         values of the main columns.
+    rows : list of BalanceRows
+        The rows fitted (`balance_rows_for` at ``choices``), one per segment with rows.
     """
 
     choices: FitChoices
     force: LinearFit
     torque: LinearFit
     reverse: dict
+    rows: list[BalanceRows]
 
 
 def _stride(choices: FitChoices, dt: float) -> int:
@@ -359,24 +414,27 @@ def _shifted(rows: BalanceRows, delay: float, stride: int) -> BalanceRows:
     Every step from rotor speeds to a column is linear and time-invariant except the
     rotation to the body frame, which turns by at most a few hundredths of a radian in
     `MAX_DELAY`: shifting the finished columns is the scan's cheap stand-in for building
-    them at each δ. Rows within `MAX_DELAY` of either end are dropped.
+    them at each δ. Rows within `MAX_DELAY` of either end are dropped. The columns are
+    interpolated linearly between the two rows around each shifted time (`np.interp`'s
+    arithmetic), only at the rows kept.
     """
     t = rows.t
     keep = np.flatnonzero((t >= t[0] + MAX_DELAY) & (t <= t[-1] - MAX_DELAY))[::stride]
     ts = t[keep] - delay
+    j = np.clip(np.searchsorted(t, ts, side="right") - 1, 0, len(t) - 2)
+    fraction = (ts - t[j]) / (t[j + 1] - t[j])
 
-    def shift(x: np.ndarray) -> np.ndarray:
-        flat = x.reshape(len(t), -1)
-        out = np.column_stack([np.interp(ts, t, flat[:, j]) for j in range(flat.shape[1])])
-        return out.reshape((len(keep),) + x.shape[1:])
+    def shift(x: np.ndarray, columns: list[int]) -> np.ndarray:
+        before, after = x[j][:, :, columns], x[j + 1][:, :, columns]
+        return (after - before) * fraction[:, None, None] + before
 
     # The nuisance quantities' columns (after the model's) are taken as the rotors' too.
-    torque_cols = rows.torque_columns[keep].copy()
+    torque_cols = rows.torque_columns[keep]
     rotor = [*ROTOR_TORQUE_COLUMNS, *range(len(TORQUE_COEFFICIENTS), torque_cols.shape[2])]
-    torque_cols[:, :, rotor] = shift(rows.torque_columns[:, :, rotor])
-    force_cols = rows.force_columns[keep].copy()
+    torque_cols[:, :, rotor] = shift(rows.torque_columns, rotor)
+    force_cols = rows.force_columns[keep]
     rotor = [*ROTOR_FORCE_COLUMNS, *range(len(FORCE_COEFFICIENTS), force_cols.shape[2])]
-    force_cols[:, :, rotor] = shift(rows.force_columns[:, :, rotor])
+    force_cols[:, :, rotor] = shift(rows.force_columns, rotor)
     return BalanceRows(t[keep], rows.force[keep], force_cols, rows.torque[keep], torque_cols)
 
 
@@ -419,7 +477,9 @@ def choose_fit(segments: list[Segment], config: VehicleConfig, c_d: float
         rows = [_dead_axes(b.rows(0.0, c_d, roll_pitch, yaw, force), choices) for b in builders]
         rows = [r for r in rows if len(r) > 0]
         stride = _stride(choices, dt)
-        delay, _, _ = scan_delay(lambda d: _torque_objective(rows, d, stride), dt)
+        top = max(b.high for b in (roll_pitch, yaw) if b is not None)
+        delay, _, _ = scan_delay(lambda d: _torque_objective(rows, d, stride), dt,
+                                 coarse=COARSE_DELAY_PERIODS / top)
         choices = replace(choices, delay=delay)
     return choices, builders
 
@@ -455,7 +515,8 @@ def fit_balance(segments: list[Segment], config: VehicleConfig, c_d: float
         The fit, and the builders (one per segment) for further rows at its window.
     """
     choices, builders = choose_fit(segments, config, c_d)
-    force, torque, reverse = regress(balance_rows_for(builders, choices))
+    rows = balance_rows_for(builders, choices)
+    force, torque, reverse = regress(rows)
     b, sigma = force.coefficients, force.sigma
     fitted_c_d, fitted_linear = b[1] / b[0], b[2] / b[0]
     # The rows' drag moments take the fitted c_D only where the flight separates it from
@@ -465,8 +526,9 @@ def fit_balance(segments: list[Segment], config: VehicleConfig, c_d: float
         new_c_d = float(fitted_c_d) if separated and fitted_c_d > 0.0 else c_d
         choices = replace(choices, c_d=new_c_d, drag_c_d=float(fitted_c_d),
                           drag_linear=float(fitted_linear))
-        force, torque, reverse = regress(balance_rows_for(builders, choices))
-    return BalanceFit(choices, force, torque, reverse), builders
+        rows = balance_rows_for(builders, choices)
+        force, torque, reverse = regress(rows)
+    return BalanceFit(choices, force, torque, reverse, rows), builders
 
 
 def delay_sigma(fit: BalanceFit, builders: list[BalanceBuilder]) -> float:
@@ -482,7 +544,7 @@ def delay_sigma(fit: BalanceFit, builders: list[BalanceBuilder]) -> float:
     c = fit.choices
     h = builders[0].dt
     b = fit.torque.coefficients
-    rows = balance_rows_for(builders, c)
+    rows = fit.rows
     plus, minus = (balance_rows_for(builders, replace(c, delay=c.delay + s)) for s in (h, -h))
     if not (len(rows) == len(plus) == len(minus)) or not rows:
         return float("nan")

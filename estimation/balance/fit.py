@@ -256,7 +256,7 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     fit, builders = fit_balance(segments, config, float(prior.value[C_D]))
     base = _fit_theta(fit)
     eiv, eiv_c = _eiv_sigma(fit, base)
-    rows = balance_rows_for(builders, fit.choices)
+    rows = fit.rows
     halves, halves_c = _split_sigma(*_halves(rows), base.value.size)
     bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices), base.value.size)
     parts = np.vstack([base.sigma, eiv, halves, bands, base.route_sigma,

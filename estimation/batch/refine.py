@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 from mavsysid.estimation.batch.kernels import (
     MODE_COO,
+    MODE_INFLUENCE,
     MODE_NORMAL,
     MODE_RESIDUALS,
     BlockSystem,
@@ -36,19 +37,29 @@ from mavsysid.estimation.batch.kernels import (
     factor,
     inject_kernel,
     shoot_kernel,
+    whiten_kernel,
 )
 from mavsysid.estimation.flight import FlightData, step_process_noise
 from mavsysid.estimation.progress import report_progress
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.estimation.robust import inflated_theta_covariance
+from mavsysid.estimation.robust import inflation_from_scores
 from mavsysid.vehicle.linearization import ErrorStateModel
 from scipy.optimize import least_squares
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["BatchResult", "LeastSquaresResult", "ShootingProblem", "apply_step",
-           "factor_at_optimum", "node_indices", "refine", "shooting_problem", "sigma_inflation",
+__all__ = ["INFLATION_DRAWS", "STEP_TOLERANCE", "BatchResult", "LeastSquaresResult",
+           "ShootingProblem", "apply_step", "factor_at_optimum", "node_indices",
+           "probe_columns", "refine", "shooting_problem", "sigma_inflation",
            "solve_least_squares", "whitening"]
+
+#: The refinement stops where its next Gauss–Newton step would move no estimated
+#: quantity by more than this share of its σ.
+STEP_TOLERANCE = 0.05
+
+#: Monte-Carlo draws of white residuals the σ inflation is calibrated against
+#: (`mavsysid.estimation.robust.inflated_theta_covariance`), and their seed.
+INFLATION_DRAWS, INFLATION_SEED = 8, 0
 
 
 def node_indices(t: np.ndarray, node_interval: float) -> np.ndarray:
@@ -63,10 +74,12 @@ def node_indices(t: np.ndarray, node_interval: float) -> np.ndarray:
 
 
 def whitening(Q: np.ndarray) -> np.ndarray:
-    """W with Wᵀ W = Q⁻¹ for each (12, 12) block of Q (M, 12, 12), robust to a singular Q."""
-    tr = np.trace(Q, axis1=1, axis2=2)
-    q = 0.5 * (Q + np.swapaxes(Q, 1, 2)) + np.eye(12) * (1e-12 + 1e-9 * tr / 12)[:, None, None]
-    return np.linalg.inv(np.linalg.cholesky(q))
+    """W with Wᵀ W = Q⁻¹ for each (12, 12) block of Q (M, 12, 12), robust to a singular Q
+    (`mavsysid.estimation.batch.kernels.whiten_kernel`)."""
+    W = np.empty_like(Q)
+    for k in range(Q.shape[0]):
+        whiten_kernel(np.ascontiguousarray(Q[k]), W[k])
+    return W
 
 
 def apply_step(model: ErrorStateModel, nodes: np.ndarray, theta: np.ndarray,
@@ -140,20 +153,27 @@ class ShootingProblem:
         return 6 * len(self.flight) + 12 * (self.node_count - 1) + self.parameter_count
 
     def _run(self, nodes: np.ndarray, theta: np.ndarray, mode: int, want_q: bool = False,
-             coo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-             system: BlockSystem | None = None) -> tuple[np.ndarray, np.ndarray]:
+             set_w: bool = False, coo: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             system: BlockSystem | None = None,
+             probe: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             influence: tuple[np.ndarray, ...] | None = None) -> tuple[np.ndarray, np.ndarray]:
         a = self.arrays
-        K = self.node_count
+        K, p = self.node_count, self.parameter_count
         res = np.empty(self.residual_count)
-        rows, cols, vals = coo if coo is not None else (np.empty(1, np.int64),) * 2 + (
-            np.empty(1),)
-        system = system if system is not None else BlockSystem.zeros(1, self.parameter_count)
+        coo = coo if coo is not None else (np.empty(1, np.int64),) * 2 + (np.empty(1),)
+        system = system if system is not None else BlockSystem.zeros(1, p)
+        probe = probe if probe is not None else (np.empty((1, 0)), np.empty((1, 12, 0)),
+                                                 np.empty((p, 0)))
+        influence = influence if influence is not None else (
+            np.empty((1, 12, 0)), np.empty((p, 0)), np.empty((1, p)), np.empty((0, 1, p)))
         Q_out = np.empty((max(K - 1, 1), 12, 12))
         mass, r, eps, scale = self.model.kernel_args()
         m, _ = shoot_kernel(nodes, theta, a["t"], a["z"], a["n"], a["w"], a["basis"],
-                            self.node_idx, mass, r, eps, scale, a["Qc"], self.W, self.sigma[0],
-                            self.sigma[1], mode, want_q, res, rows, cols, vals, Q_out, system.D,
-                            system.U, system.B, system.T, system.g, system.gt)
+                            self.node_idx, mass, r, eps, scale, a["Qc"], self.W,
+                            (float(self.sigma[0]), float(self.sigma[1])), mode, want_q, set_w,
+                            res, Q_out, (*coo, 12 * K),
+                            (system.D, system.U, system.B, system.T, system.g, system.gt),
+                            probe, influence)
         res[m:] = (theta - self.prior.value) / self.prior_sigma
         return res, Q_out
 
@@ -173,13 +193,74 @@ class ShootingProblem:
     def normal_equations(self, nodes: np.ndarray, theta: np.ndarray
                          ) -> tuple[np.ndarray, BlockSystem]:
         """r, and JᵀJ with Jᵀr in blocks (θ in its scaled units)."""
-        p = self.parameter_count
-        system = BlockSystem.zeros(self.node_count, p)
-        res, _ = self._run(nodes, theta, MODE_NORMAL, system=system)
+        res, system, _ = self.normal_equations_with_probes(nodes, theta)
+        return res, system
+
+    def normal_equations_with_probes(
+        self, nodes: np.ndarray, theta: np.ndarray, probes: np.ndarray | None = None,
+        whiten: bool = False,
+    ) -> tuple[np.ndarray, BlockSystem, tuple[np.ndarray, np.ndarray]]:
+        """`normal_equations`, and Jᵀ E for probe columns E in blocks.
+
+        Parameters
+        ----------
+        nodes, theta
+            The point.
+        probes : ndarray, shape (M, d), optional
+            Probe columns E, one row per residual; none by default.
+        whiten : bool
+            Set the defects' whitening from this pass's process noise (`interval_noise`)
+            before they are formed: the first pass of a problem made by `shooting_problem`
+            with ``whitened=False``.
+
+        Returns
+        -------
+        res : ndarray, shape (M,)
+        system : BlockSystem
+        probes : tuple of ndarray
+            Jᵀ E of the nodes (K, 12, d) and of θ (P, d).
+        """
+        K, p = self.node_count, self.parameter_count
+        E = np.empty((1, 0)) if probes is None else np.ascontiguousarray(probes, dtype=float)
+        d = E.shape[1]
+        system = BlockSystem.zeros(K, p)
+        probe = (E, np.zeros((K, 12, d)), np.zeros((p, d)))
+        res, _ = self._run(nodes, theta, MODE_NORMAL, set_w=whiten, system=system, probe=probe)
         w = self.model.theta_scale / self.prior_sigma
         system.T[np.diag_indices(p)] += w * w
         system.gt[:] += w * res[-p:]
-        return res, system
+        if d:
+            probe[2][:] += w[:, None] * E[-p:]
+        return res, system, probe[1:]
+
+    def influence(self, nodes: np.ndarray, theta: np.ndarray, probes: np.ndarray,
+                  Xn: np.ndarray, Xt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each time sample's share of (J X)ᵀ r, for the data and for white probes.
+
+        Parameters
+        ----------
+        nodes, theta
+            The point (usually the optimum).
+        probes : ndarray, shape (M, d)
+            White probe columns E, one entry per residual row.
+        Xn, Xt : ndarray, shapes (K, 12, P + d) and (P, P + d)
+            X = H⁻¹ [E_θ, Jᵀ E] in blocks: the columns of the P quantities, then d more.
+
+        Returns
+        -------
+        data : ndarray, shape (N, P)
+            Σ over each sample's rows of (J X_θ) r (prior rows left out; a defect counts
+            with the last sample of its interval).
+        white : ndarray, shape (d, N, P)
+            The same with r replaced by each probe's E_i − J X_i.
+        """
+        N, p, d = len(self.flight), self.parameter_count, probes.shape[1]
+        data, white = np.zeros((N, p)), np.zeros((d, N, p))
+        probe = (np.ascontiguousarray(probes, dtype=float), np.empty((1, 12, 0)),
+                 np.empty((p, 0)))
+        self._run(nodes, theta, MODE_INFLUENCE, probe=probe,
+                  influence=(np.ascontiguousarray(Xn), np.ascontiguousarray(Xt), data, white))
+        return data, white
 
     def jacobian(self, nodes: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
         """r and J as a sparse matrix (columns: 12 per node, then the P scaled quantities)."""
@@ -195,7 +276,7 @@ class ShootingProblem:
         shape = (m + p, 12 * K + p)
         if np.all(rows[1:] >= rows[:-1]):
             # The kernel writes row by row with no repeated column: CSR directly, without
-            # the sort of a COO conversion (2 s of a 60 s, 500 Hz estimate).
+            # the sort of a COO conversion (seconds on a 60 s flight at 500 Hz).
             indptr = np.searchsorted(rows, np.arange(shape[0] + 1))
             return res, sp.csr_matrix((vals, cols, indptr), shape=shape)
         return res, sp.csr_matrix((vals, (rows, cols)), shape=shape)
@@ -233,18 +314,22 @@ class BatchResult:
 def shooting_problem(
     flight: FlightData, filtered_states: np.ndarray, filtered: ParameterEstimate,
     model: ErrorStateModel, prior: ParameterEstimate, sigma: tuple[float, float],
-    node_interval: float = 0.0, wrench: np.ndarray | None = None,
+    node_interval: float = 0.0, wrench: np.ndarray | None = None, whitened: bool = True,
 ) -> tuple[ShootingProblem, np.ndarray]:
     """The problem `refine` solves, with its defects whitened at the start, and the start nodes.
 
-    Parameters as for `refine`. Returns the problem and the nodes (K, 13) at the start.
+    Parameters as for `refine`; ``whitened`` False leaves the whitening to the first
+    `ShootingProblem.normal_equations_with_probes` (``whiten=True``, at the start nodes and
+    θ), which saves a pass over the flight. Returns the problem and the nodes (K, 13) at
+    the start.
     """
     node_idx = node_indices(flight.t, node_interval)
     nodes = np.ascontiguousarray(filtered_states[node_idx[:-1]])
     K = nodes.shape[0]
     problem = ShootingProblem(flight, model, node_idx, prior, sigma,
                               np.zeros((max(K - 1, 1), 12, 12)), wrench)
-    problem.W = whitening(problem.interval_noise(nodes, filtered.value))
+    if whitened:
+        problem.W = whitening(problem.interval_noise(nodes, filtered.value))
     return problem, nodes
 
 
@@ -254,39 +339,58 @@ def _theta_covariance(fac: ThetaBorderedFactor, theta_scale: np.ndarray) -> np.n
     return 0.5 * (cov + cov.T)
 
 
+def probe_columns(problem: ShootingProblem) -> np.ndarray:
+    """The seeded white probes of the σ inflation, one row per residual.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+
+    Returns
+    -------
+    ndarray, shape (M, `INFLATION_DRAWS`)
+    """
+    return np.random.default_rng(INFLATION_SEED).standard_normal(
+        (problem.residual_count, INFLATION_DRAWS))
+
+
 def sigma_inflation(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarray,
-                    fac: ThetaBorderedFactor) -> np.ndarray:
+                    fac: ThetaBorderedFactor,
+                    probes: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """σ multiplier (P,) ≥ 1 of each quantity at the optimum, from the residuals' HAC.
 
-    `mavsysid.estimation.robust.inflated_theta_covariance` on this problem:
-    rows grouped by sample (a defect with the last sample of its interval, the prior
-    rows apart), H⁻¹ b by the optimum's block factorisation.
+    `mavsysid.estimation.robust.inflated_theta_covariance` on this problem, from its
+    blocks (`ShootingProblem.influence`): rows grouped by sample (a defect with the last
+    sample of its interval, the prior rows apart), H⁻¹ b by the optimum's block
+    factorisation, the white reference from `probe_columns`. ``probes`` is Jᵀ E of those
+    columns at this point, (K, 12, d) and (P, d), if already formed
+    (`ShootingProblem.normal_equations_with_probes`); else one more pass forms it.
     """
-    res, J = problem.jacobian(nodes, theta)
-    K = problem.node_count
-
-    def solve(b: np.ndarray) -> np.ndarray:
-        out = np.empty_like(b)
-        for i in range(b.shape[1]):
-            x, xt = fac.solve(np.ascontiguousarray(b[:12 * K, i]).reshape(K, 12),
-                              np.ascontiguousarray(b[12 * K:, i]))
-            out[:12 * K, i], out[12 * K:, i] = x.ravel(), xt
-        return out
-
-    p = problem.parameter_count
-    rows = np.full(len(problem.flight), 6)
-    rows[problem.node_idx[1:-1] - 1] += 12
-    sample = np.append(np.repeat(np.arange(rows.size), rows), np.full(p, -1))
-    return inflated_theta_covariance(J, res, solve, 12 * K + np.arange(p), sample,
-                                     rows.size)[1]
+    E = probe_columns(problem)
+    if probes is None:
+        probes = problem.normal_equations_with_probes(nodes, theta, E)[2]
+    K, p = problem.node_count, problem.parameter_count
+    Xn, Xt = fac.solve(np.concatenate([np.zeros((K, 12, p)), probes[0]], axis=2),
+                       np.concatenate([np.eye(p), probes[1]], axis=1))
+    data, white = problem.influence(nodes, theta, E, Xn, Xt)
+    naive = Xt[:, :p]
+    G_prior = (problem.model.theta_scale / problem.prior_sigma)[:, None] * naive
+    return inflation_from_scores(0.5 * (naive + naive.T), data, white,
+                                 G_prior.T @ G_prior)[1]
 
 
-def _damped_step(system: BlockSystem, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """The LM step −(JᵀJ + λ diag)⁻¹ Jᵀr, None if the damped matrix is not positive definite."""
+def _damped_factor(system: BlockSystem, lam: float) -> ThetaBorderedFactor | None:
+    """The factor of JᵀJ + λ diag, None if the damped matrix is not positive definite."""
     try:
-        return factor(system, lam).solve(-system.g, -system.gt)
+        return factor(system, lam)
     except np.linalg.LinAlgError:
         return None
+
+
+def _small_step(fac: ThetaBorderedFactor, step_theta: np.ndarray) -> bool:
+    """The θ step (scaled units) moves no quantity by more than `STEP_TOLERANCE` σ."""
+    sigma = np.sqrt(np.maximum(np.diag(fac.theta_inverse()), 0.0))
+    return bool(np.all(np.abs(step_theta) <= STEP_TOLERANCE * sigma))
 
 
 def factor_at_optimum(system: BlockSystem, source: str) -> ThetaBorderedFactor:
@@ -338,45 +442,70 @@ def refine(
         in the model's terms (`mavsysid.estimation.filter.likelihood.ModelTerms`).
     """
     problem, nodes = shooting_problem(flight, filtered_states, filtered, model, prior, sigma,
-                                      node_interval, wrench)
-    theta = filtered.value.copy()
-    res, system = problem.normal_equations(nodes, theta)
+                                      node_interval, wrench, whitened=False)
+    E = probe_columns(problem)
+    fit = _levenberg_marquardt(problem, nodes, filtered.value.copy(), E, max_iterations)
+    optimum = factor_at_optimum(fit.system, flight.source)
+    inflation = sigma_inflation(problem, fit.nodes, fit.theta, optimum, fit.probes)
+    return BatchResult(
+        estimate=ParameterEstimate(fit.theta, _theta_covariance(optimum, model.theta_scale)
+                                   * np.outer(inflation, inflation), filtered.names),
+        states=fit.nodes,
+        node_times=flight.t[problem.node_idx[:-1]], iterations=fit.iterations,
+        cost_initial=fit.cost_initial, cost_final=fit.cost, sigma_inflation=inflation,
+    )
+
+
+@dataclass
+class _Optimum:
+    """Where `_levenberg_marquardt` stopped: the point, its normal equations and probes,
+    the steps taken and the costs."""
+
+    nodes: np.ndarray
+    theta: np.ndarray
+    system: BlockSystem
+    probes: tuple[np.ndarray, np.ndarray]
+    iterations: int
+    cost_initial: float
+    cost: float
+
+
+def _levenberg_marquardt(problem: ShootingProblem, nodes: np.ndarray, theta: np.ndarray,
+                         probes: np.ndarray, max_iterations: int) -> _Optimum:
+    """Minimise ½|r|² from (nodes, θ), whitening the defects on the first pass.
+
+    Stops where the next Gauss–Newton step (λ ≤ 1e-4) would move θ by less than
+    `STEP_TOLERANCE` σ, or where no damping lowers the cost. Each pass of the normal
+    equations also forms Jᵀ E for the σ inflation's probe columns E, so the optimum's is
+    at hand.
+    """
+    model = problem.model
+    res, system, jte = problem.normal_equations_with_probes(nodes, theta, probes, whiten=True)
     cost0 = cost = 0.5 * float(res @ res)
     lam = 1e-6
-    iterations = 0
-    for iterations in range(1, max_iterations + 1):
-        report_progress("batch refinement", iterations, max_iterations, f"cost {cost:.4g}")
-        while True:
-            step = _damped_step(system, lam)
-            trial_cost = np.inf
-            if step is not None:
+    steps = 0
+    for iteration in range(1, max_iterations + 1):
+        report_progress("batch refinement", iteration, max_iterations, f"cost {cost:.4g}")
+        accepted = converged = False
+        while lam <= 1e8 and not (accepted or converged):
+            fac = _damped_factor(system, lam)
+            if fac is not None:
+                step = fac.solve(-system.g, -system.gt)
+                converged = lam <= 1e-4 and _small_step(fac, step[1])
+                if converged:
+                    break
                 trial_nodes, trial_theta = apply_step(model, nodes, theta, *step)
                 trial_res = problem.residuals(trial_nodes, trial_theta)
-                trial_cost = 0.5 * float(trial_res @ trial_res)
-            if trial_cost <= cost:
-                break
-            lam *= 10.0
-            if lam > 1e8:
-                break
-        if not trial_cost <= cost:
+                accepted = 0.5 * float(trial_res @ trial_res) <= cost
+            if not accepted:
+                lam *= 10.0
+        if not accepted:
             break
-        improvement = cost - trial_cost
-        nodes, theta = trial_nodes, trial_theta
+        nodes, theta, steps = trial_nodes, trial_theta, steps + 1
         lam = max(lam / 10.0, 1e-9)
-        res, system = problem.normal_equations(nodes, theta)
+        res, system, jte = problem.normal_equations_with_probes(nodes, theta, probes)
         cost = 0.5 * float(res @ res)
-        if improvement <= 1e-9 * cost0 or np.max(np.abs(step[1])) < 1e-7:
-            break
-
-    optimum = factor_at_optimum(system, flight.source)
-    inflation = sigma_inflation(problem, nodes, theta, optimum)
-    return BatchResult(
-        estimate=ParameterEstimate(theta, _theta_covariance(optimum, model.theta_scale)
-                                   * np.outer(inflation, inflation), filtered.names),
-        states=nodes,
-        node_times=flight.t[problem.node_idx[:-1]], iterations=iterations, cost_initial=cost0,
-        cost_final=cost, sigma_inflation=inflation,
-    )
+    return _Optimum(nodes, theta, system, jte, steps, cost0, cost)
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from mavsysid.estimation.balance.fit import WrenchBalanceSettings, fit_wrench_balance
 from mavsysid.estimation.batch.refine import refine
-from mavsysid.estimation.filter.ekf import ParameterEKF
+from mavsysid.estimation.filter.ekf import FilterRun, ParameterEKF
 from mavsysid.estimation.filter.guard import guarded_filter, pose_sigma
 from mavsysid.estimation.filter.likelihood import (
     NOISE_SCALE_LIMITS,
@@ -261,7 +261,7 @@ def estimate_with_effects(
     state_sigma = flight_initial_state_sigma(flight, sigma)
     log_likelihood, refined = run.log_likelihood, None
     if settings.refine:
-        refined, log_likelihood = _refine(terms, fit, config, (prior, start), sigma,
+        refined, log_likelihood = _refine(terms, run, fit, config, (prior, start), sigma,
                                           state_sigma, notes)
     increment = None if fit is None else fit.theta_covariance_increment()
     filtered, refined = (_with_increment(e, increment) for e in (run.estimate, refined))
@@ -334,13 +334,15 @@ def _reference(flight: FlightData, config: VehicleConfig, prior: ParameterEstima
 
 
 def _refine(
-    terms: ModelTerms, fit: EffectFit | None, config: VehicleConfig,
+    terms: ModelTerms, unit_run: FilterRun, fit: EffectFit | None, config: VehicleConfig,
     priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
     state_sigma: tuple[float, float, float, float], notes: list[str],
 ) -> tuple[ParameterEstimate, float]:
     """Step 2: the process-noise level (the effect fit's, or fitted now) and the batch MAP.
 
-    ``priors`` is (the MAP prior, the filter's start). Appends its notes to ``notes``;
+    ``priors`` is (the MAP prior, the filter's start); ``unit_run`` the filter run on
+    ``terms`` from that start at the configured noise (the noise fit's first point).
+    Appends its notes to ``notes``;
     returns the refined θ and the log-likelihood of the filter run at the fitted noise
     level. A noise level at the upper edge of its search range is refused
     (`JobFailedError`).
@@ -354,7 +356,7 @@ def _refine(
     else:
         report_stage("fitting the process noise")
         nf = fit_noise_scale(terms.flight, config, start_prior, sigma, state_sigma,
-                             wrench=terms.wrench)
+                             wrench=terms.wrench, unit_run=unit_run)
         noise_cfg, scale, at_bound, start, terms_r = nf.config, nf.scale, nf.at_bound, \
             nf.run, terms
         at_upper = nf.at_upper_bound

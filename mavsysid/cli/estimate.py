@@ -35,7 +35,6 @@ from mavsysid.estimation import (
     write_estimate_json,
     write_history_csv,
 )
-from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
 from mavsysid.pipeline.simulate import read_truth
 from mavsysid.vehicle.config import PARAMETER_NAMES, save_vehicle
@@ -131,7 +130,11 @@ def main(args: argparse.Namespace) -> int:
     show = progress_wanted(args.verbosity, sys.stderr)
     with stage_listener(StageLog("mavsysid estimate", sys.stderr) if show else None):
         report_stage(f"reading {args.log}")
-        job = run_estimate_with_named_effects if args.auto_effects else run_estimate
+        job = run_estimate
+        if args.auto_effects:  # the diagnosis stack (statsmodels) loads only when asked for
+            from mavsysid.pipeline.auto_effects import run_estimate_with_named_effects
+
+            job = run_estimate_with_named_effects
         run = job(args.log, args.vehicle, args.pose, args.time_offset, settings,
                   start=args.start, end=args.end)
         _write_extras(args, run)

@@ -10,6 +10,7 @@ from mavsysid.estimation.batch.kernels import BlockSystem, factor
 from mavsysid.estimation.batch.refine import (
     factor_at_optimum,
     node_indices,
+    probe_columns,
     refine,
     shooting_problem,
     solve_least_squares,
@@ -22,6 +23,7 @@ from mavsysid.estimation.filter.estimator import (
 from mavsysid.estimation.filter.likelihood import scaled_noise
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate, prior_from_config
+from mavsysid.estimation.robust import influence_by_sample
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.formats.flight_dir import read_meta
@@ -176,3 +178,34 @@ def test_least_squares_ends_no_lower_than_the_refinement(start):
     sol = solve_least_squares(problem, nodes, start.run.estimate.value, max_evaluations=15)
     assert sol.cost < batch.cost_initial
     assert sol.cost >= batch.cost_final * (1.0 - 1e-9)
+
+
+def test_influence_from_the_blocks_equals_the_sparse_jacobian_products(start):
+    """Jᵀ E of the normal-equations pass and each sample's influence (data and white
+    probes) equal the products of the sparse J, which the σ inflation once formed."""
+    batch = refine(*start.args)
+    problem, _ = shooting_problem(*start.args)
+    nodes, theta = batch.states, batch.estimate.value
+    E = probe_columns(problem)
+    res, system, (Etn, Ett) = problem.normal_equations_with_probes(nodes, theta, E)
+    res_sparse, J = problem.jacobian(nodes, theta)
+    np.testing.assert_allclose(res, res_sparse, rtol=1e-12)
+    JtE = J.T @ E
+    K, p = problem.node_count, problem.parameter_count
+    got = np.concatenate([Etn.reshape(12 * K, -1), Ett])
+    np.testing.assert_allclose(got, JtE, rtol=1e-9, atol=1e-9 * np.max(np.abs(JtE)))
+    fac = factor_at_optimum(system, "x")
+    Xn, Xt = fac.solve(np.concatenate([np.zeros((K, 12, p)), Etn], axis=2),
+                       np.concatenate([np.eye(p), Ett], axis=1))
+    data, white = problem.influence(nodes, theta, E, Xn, Xt)
+    X = np.concatenate([Xn.reshape(12 * K, -1), Xt])
+    rows = np.full(len(problem.flight), 6)
+    rows[problem.node_idx[1:-1] - 1] += 12
+    sample = np.append(np.repeat(np.arange(rows.size), rows), np.full(p, -1))
+    expected = influence_by_sample(J, res, X[:, :p], sample, rows.size)
+    scale = np.max(np.abs(expected))
+    np.testing.assert_allclose(data, expected, atol=1e-9 * scale)
+    for i in range(E.shape[1]):
+        probe = E[:, i] - J @ X[:, p + i]
+        expected = influence_by_sample(J, probe, X[:, :p], sample, rows.size)
+        np.testing.assert_allclose(white[i], expected, atol=1e-9 * np.max(np.abs(expected)))
