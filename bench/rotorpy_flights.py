@@ -42,7 +42,7 @@ times. A pose log already in ``--out`` is reused.
 
     nice .venv/bin/python bench/rotorpy_flights.py --out /tmp/rotorpy-flights \
         [--duration 50] [--seed 0] [--declared] [--no-auto] [--no-estimate]
-        [--reuse-estimate] [--json rows.json] [--no-imu]
+        [--reuse-estimate] [--json rows.json] [--no-imu] [--no-diagnose]
 
 RotorPy is not a mavsysid dependency: ``.venv/bin/pip install --no-deps rotorpy==3.0.0``
 (this bench needs only its numpy/scipy parts).
@@ -451,11 +451,12 @@ def _diagnose(log: Path, vehicle: Path, estimate: Path | None, ref: dict[str, An
 
 
 def evaluate(directory: Path, vehicle: str = "vehicle.toml", auto: bool = True,
-             progress: bool = True, estimate: bool | str = True) -> dict[str, Any]:
+             progress: bool = True, estimate: bool | str = True, diagnose: bool = True
+             ) -> dict[str, Any]:
     """``estimate``, ``diagnose`` (from the estimate, or the prior if it was refused or
     ``estimate`` is False) and ``estimate --auto-effects`` on one flight: the library
     functions the CLI calls. ``estimate="reuse"`` diagnoses from the estimate an earlier
-    run wrote into the flight's directory.
+    run wrote into the flight's directory. ``diagnose`` False skips ``diagnose``.
 
     Returns the row of the table: θ error and z per parameter of each, the refusals, what
     was named (and whether the hidden effect's 95 % interval holds its truth), run times.
@@ -469,7 +470,8 @@ def evaluate(directory: Path, vehicle: str = "vehicle.toml", auto: bool = True,
         out.unlink(missing_ok=True)
     row["estimate"] = (_estimate(log, toml, ref, False, progress, out) if estimate is True
                        else None)
-    row["diagnose"] = _diagnose(log, toml, out if out.is_file() else None, ref, progress)
+    row["diagnose"] = (_diagnose(log, toml, out if out.is_file() else None, ref, progress)
+                       if diagnose else None)
     row["auto"] = _estimate(log, toml, ref, True, progress, None) if auto else None
     return row
 
@@ -488,16 +490,18 @@ def _theta_cells(part: dict[str, Any] | None) -> str:
 def format_row(row: dict[str, Any]) -> str:
     """The flight's lines of the table: estimate, diagnose, estimate --auto-effects."""
     d = row["diagnose"]
-    named = ("refused: " + d["refusal"] if d.get("refusal")
-             else ", ".join(d["named"]) or "nothing")
-    if d.get("covered") is not None:
-        named += f" (hidden effect's CI holds its truth: {d['covered']})"
     lines = [f"{row['variant']} (hidden: {row['hidden']}), {row['vehicle']}"]
     if row["estimate"] is not None:
         lines.append(f"  estimate          {row['estimate']['time']:6.1f} s  "
                      + _theta_cells(row["estimate"]))
-    lines += [f"  diagnose          {d['time']:6.1f} s  named {named}",
-             "  θ with the named  " + " " * 9 + _theta_cells(None if d.get("refusal") else d)]
+    if d is not None:
+        named = ("refused: " + d["refusal"] if d.get("refusal")
+                 else ", ".join(d["named"]) or "nothing")
+        if d.get("covered") is not None:
+            named += f" (hidden effect's CI holds its truth: {d['covered']})"
+        lines += [f"  diagnose          {d['time']:6.1f} s  named {named}",
+                  "  θ with the named  " + " " * 9
+                  + _theta_cells(None if d.get("refusal") else d)]
     if row["auto"] is not None:
         lines.append(f"  --auto-effects    {row['auto']['time']:6.1f} s  "
                      + _theta_cells(row["auto"]))
@@ -514,6 +518,7 @@ def main() -> None:
     parser.add_argument("--declared", action="store_true",
                         help="use the vehicle file that declares RotorPy's rotor drag law")
     parser.add_argument("--no-auto", action="store_true", help="skip --auto-effects")
+    parser.add_argument("--no-diagnose", action="store_true", help="skip diagnose")
     parser.add_argument("--no-estimate", action="store_true",
                         help="diagnose from the vehicle file's θ (no estimate first)")
     parser.add_argument("--reuse-estimate", action="store_true",
@@ -531,7 +536,8 @@ def main() -> None:
     rows = []
     for directory in dirs.values():
         estimate = "reuse" if args.reuse_estimate else not args.no_estimate
-        rows.append(evaluate(directory, vehicle, not args.no_auto, not args.quiet, estimate))
+        rows.append(evaluate(directory, vehicle, not args.no_auto, not args.quiet, estimate,
+                             not args.no_diagnose))
         print(format_row(rows[-1]), flush=True)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1))
