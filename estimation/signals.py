@@ -392,6 +392,11 @@ class UniformSegment:
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
+    @property
+    def rotor_step(self) -> float:
+        """The median interval of the logged rotor speeds, s."""
+        return float(np.median(np.diff(self.rotor_time))) if self.rotor_time.size > 1 else 0.0
+
     def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
         """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s.
 
@@ -486,6 +491,8 @@ class ImuSegment:
         the specific force from the pose (motion capture) rather than the accelerometer.
     pose_quaternion : ndarray, shape (M, 4), or None
         Its attitude likewise, unit, sign-continuous.
+    gyro_cutoff_hz, accel_cutoff_hz : float or None
+        The low-pass each sensor went through before logging, Hz (None or 0: none known).
     """
 
     t: np.ndarray
@@ -501,9 +508,16 @@ class ImuSegment:
     imu_position: np.ndarray | None = None
     pose_position: np.ndarray | None = None
     pose_quaternion: np.ndarray | None = None
+    gyro_cutoff_hz: float | None = None
+    accel_cutoff_hz: float | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
+
+    @property
+    def rotor_step(self) -> float:
+        """The median interval of the logged rotor speeds, s."""
+        return float(np.median(np.diff(self.rotor_time))) if self.rotor_time.size > 1 else 0.0
 
     def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
         """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s."""
@@ -546,9 +560,23 @@ def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float, force_from
         raw_q /= np.linalg.norm(raw_q, axis=1, keepdims=True)
     return ImuSegment(grid, dt, gyro, _interp_columns(grid, ta, accel),
                       velocity_body, _interp_columns(grid, pose.t, smoothed.position), q,
-                      pose.rotor_time, pose.rotor_samples, pose.flight_start,
+                      *_rotor_series(flight, pose), pose.flight_start,
                       None if imu.position is None else np.asarray(imu.position, float),
-                      raw_p, raw_q)
+                      raw_p, raw_q, imu.gyro.cutoff_hz, imu.accel.cutoff_hz)
+
+
+def _rotor_series(flight: FlightData, pose: UniformSegment) -> tuple[np.ndarray, np.ndarray]:
+    """The rotor speeds as logged over the segment, where they come as one series at their
+    own rate (an autopilot's motor outputs, faster than its pose), else at the pose's rows."""
+    inputs = flight.inputs
+    if inputs is None or len(inputs.series) != 1:
+        return pose.rotor_time, pose.rotor_samples
+    t, values = inputs.series[0]
+    inside = np.flatnonzero((t >= pose.t[0]) & (t <= pose.t[-1]))
+    if inside.size < 4:
+        return pose.rotor_time, pose.rotor_samples
+    keep = slice(max(inside[0] - 1, 0), inside[-1] + 2)
+    return np.asarray(t[keep], float), np.asarray(values[keep], float)
 
 
 def _gyro_bias(gyro: np.ndarray, pose_rates: np.ndarray, edge: int) -> np.ndarray:

@@ -325,6 +325,13 @@ def balance_rows_for(builders: list[BalanceBuilder], choices: FitChoices,
     return out
 
 
+#: Highest band frequency per rotor-speed sample rate: the rotor speeds are interpolated
+#: linearly between their samples, which passes a quarter of their rate at 0.9 of its
+#: amplitude (sinc²) and a half not at all; the model's side above it is attenuated, the
+#: measured side is not, and the coefficients would take the difference.
+ROTOR_BAND_FRACTION = 0.15
+
+
 def _pilot_bands(segments: list[Segment], config: VehicleConfig, c_d: float
                  ) -> tuple[Band | None, Band | None, Band | None]:
     """Roll/pitch, yaw and force bands from the pilot-smoothed rows (coherence)."""
@@ -334,7 +341,8 @@ def _pilot_bands(segments: list[Segment], config: VehicleConfig, c_d: float
     if not rows:
         return None, None, None
     dt = segments[0].dt
-    f_max = smoother_cutoff(PILOT_WINDOW, dt, 0.9)
+    f_max = min(smoother_cutoff(PILOT_WINDOW, dt, 0.9),
+                min(ROTOR_BAND_FRACTION / s.rotor_step for s in segments))
     torque = np.concatenate([r.torque for r in rows])
     cols = np.concatenate([r.torque_columns for r in rows])
     roll_pitch = choose_band(torque[:, :2], np.column_stack([cols[:, 0, 0], cols[:, 1, 3]]),

@@ -54,6 +54,7 @@ from mavsysid.vehicle.imu import lever_arm_acceleration
 from mavsysid.vehicle.mav_model import euler_acceleration, rotor_wrench
 from mavsysid.vehicle.model_effects import ModelEffect, RotorDragLinear, total_wrench
 from mavsysid.vehicle.parameters import INERTIA, QuantityTerm
+from scipy.signal import butter, lfilter, lfilter_zi
 
 __all__ = [
     "FORCE_COEFFICIENTS",
@@ -346,6 +347,43 @@ class BalanceBuilder:
     magnitude_row = True
 
 
+@dataclass(frozen=True)
+class SensorFilter:
+    """The low-pass an autopilot applies to its IMU before logging: second-order
+    Butterworth at the cutoff (ArduPilot's ``INS_GYRO_FILTER``/``INS_ACCEL_FILTER``, PX4's
+    ``IMU_GYRO_CUTOFF``/``IMU_ACCEL_CUTOFF``), discretised by the bilinear transform.
+
+    The model's side of an IMU balance goes through it too, so that its gain and its lag
+    (≈ 0.225 / f_c s at low frequency) apply to both sides and cancel.
+
+    Attributes
+    ----------
+    b, a : ndarray, shape (3,)
+        The biquad's coefficients.
+    """
+
+    b: np.ndarray
+    a: np.ndarray
+
+    @staticmethod
+    def of(cutoff_hz: float | None, dt: float) -> SensorFilter | None:
+        """The filter at ``cutoff_hz`` on samples ``dt`` s apart (None: none, or a cutoff
+        at or above the Nyquist frequency)."""
+        if cutoff_hz is None or not 0.0 < cutoff_hz < 0.5 / dt:
+            return None
+        b, a = butter(2, cutoff_hz, fs=1.0 / dt)
+        return SensorFilter(b, a)
+
+    @staticmethod
+    def apply(sensor: SensorFilter | None, x: np.ndarray) -> np.ndarray:
+        """``x`` (N, ...) filtered along time from rest at its first sample (None: as is)."""
+        if sensor is None:
+            return x
+        zi = lfilter_zi(sensor.b, sensor.a).reshape((-1,) + (1,) * (x.ndim - 1))
+        out, _ = lfilter(sensor.b, sensor.a, x, axis=0, zi=zi * x[:1])
+        return np.asarray(out, float)
+
+
 class ImuBalanceBuilder(BalanceBuilder):
     """Builds `BalanceRows` of one segment from the IMU, for any delay.
 
@@ -374,6 +412,8 @@ class ImuBalanceBuilder(BalanceBuilder):
     def __init__(self, segment: ImuSegment, config: VehicleConfig, window: float) -> None:
         self.segment, self.config, self.dt = segment, config, segment.dt
         self.settings = SmootherSettings(window=window, polyorder=3)
+        self._gyro_filter = SensorFilter.of(segment.gyro_cutoff_hz, self.dt)
+        self._accel_filter = SensorFilter.of(segment.accel_cutoff_hz, self.dt)
         samples = self.settings.samples(self.dt)
         self.smoother = savgol_kernel(samples, 3, 0, self.dt)
         self.kernel = rate_kernel(self.settings, self.dt)
@@ -390,12 +430,12 @@ class ImuBalanceBuilder(BalanceBuilder):
             self.magnitude_row = True
 
     def _rotation_readout(self, omega_dot: np.ndarray) -> np.ndarray:
-        return convolve_columns(omega_dot, self.kernel)
+        return SensorFilter.apply(self._gyro_filter, convolve_columns(omega_dot, self.kernel))
 
     def _force_readout(self, force: np.ndarray) -> np.ndarray:
         if self.pose is not None:
             return body_force_readout(self.pose, self.pose, force, self.force_kernel)
-        return convolve_columns(force, self.smoother)
+        return SensorFilter.apply(self._accel_filter, convolve_columns(force, self.smoother))
 
     def measured(self) -> tuple[np.ndarray, np.ndarray]:
         """The specific force (the pose's, or the accelerometer's less its lever arm where

@@ -297,12 +297,20 @@ def download_flight_log(connect: str, directory: Path, signing_key: bytes | None
 IMU_FAST = 1 << 18
 
 
+#: ArduPilot's IMU position (m, body FRD) and the low-pass its gyro and accelerometer logs
+#: went through (Hz).
+IMU_PARAMETERS = ("INS_POS1_X", "INS_POS1_Y", "INS_POS1_Z", "INS_GYRO_FILTER",
+                  "INS_ACCEL_FILTER")
+
+
 def log_imu_fast(parameters: Any, say: Callable[[str], None]) -> None:
     """Make an ArduPilot vehicle log its IMU at the loop rate for this flight.
 
     With LOG_BITMASK's IMU_FAST bit, ArduCopter writes its IMU message at the loop rate
     (400 Hz) instead of 25 Hz (``Copter::loop_rate_logging``), at once; the streamer puts
-    LOG_BITMASK back after landing with the other parameters it changed.
+    LOG_BITMASK back after landing with the other parameters it changed. The IMU's
+    position and filters (`IMU_PARAMETERS`) are read too, so that their PARAM_VALUEs are in
+    the flight's tlog, whose reader takes them (`mavsysid.formats.tlog`).
 
     Parameters
     ----------
@@ -311,7 +319,7 @@ def log_imu_fast(parameters: Any, say: Callable[[str], None]) -> None:
     say : callable
         Receives a warning line when the vehicle has no LOG_BITMASK or refuses it.
     """
-    value = parameters.read(["LOG_BITMASK"]).get("LOG_BITMASK")
+    value = parameters.read(["LOG_BITMASK", *IMU_PARAMETERS]).get("LOG_BITMASK")
     if value is None:
         say("warning: no LOG_BITMASK on the vehicle: its log keeps its own IMU rate")
         return

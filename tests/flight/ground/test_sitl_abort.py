@@ -27,7 +27,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.peers]
 SITL_PARMS = Path(__file__).resolve().parents[3] / "vehicle" / "configs" / "sitl_quad.parm"
 #: What ``--set-limits`` may raise and what the fence changes on ArduCopter.
 WATCHED = (*parameter_names(Autopilot.ARDUPILOT), "FENCE_ENABLE", "FENCE_TYPE",
-           "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN", "GUID_TIMEOUT")
+           "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN", "GUID_TIMEOUT", "LOG_BITMASK")
 #: MAV_MODE_FLAG_SAFETY_ARMED.
 ARMED_FLAG = 0x80
 

@@ -21,7 +21,7 @@ _DATA = Path(__file__).resolve().parents[2] / "data"
 STOCK_PARMS = _DATA / "sitl_quad_x_stock.parm"
 #: What ``--set-limits`` may raise and what the fence changes on ArduCopter.
 WATCHED = (*parameter_names(Autopilot.ARDUPILOT), "FENCE_ENABLE", "FENCE_TYPE",
-           "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN", "GUID_TIMEOUT")
+           "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN", "GUID_TIMEOUT", "LOG_BITMASK")
 #: MAV_SYS_STATUS_SENSOR_PREARM_CHECK.
 PREARM_BIT = 0x10000000
 

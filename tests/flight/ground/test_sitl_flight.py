@@ -62,9 +62,9 @@ PLAN = ("--vehicle", "quad_x", "--budget", "12", "--samples", "400", "--time", "
 GENTLE = ExcitationSpec(duration=20.0, amplitude=(0.8, 0.6, 0.3))
 #: The autopilot's position-controller limits (what ``--set-limits`` may raise).
 LIMITS = tuple(parameter_names(Autopilot.ARDUPILOT))
-#: What the fence changes on ArduCopter.
+#: What the fence (and the log's IMU rate) changes on ArduCopter.
 FENCE = ("FENCE_ENABLE", "FENCE_TYPE", "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN",
-         "GUID_TIMEOUT")
+         "GUID_TIMEOUT", "LOG_BITMASK")
 
 
 @dataclass(frozen=True)
