@@ -44,16 +44,20 @@ error, z).
 
     nice python bench/mismatch_coverage.py [--seeds 20] [--first-seed 0]
         [--truths clean,wind] [--workers 2] [--reestimate | --answer] [--no-imu]
+        [--rows rows.jsonl]
+    nice python bench/mismatch_coverage.py --from-rows rows.jsonl
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -175,7 +179,8 @@ def table(truth: str, rows: list[tuple[np.ndarray, ...]]) -> str:
     return "\n".join(lines)
 
 
-def misses(results: dict[str, list[tuple[np.ndarray, ...]]], first_seed: int) -> str:
+def misses(results: dict[str, list[tuple[np.ndarray, ...]]], first_seed: int,
+           seeds: dict[str, list[int]] | None = None) -> str:
     """Over every truth: determined parameters, how many intervals cover the truth, the
     largest |error|/σ, and each miss (truth, seed, parameter, relative error, z)."""
     count = covered = 0
@@ -189,17 +194,46 @@ def misses(results: dict[str, list[tuple[np.ndarray, ...]]], first_seed: int) ->
                 if abs(z) <= Z95:
                     covered += 1
                     continue
-                lines.append(f"  {truth} seed {first_seed + k} {PARAMETER_NAMES[i]}: "
+                seed = first_seed + k if seeds is None else seeds[truth][k]
+                lines.append(f"  {truth} seed {seed} {PARAMETER_NAMES[i]}: "
                              f"{100 * (value[i] / reference[i] - 1):+.3f} % ({z:+.1f} σ)")
     head = (f"\nall truths: {count} determined, {covered} covered by the 95 % interval "
             f"({100 * covered / max(count, 1):.1f} %), largest |error|/σ {worst:.1f}; misses:")
     return "\n".join([head, *lines])
 
 
+def print_rows(path: Path) -> None:
+    """The tables and misses of the rows a ``--rows`` file holds, seeds in file order."""
+    results: dict[str, list[tuple[np.ndarray, ...]]] = {}
+    seeds: dict[str, list[int]] = {}
+    for line in path.read_text(encoding="utf-8").splitlines():
+        row = json.loads(line)
+        results.setdefault(row["truth"], []).append(tuple(np.array(row[k], dtype=float if
+            k != "determined" else bool) for k in ("reference", "value", "sigma", "determined")))
+        seeds.setdefault(row["truth"], []).append(row["seed"])
+    for truth in (t for t in TRUTHS if t in results):
+        print(table(truth, results[truth]) + f"\n  seeds {sorted(seeds[truth])}", flush=True)
+    print(misses(results, 0, seeds), flush=True)
+
+
+def _record(path: Path | None, truth: str, seed: int, future: Future) -> None:
+    """Append one flight's row (JSON) to ``path`` as it arrives."""
+    if path is None or future.exception() is not None:
+        return
+    reference, value, sigma, determined = future.result()
+    row = {"truth": truth, "seed": seed, "reference": reference.tolist(),
+           "value": value.tolist(), "sigma": sigma.tolist(),
+           "determined": determined.tolist()}
+    with path.open("a", encoding="utf-8") as out:
+        out.write(json.dumps(row) + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--rows", type=Path,
+                        help="append each flight's row (JSON lines) here as it arrives")
     parser.add_argument("--no-imu", action="store_true",
                         help="read the flights without their IMU columns")
     parser.add_argument("--truths", default=",".join(TRUTHS),
@@ -210,7 +244,12 @@ def main() -> None:
                        help="estimate again with the effects a diagnosis names")
     modes.add_argument("--answer", action="store_true",
                        help="score estimate's per-parameter answer (balance and filter)")
+    parser.add_argument("--from-rows", type=Path,
+                        help="print the tables of a --rows file (of a run cut short) and stop")
     args = parser.parse_args()
+    if args.from_rows is not None:
+        print_rows(args.from_rows)
+        return
     mode = "answer" if args.answer else "reestimate" if args.reestimate else "filter"
     truths = [t for t in args.truths.split(",") if t]
     unknown = sorted(set(truths) - set(TRUTHS))
@@ -218,8 +257,11 @@ def main() -> None:
         parser.error(f"unknown truth {', '.join(unknown)}; expected some of {', '.join(TRUTHS)}")
     with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.workers) as pool:
         seeds = range(args.first_seed, args.first_seed + args.seeds)
-        jobs = {t: [pool.submit(run, t, seed, tmp, mode, not args.no_imu) for seed in seeds]
-                for t in truths}
+        jobs: dict[str, list[Future]] = {t: [] for t in truths}
+        for seed in seeds:  # seed by seed, so that a run cut short covers every truth
+            for truth in truths:
+                jobs[truth].append(pool.submit(run, truth, seed, tmp, mode, not args.no_imu))
+                jobs[truth][-1].add_done_callback(partial(_record, args.rows, truth, seed))
         results = {}
         for truth, futures in jobs.items():
             results[truth] = [f.result() for f in futures]
