@@ -9,8 +9,15 @@ flight into a temporary directory:
   ``fixedFrequency`` event, t = timestamp (ms → s), position ``stateEstimate.x/y/z``
   (the on-board estimator fused with motion capture; world z up), quaternion
   ``stateEstimate.qw..qz`` (body → world, verified against the gyroscope), rotor speeds
-  ``rpm.m1..m4`` (rpm → rad/s) in the vehicle file's rotor order M1..M4. Rows are written
-  as logged, repeated poses and dead rotor channels included: that is the tool's input;
+  ``rpm.m1..m4`` (rpm → rad/s) in the vehicle file's rotor order M1..M4, and the on-board
+  IMU (`imu_columns`): ``gyro.x/y/z`` (deg/s → rad/s) as ``gyro_x..z`` and ``acc.x/y/z``
+  (g → m/s²) as ``acc_x..z``. The Crazyflie's body frame is FLU (x forward, y left, z
+  up), checked on the flights: the gyro correlates with the rates of the logged attitude
+  at 0.99 (roll, pitch) with a positive slope, and the accelerometer reads +1 g on z at
+  rest, its specific force rotated into the world less gravity following the pose's
+  acceleration (correlation 0.97–0.99 horizontally). ``--no-imu`` writes the same rows
+  without the IMU columns. Rows are written as logged, repeated poses and dead rotor
+  channels included: that is the tool's input;
 * a vehicle TOML: mass from the flights' READMEs (34.7 g brushed, 37 g brushless), the X
   layout checked on the flights (arm 0.046 m; M1 front right CCW, M2 back right CW, M3 back left
   CCW, M4 front left CW), ``rotor_speed_max`` the highest speed of the thrust stand, and
@@ -18,6 +25,9 @@ flight into a temporary directory:
   c_T for a thrust-to-weight ratio of 2 at top speed (2 m g = 4 c_T n_max²), c_M a 1 cm
   torque-to-thrust ratio, c_D = 0.01 s/m, and J of a uniform box spanning the motors
   (side 2 × arm, 2 cm high). It is 30–70 % off the references, in both directions.
+  ``--prior thirty`` instead puts θ 30 % off the references in the directions of issue 33
+  (`PRIOR_FACTORS`: c_T and c_M × 1.3, c_D and J × 0.7); c_M and c_D have no stand
+  reference, so their factor multiplies the generic prior's value.
 
 References: c_T by least squares of the stand's total thrust on Σ n² (brushed: both files
 of ``system-id/data/cf21_bitcraze2021``, F = weight · g; brushless: the scale readings of
@@ -35,7 +45,7 @@ empty pose log, to show its one-line refusal.
 
     nice python bench/crazyflie_flights.py --repo /path/to/crazyflie-data-collection \\
         [--json out.json] [--markdown table.md] [--flights jana0,eckart1] [--jobs 2]
-        [--library] [--diagnose]
+        [--library] [--diagnose] [--prior generic|thirty] [--no-imu]
 
 With ``--diagnose``, each flight also runs ``mavsysid diagnose --estimate estimate.json``
 (time, named effects, held-out ratios before → after).
@@ -80,6 +90,10 @@ FOERSTER_J = (16.571710e-6, 16.655602e-6, 29.261652e-6)
 ARM = 0.046
 #: M1..M4: (x, y) signs and spin direction (+1 counter-clockwise seen from above).
 LAYOUT = (((1, -1), 1), ((-1, -1), -1), ((-1, 1), 1), ((1, 1), -1))
+#: ``--prior thirty``: θ's factor on the reference (c_T, c_D, c_M, j_x, j_y, j_z).
+PRIOR_FACTORS = np.array([1.3, 0.7, 1.3, 0.7, 0.7, 0.7])
+#: The uSD log's IMU: gyro in deg/s, accelerometer in g (the firmware's 9.81 m/s²).
+GYRO_UNIT, ACCEL_UNIT = np.pi / 180.0, 9.81
 
 
 def load_decoder(repo: Path):
@@ -136,6 +150,13 @@ def prior_theta(mass: float, n_max: float) -> np.ndarray:
     return np.array([c_t, 0.01, 0.01 * c_t, j_xy, j_xy, j_z])
 
 
+def thirty_prior(reference: np.ndarray, generic: np.ndarray) -> np.ndarray:
+    """θ 30 % off the reference (`PRIOR_FACTORS`); c_D and c_M, which have no
+    reference, from the generic prior's values by the same factors."""
+    base = np.where(np.isfinite(reference), reference, generic)
+    return base * PRIOR_FACTORS
+
+
 def vehicle_toml(name: str, mass: float, theta: np.ndarray, n_max: float) -> str:
     """The vehicle file of the module docstring, written by the project's TOML writer."""
     base = load_vehicle("micro_quad")
@@ -147,8 +168,16 @@ def vehicle_toml(name: str, mass: float, theta: np.ndarray, n_max: float) -> str
     return vehicle_to_toml(config.with_parameters(np.asarray(theta, float)))
 
 
-def convert(decoded: dict, directory: Path) -> tuple[Path, int, float]:
-    """Write ``pose.csv`` from the decoded ``fixedFrequency`` event; (path, rows, duration)."""
+def imu_columns(ff: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The on-board gyro (rad/s) and specific force (m/s²), body FLU, shape (N, 3) each."""
+    gyro = np.column_stack([ff[f"gyro.{a}"] for a in "xyz"]) * GYRO_UNIT
+    accel = np.column_stack([ff[f"acc.{a}"] for a in "xyz"]) * ACCEL_UNIT
+    return gyro, accel
+
+
+def convert(decoded: dict, directory: Path, imu: bool = True) -> tuple[Path, int, float]:
+    """Write ``pose.csv`` from the decoded ``fixedFrequency`` event, with the IMU columns
+    unless ``imu`` is False; (path, rows, duration)."""
     ff = decoded["fixedFrequency"]
     t = np.asarray(ff["timestamp"], float) * 1e-3
     keep = np.concatenate([[True], np.diff(t) > 1e-6])
@@ -157,8 +186,13 @@ def convert(decoded: dict, directory: Path) -> tuple[Path, int, float]:
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     n = np.column_stack([ff[f"rpm.m{i}"] for i in range(1, 5)]) * RPM_TO_RAD_S
     path = directory / "pose.csv"
-    with PoseLogWriter(path, 4) as writer:
-        writer.write_rows(t[keep], p[keep], q[keep], n[keep])
+    with PoseLogWriter(path, 4, imu=imu) as writer:
+        if imu:
+            gyro, accel = imu_columns(ff)
+            writer.write_rows(t[keep], p[keep], q[keep], n[keep], gyro=gyro[keep],
+                              accel=accel[keep])
+        else:
+            writer.write_rows(t[keep], p[keep], q[keep], n[keep])
     return path, int(keep.sum()), float(t[-1] - t[0])
 
 
@@ -210,6 +244,7 @@ def run_tool(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
         source=[params[n].get("source") for n in PARAMETER_NAMES],
         data=_scored(data_value, data_sigma, reference),
         filter_refusal=doc.get("filter_refusal"), mismatch=doc.get("mismatch", []),
+        sensors=next((n for n in doc.get("notes", []) if "the balance read" in n), None),
         window_s=choices.get("window_s"), delay_s=choices.get("delay_s") or 0.0,
         roll_pitch_band=choices.get("roll_pitch_band_hz"),
         combinations=[(combos.get(c) or {}).get("value") or np.nan
@@ -300,7 +335,7 @@ def run_balance(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
 
 def run_flight(job: tuple) -> dict:
     """Decode, convert and estimate one flight (a worker's task)."""
-    repo, vehicle, path, references, prior, n_max, library, diagnose = job
+    repo, vehicle, path, references, prior, n_max, library, diagnose, imu = job
     row = {"flight": path.name, "vehicle": vehicle}
     with tempfile.TemporaryDirectory(prefix="cf-") as tmp:
         toml = Path(tmp) / f"{vehicle}.toml"
@@ -312,8 +347,8 @@ def run_flight(job: tuple) -> dict:
         decoded = load_decoder(repo).decode(str(path))
         if not decoded or "fixedFrequency" not in decoded:
             return {**row, "skipped": "the decoder found no fixedFrequency event"}
-        pose, rows, duration = convert(decoded, Path(tmp))
-        row.update(rows=rows, duration=duration)
+        pose, rows, duration = convert(decoded, Path(tmp), imu)
+        row.update(rows=rows, duration=duration, imu=imu)
         row["balance"] = run_tool(pose, toml, references)
         if library:
             row["library"] = run_balance(pose, toml, references)
@@ -345,6 +380,11 @@ def main() -> None:
                         help="also run the library's balance alone (`fit_wrench_balance`)")
     parser.add_argument("--diagnose", action="store_true",
                         help="also run `mavsysid diagnose` on each flight after `estimate`")
+    parser.add_argument("--prior", choices=("generic", "thirty"), default="generic",
+                        help="the vehicle file's θ: generic (default) or 30 %% off the "
+                             "references (c_T, c_M × 1.3; c_D, J × 0.7)")
+    parser.add_argument("--no-imu", action="store_true",
+                        help="write pose.csv without the on-board IMU's columns")
     args = parser.parse_args()
     repo = args.repo.resolve()
     refs, stand, jobs = {}, {}, []
@@ -354,10 +394,15 @@ def main() -> None:
         stand[vehicle] = {"c_T": c_t, "per_file": per_file, "n_max": n_max,
                           "prior": prior_theta(VEHICLES[vehicle][2], n_max).tolist()}
         refs[vehicle] = np.array([c_t, np.nan, np.nan, *FOERSTER_J])
+        if args.prior == "thirty":
+            stand[vehicle]["prior"] = thirty_prior(refs[vehicle],
+                                                   np.array(stand[vehicle]["prior"])).tolist()
+        stand[vehicle]["prior_kind"] = args.prior
+        stand[vehicle]["imu"] = not args.no_imu
     for vehicle, path in _flights(repo, [p for p in args.flights.split(",") if p]):
         prior = np.array(stand[vehicle]["prior"])
         jobs.append((repo, vehicle, path, refs[vehicle], prior, stand[vehicle]["n_max"],
-                     args.library, args.diagnose))
+                     args.library, args.diagnose, not args.no_imu))
     print(f"references: {json.dumps(stand)}")
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:

@@ -7,8 +7,15 @@ lag) with its own SE(3) controller (`rotorpy.controllers.quadrotor_control.SE3Co
 and integrator (`Multirotor.step`, scipy RK45) along mavsysid's excitation figure
 (`mavsysid.flight.offline.excitation`, a 3-D Lissajous with yaw). Its motion-capture
 model (`rotorpy.sensors.external_mocap.MotionCapture`) adds white pose noise of 0.5 mm
-and 0.1° (σ at the log rate), the vehicle files' default. Nothing of mavsysid's simulator
-is used; mavsysid only supplies the reference figure and writes the files.
+and 0.1° (σ at the log rate), the vehicle files' default. Its IMU model
+(`rotorpy.sensors.imu.Imu`, at the centre of gravity, axes along the body's) gives the
+true body rates and specific force, from RotorPy's own state derivative
+(`Multirotor.statedot`), at every logged sample; the bench adds a constant bias per axis
+drawn once per flight (σ `GYRO_BIAS_SIGMA` 0.005 rad/s, `ACCEL_BIAS_SIGMA` 0.1 m/s²) and
+white noise (σ per sample `GYRO_SIGMA` 0.005 rad/s, `ACCEL_SIGMA` 0.04 m/s²), seeded
+(`measured_imu`): the ``gyro_*`` and ``acc_*`` columns of ``pose.csv`` (``--no-imu``
+leaves them out). Nothing of mavsysid's simulator is used; mavsysid only
+supplies the reference figure and writes the files.
 
 The variants hide one effect each from the vehicle file (`VARIANTS`):
 
@@ -35,7 +42,7 @@ times. A pose log already in ``--out`` is reused.
 
     nice .venv/bin/python bench/rotorpy_flights.py --out /tmp/rotorpy-flights \
         [--duration 50] [--seed 0] [--declared] [--no-auto] [--no-estimate]
-        [--reuse-estimate] [--json rows.json]
+        [--reuse-estimate] [--json rows.json] [--no-imu] [--no-diagnose]
 
 RotorPy is not a mavsysid dependency: ``.venv/bin/pip install --no-deps rotorpy==3.0.0``
 (this bench needs only its numpy/scipy parts).
@@ -70,6 +77,7 @@ __all__ = [
     "format_row",
     "import_rotorpy",
     "measured",
+    "measured_imu",
     "reference_theta",
     "vehicle_toml",
 ]
@@ -99,6 +107,10 @@ _FLOWN = {"clean": "clean", "motor_lag": "clean", "pose_delay": "clean",
 RATE_HZ = 500.0
 POSITION_SIGMA = 0.0005
 ATTITUDE_SIGMA = math.radians(0.1)
+#: The IMU's white noise per logged sample and the σ of its constant biases per axis: the
+#: vehicle files' defaults (`mavsysid.vehicle.config_types`), from real autopilot logs.
+GYRO_SIGMA, ACCEL_SIGMA = 0.005, 0.04
+GYRO_BIAS_SIGMA, ACCEL_BIAS_SIGMA = 0.005, 0.1
 
 
 def import_rotorpy() -> dict[str, Any]:
@@ -106,13 +118,14 @@ def import_rotorpy() -> dict[str, Any]:
     try:
         from rotorpy.controllers.quadrotor_control import SE3Control
         from rotorpy.sensors.external_mocap import MotionCapture
+        from rotorpy.sensors.imu import Imu
         from rotorpy.vehicles.crazyflie_params import quad_params
         from rotorpy.vehicles.multirotor import Multirotor
     except ImportError:
         print(INSTALL, file=sys.stderr)
         raise SystemExit(2) from None
     return {"Multirotor": Multirotor, "params": quad_params, "SE3Control": SE3Control,
-            "MotionCapture": MotionCapture}
+            "MotionCapture": MotionCapture, "Imu": Imu}
 
 
 def hover_speed(params: dict[str, Any]) -> float:
@@ -164,7 +177,9 @@ def vehicle_toml(params: dict[str, Any], prior: np.ndarray, name: str,
               "[limits]", f"rotor_speed_max = {float(params['rotor_speed_max'])!r}", "",
               "[motor]", f"time_constant = {float(params['tau_m'])!r}", "",
               "[noise]", f"position_sigma = {POSITION_SIGMA!r}",
-              f"attitude_sigma = {ATTITUDE_SIGMA!r}", ""]
+              f"attitude_sigma = {ATTITUDE_SIGMA!r}", f"gyro_sigma = {GYRO_SIGMA!r}",
+              f"accel_sigma = {ACCEL_SIGMA!r}", f"gyro_bias_sigma = {GYRO_BIAS_SIGMA!r}",
+              f"accel_bias_sigma = {ACCEL_BIAS_SIGMA!r}", ""]
     if drag is not None:
         lines += ["[effects.rotor_drag_linear]", f"k = {float(drag[0])!r}",
                   f"k_z = {float(drag[1])!r}", ""]
@@ -173,13 +188,16 @@ def vehicle_toml(params: dict[str, Any], prior: np.ndarray, name: str,
 
 @dataclass(frozen=True)
 class TruthRecord:
-    """One RotorPy flight at the log rate: truth pose, actual and commanded rotor speeds."""
+    """One RotorPy flight at the log rate: truth pose, actual and commanded rotor speeds,
+    and the IMU's true readings (body rates, specific force; body FLU, at the CoG)."""
 
     t: np.ndarray
     position: np.ndarray
     quaternion: np.ndarray  # [w, x, y, z], body → world
     rotor_speeds: np.ndarray
     commands: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
 
 
 def _params_for(base: dict[str, Any], flown: str) -> dict[str, Any]:
@@ -220,6 +238,8 @@ def fly(rp: dict[str, Any], params: dict[str, Any], flown: str, duration: float
     t = np.arange(steps + 1) * dt
     pos, quat = np.empty((steps + 1, 3)), np.empty((steps + 1, 4))
     speeds, commands = np.empty((steps + 1, 4)), np.empty((steps + 1, 4))
+    imu = rp["Imu"](sampling_rate=RATE_HZ)  # true readings; `measured_imu` adds the sensor's
+    gyro, accel = np.empty((steps + 1, 3)), np.empty((steps + 1, 3))
     for i in range(steps + 1):
         state["wind"] = wind
         control = controller.update(t[i], state, _flat(trajectory, t[i]))
@@ -228,10 +248,12 @@ def fly(rp: dict[str, Any], params: dict[str, Any], flown: str, duration: float
         pos[i], speeds[i], commands[i] = state["x"], state["rotor_speeds"], cmd
         x, y, z, w = state["q"]
         quat[i] = (w, x, y, z)
+        vehicle.k_eta = k_eta0 * (1.0 + rate * t[i])
+        reading = imu.measurement(state, vehicle.statedot(state, control, dt), with_noise=False)
+        gyro[i], accel[i] = reading["gyro"], reading["accel"]
         if i < steps:
-            vehicle.k_eta = k_eta0 * (1.0 + rate * t[i])
             state = vehicle.step(state, control, dt)
-    return TruthRecord(t, pos, quat, speeds, commands)
+    return TruthRecord(t, pos, quat, speeds, commands, gyro, accel)
 
 
 def _quat_wxyz(q_xyzw: np.ndarray) -> np.ndarray:
@@ -243,7 +265,8 @@ def measured(rp: dict[str, Any], record: TruthRecord, variant: str, seed: int
     """The logged position, attitude [w, x, y, z] and rotor speeds of ``variant``.
 
     RotorPy's motion capture adds the noise (noise density σ / √(rate / 2)); its draws
-    come from numpy's global generator, seeded here per variant.
+    come from numpy's global generator, seeded here per variant. The IMU's are
+    `measured_imu`'s.
     """
     np.random.seed(seed)  # noqa: NPY002 - RotorPy draws from the global generator
     density = lambda s: np.full(3, s / math.sqrt(RATE_HZ / 2.0))  # noqa: E731
@@ -273,16 +296,35 @@ def measured(rp: dict[str, Any], record: TruthRecord, variant: str, seed: int
     return pm, qm, n
 
 
+def measured_imu(record: TruthRecord, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The logged gyro (rad/s) and specific force (m/s²), body FLU, shape (S, 3) each.
+
+    RotorPy's true readings plus, per axis, a constant bias drawn once (σ
+    `GYRO_BIAS_SIGMA`, `ACCEL_BIAS_SIGMA`) and white noise (σ `GYRO_SIGMA`,
+    `ACCEL_SIGMA` per sample), from a generator seeded with ``seed``. The IMU keeps the
+    flight's time whatever the variant does to the pose (a delayed pose leaves the IMU on
+    time, as an autopilot logs it).
+    """
+    rng = np.random.default_rng(seed)
+    n = len(record.t)
+    gyro = (record.gyro + rng.normal(0.0, GYRO_BIAS_SIGMA, 3)
+            + rng.normal(0.0, GYRO_SIGMA, (n, 3)))
+    accel = (record.accel + rng.normal(0.0, ACCEL_BIAS_SIGMA, 3)
+             + rng.normal(0.0, ACCEL_SIGMA, (n, 3)))
+    return gyro, accel
+
+
 def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     return np.concatenate([q_wxyz[..., 1:], q_wxyz[..., :1]], axis=-1)
 
 
 def fly_all(out: Path, variants: tuple[str, ...], duration: float, seed: int,
-            prior_error: float = 0.3) -> dict[str, Path]:
+            prior_error: float = 0.3, imu: bool = True) -> dict[str, Path]:
     """Fly and log every variant (a pose log already there is kept); their directories.
 
     Each holds ``pose.csv``, ``vehicle.toml`` (the paper's model, the prior drawn ±
-    ``prior_error`` around the reference, seeded), ``vehicle_declared.toml`` (the same with
+    ``prior_error`` around the reference, seeded; with ``imu`` the IMU's columns too),
+    ``vehicle_declared.toml`` (the same with
     RotorPy's rotor drag law declared, its k and k_z off by c_D's prior factor) and
     ``reference.json``.
     """
@@ -306,8 +348,14 @@ def fly_all(out: Path, variants: tuple[str, ...], duration: float, seed: int,
             p, q, n = measured(rp, records[flown], variant,
                                1000 * seed + VARIANTS.index(variant))
             directory.mkdir(parents=True, exist_ok=True)
-            with PoseLogWriter(directory / "pose.csv", n.shape[1], overwrite=True) as writer:
-                writer.write_rows(records[flown].t, p, q, n)
+            with PoseLogWriter(directory / "pose.csv", n.shape[1], overwrite=True,
+                               imu=imu) as writer:
+                if imu:
+                    gyro, accel = measured_imu(records[flown],
+                                               1000 * seed + VARIANTS.index(variant) + 500)
+                    writer.write_rows(records[flown].t, p, q, n, gyro=gyro, accel=accel)
+                else:
+                    writer.write_rows(records[flown].t, p, q, n)
         factor = prior[1] / reference[1]
         name = f"rotorpy_crazyflie_{variant}"
         (directory / "vehicle.toml").write_text(vehicle_toml(params, prior, name))
@@ -318,7 +366,8 @@ def fly_all(out: Path, variants: tuple[str, ...], duration: float, seed: int,
             "theta": reference.tolist(), "prior": prior.tolist(),
             "hidden": None if hidden is None else {"name": hidden[0], "parameters": hidden[1]},
             "variant": variant, "seed": seed, "duration": duration, "k_d": params["k_d"],
-            "k_z": params["k_z"], "hover_speed": hover_speed(params)}, indent=1))
+            "k_z": params["k_z"], "hover_speed": hover_speed(params), "imu": imu},
+            indent=1))
     return dirs
 
 
@@ -402,11 +451,12 @@ def _diagnose(log: Path, vehicle: Path, estimate: Path | None, ref: dict[str, An
 
 
 def evaluate(directory: Path, vehicle: str = "vehicle.toml", auto: bool = True,
-             progress: bool = True, estimate: bool | str = True) -> dict[str, Any]:
+             progress: bool = True, estimate: bool | str = True, diagnose: bool = True
+             ) -> dict[str, Any]:
     """``estimate``, ``diagnose`` (from the estimate, or the prior if it was refused or
     ``estimate`` is False) and ``estimate --auto-effects`` on one flight: the library
     functions the CLI calls. ``estimate="reuse"`` diagnoses from the estimate an earlier
-    run wrote into the flight's directory.
+    run wrote into the flight's directory. ``diagnose`` False skips ``diagnose``.
 
     Returns the row of the table: θ error and z per parameter of each, the refusals, what
     was named (and whether the hidden effect's 95 % interval holds its truth), run times.
@@ -420,7 +470,8 @@ def evaluate(directory: Path, vehicle: str = "vehicle.toml", auto: bool = True,
         out.unlink(missing_ok=True)
     row["estimate"] = (_estimate(log, toml, ref, False, progress, out) if estimate is True
                        else None)
-    row["diagnose"] = _diagnose(log, toml, out if out.is_file() else None, ref, progress)
+    row["diagnose"] = (_diagnose(log, toml, out if out.is_file() else None, ref, progress)
+                       if diagnose else None)
     row["auto"] = _estimate(log, toml, ref, True, progress, None) if auto else None
     return row
 
@@ -439,16 +490,18 @@ def _theta_cells(part: dict[str, Any] | None) -> str:
 def format_row(row: dict[str, Any]) -> str:
     """The flight's lines of the table: estimate, diagnose, estimate --auto-effects."""
     d = row["diagnose"]
-    named = ("refused: " + d["refusal"] if d.get("refusal")
-             else ", ".join(d["named"]) or "nothing")
-    if d.get("covered") is not None:
-        named += f" (hidden effect's CI holds its truth: {d['covered']})"
     lines = [f"{row['variant']} (hidden: {row['hidden']}), {row['vehicle']}"]
     if row["estimate"] is not None:
         lines.append(f"  estimate          {row['estimate']['time']:6.1f} s  "
                      + _theta_cells(row["estimate"]))
-    lines += [f"  diagnose          {d['time']:6.1f} s  named {named}",
-             "  θ with the named  " + " " * 9 + _theta_cells(None if d.get("refusal") else d)]
+    if d is not None:
+        named = ("refused: " + d["refusal"] if d.get("refusal")
+                 else ", ".join(d["named"]) or "nothing")
+        if d.get("covered") is not None:
+            named += f" (hidden effect's CI holds its truth: {d['covered']})"
+        lines += [f"  diagnose          {d['time']:6.1f} s  named {named}",
+                  "  θ with the named  " + " " * 9
+                  + _theta_cells(None if d.get("refusal") else d)]
     if row["auto"] is not None:
         lines.append(f"  --auto-effects    {row['auto']['time']:6.1f} s  "
                      + _theta_cells(row["auto"]))
@@ -465,21 +518,26 @@ def main() -> None:
     parser.add_argument("--declared", action="store_true",
                         help="use the vehicle file that declares RotorPy's rotor drag law")
     parser.add_argument("--no-auto", action="store_true", help="skip --auto-effects")
+    parser.add_argument("--no-diagnose", action="store_true", help="skip diagnose")
     parser.add_argument("--no-estimate", action="store_true",
                         help="diagnose from the vehicle file's θ (no estimate first)")
     parser.add_argument("--reuse-estimate", action="store_true",
                         help="diagnose from the estimate an earlier run wrote")
     parser.add_argument("--quiet", action="store_true", help="no stage messages")
     parser.add_argument("--json", type=Path, help="write the rows as JSON")
+    parser.add_argument("--no-imu", action="store_true",
+                        help="write pose.csv without the IMU's columns")
     args = parser.parse_args()
-    dirs = fly_all(args.out, tuple(args.variants.split(",")), args.duration, args.seed)
+    dirs = fly_all(args.out, tuple(args.variants.split(",")), args.duration, args.seed,
+                   imu=not args.no_imu)
     if args.fly_only:
         return
     vehicle = "vehicle_declared.toml" if args.declared else "vehicle.toml"
     rows = []
     for directory in dirs.values():
         estimate = "reuse" if args.reuse_estimate else not args.no_estimate
-        rows.append(evaluate(directory, vehicle, not args.no_auto, not args.quiet, estimate))
+        rows.append(evaluate(directory, vehicle, not args.no_auto, not args.quiet, estimate,
+                             not args.no_diagnose))
         print(format_row(rows[-1]), flush=True)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1))
