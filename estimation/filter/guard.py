@@ -46,13 +46,13 @@ from mavsysid.estimation.filter.ekf import FilterOverflow, FilterRun
 from mavsysid.estimation.filter.likelihood import ModelTerms, reference_terms
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.results import ParameterEstimate
-from mavsysid.estimation.signals import savgol_kernel
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.linearization import MEAS_DIM, initial_state_sigma
 from mavsysid.vehicle.model_effects import ModelEffect
 from mavsysid.vehicle.parameters import PAPER_THETA
 from mavsysid.vehicle.rotation import continuous_sign
 from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs
 from scipy.stats import chi2
 
 from mavsysid.errors import JobFailedError
@@ -381,7 +381,7 @@ _MAD_TO_SIGMA = 1.4826
 
 def _white_sigma(x: np.ndarray) -> np.ndarray:
     """Robust σ of the white part of each column of x (N, k)."""
-    c = savgol_kernel(NOISE_WINDOW, 3, 0, 1.0)
+    c = savgol_coeffs(NOISE_WINDOW, 3)
     e = (x - convolve1d(x, c, axis=0, mode="nearest"))[NOISE_WINDOW:-NOISE_WINDOW]
     mad = np.median(np.abs(e - np.median(e, axis=0)), axis=0)
     return _MAD_TO_SIGMA * mad / np.sqrt(1.0 - c[NOISE_WINDOW // 2])

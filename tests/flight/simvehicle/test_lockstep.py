@@ -195,7 +195,7 @@ def _fly(work: Path, trajectory: Path, busy: int) -> tuple[dict, np.ndarray]:
 def test_same_flight_idle_and_under_load(tmp_path):
     """The same lock-step flight (sensor noise on, seeded) idle and with `BUSY` busy
     processes on the cores: the same samples, the same poses, the same tracking."""
-    trajectory = export_excitation(tmp_path / "figure.json", 6.0)
+    trajectory = export_excitation(tmp_path / "figure.json", 8.0)
     (tmp_path / "idle").mkdir()
     (tmp_path / "loaded").mkdir()
     idle_meta, idle = _fly(tmp_path / "idle", trajectory, 0)
