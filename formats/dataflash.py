@@ -98,7 +98,11 @@ from typing import Any
 
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
-from mavsysid.formats.motor_curve import pwm_curve_caveat, rotor_speed_from_pwm
+from mavsysid.formats.motor_curve import (
+    check_pwm_outputs,
+    pwm_curve_caveat,
+    rotor_speed_from_pwm,
+)
 from mavsysid.formats.parsed_log import (
     ImuFilter,
     ModeChanges,
@@ -661,6 +665,7 @@ def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
         if escs is not None:
             rotors = escs
         elif outputs is not None:
+            check_pwm_outputs(outputs.series.values, vehicle, f"{path}: RCOU")
             rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
                                                                     vehicle), "RCOU PWM"),)
             notes.append(f"{path}: no ESC rpm; rotor speeds are RCOU motor outputs "

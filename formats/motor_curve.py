@@ -18,8 +18,11 @@ from __future__ import annotations
 import numpy as np
 from mavsysid.vehicle.config import VehicleConfig
 
-__all__ = ["describe_curve", "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
-           "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
+from mavsysid.errors import LogFormatError
+
+__all__ = ["check_pwm_outputs", "describe_curve", "pwm_curve_caveat", "pwm_from_rotor_speed",
+           "rotor_speed_from_pwm", "rotor_speed_from_throttle", "throttle_from_pwm",
+           "throttle_from_rotor_speed"]
 
 
 def throttle_from_pwm(pwm: np.ndarray, pwm_min: float, pwm_max: float) -> np.ndarray:
@@ -81,6 +84,55 @@ def rotor_speed_from_pwm(pwm: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
     motor = vehicle.motor
     u = throttle_from_pwm(pwm, motor.pwm_min, motor.pwm_max)
     return rotor_speed_from_throttle(u, vehicle.limits.rotor_speed_max, motor.thrust_expo)
+
+
+#: Share of the vehicle's PWM span an armed output may lie outside it (an idle below
+#: ``pwm_min``, a trimmed top above ``pwm_max``).
+PWM_MARGIN = 0.1
+
+#: Share of the outputs above ``pwm_min`` that may lie above the widened span.
+PWM_OUTSIDE_SHARE = 0.05
+
+
+def check_pwm_outputs(pwm: np.ndarray, vehicle: VehicleConfig, where: str) -> None:
+    """Refuse motor outputs that are not PWM in the vehicle's ``[motor]`` range.
+
+    Rotor speeds through the motor curve are only as right as its range: outputs in
+    another unit (a mixer's 0..1, a 12-bit scale) would be clipped into a made-up thrust,
+    and c_T with them. Outputs below the range are left to the hover check
+    (`mavsysid.estimation.readers.samples`): a disarmed level (0, PX4's 900 µs) or an
+    idle is PWM too. Outputs that never reach half of ``pwm_min`` are no PWM at all.
+
+    Parameters
+    ----------
+    pwm : ndarray, shape (N, k)
+        The logged motor outputs, µs as the log says.
+    vehicle : VehicleConfig
+        ``[motor]`` pwm_min and pwm_max.
+    where : str
+        The log and message, for the message.
+
+    Raises
+    ------
+    LogFormatError
+        More than `PWM_OUTSIDE_SHARE` of the outputs above ``pwm_min`` lie above the range
+        widened by `PWM_MARGIN` of its span, or none reaches half of ``pwm_min``; one line.
+    """
+    values = np.asarray(pwm, dtype=float)
+    values = values[np.isfinite(values) & (values != 0.0)]
+    if values.size == 0:
+        return
+    low, high = vehicle.motor.pwm_min, vehicle.motor.pwm_max
+    running = values[values > low]
+    above = float(np.mean(running > high + PWM_MARGIN * (high - low))) if running.size else 0.0
+    if np.max(values) >= 0.5 * low and above <= PWM_OUTSIDE_SHARE:
+        return
+    lo, hi = np.percentile(values, [5, 95])
+    raise LogFormatError(
+        f"{where}: the motor outputs are not PWM in the vehicle's [motor] range "
+        f"{low:g}–{high:g} µs (5–95 % of the non-zero ones at {lo:.4g}–{hi:.4g}): rotor "
+        "speeds through the motor curve would be made up; log ESC rpm, or set [motor] "
+        "pwm_min and pwm_max to what the vehicle sends")
 
 
 def throttle_from_rotor_speed(n: np.ndarray, rotor_speed_max: float,

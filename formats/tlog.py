@@ -56,7 +56,11 @@ from typing import Any, Protocol
 
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
-from mavsysid.formats.motor_curve import pwm_curve_caveat, rotor_speed_from_pwm
+from mavsysid.formats.motor_curve import (
+    check_pwm_outputs,
+    pwm_curve_caveat,
+    rotor_speed_from_pwm,
+)
 from mavsysid.formats.parsed_log import (
     ImuFilter,
     ModeChanges,
@@ -429,6 +433,7 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
         if any(own.get(name) for name in ESC_TELEMETRY):
             rotors = escs = _esc_rotors(path, own, offset, vehicle.rotor_count)
         elif outputs is not None:
+            check_pwm_outputs(outputs.series.values, vehicle, f"{path}: SERVO_OUTPUT_RAW")
             rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
                                                                     vehicle),
                              "SERVO_OUTPUT_RAW PWM"),)

@@ -66,6 +66,7 @@ from pathlib import Path
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import (
+    check_pwm_outputs,
     describe_curve,
     pwm_curve_caveat,
     rotor_speed_from_pwm,
@@ -430,6 +431,14 @@ def _commanded(outputs: MotorOutputs | None,
             f"actuator_outputs PWM {pwm_curve_caveat(vehicle)}")
 
 
+def _checked(path: Path, outputs: MotorOutputs, commanded: tuple[Series, str],
+             vehicle: VehicleConfig) -> tuple[Series, str]:
+    """``commanded``, once PWM outputs are seen to be PWM in the vehicle's range."""
+    if outputs.kind == "pwm":
+        check_pwm_outputs(outputs.series.values, vehicle, f"{path}: actuator_outputs")
+    return commanded
+
+
 def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
             vehicle: VehicleConfig) -> tuple[Series, list[str]]:
     """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm."""
@@ -439,12 +448,12 @@ def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
         faster = commanded is not None and 2.0 * _period(commanded[0].t) <= esc_period
         if esc_period <= RPM_USABLE_PERIOD or not faster:
             return esc, []
-        series, how = commanded
+        series, how = _checked(path, outputs, commanded, vehicle)
         return series, [f"{path}: esc_status rpm sampled only every {esc_period:.3g} s (more "
                         f"than {RPM_USABLE_PERIOD:g} s), {series.label} every "
                         f"{_period(series.t):.3g} s: rotor speeds are {how}"]
     if commanded is not None:
-        series, how = commanded
+        series, how = _checked(path, outputs, commanded, vehicle)
         return series, [f"{path}: no esc_status rpm; rotor speeds are {how}"]
     raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no esc_status, "
                          "actuator_motors or actuator_outputs)")

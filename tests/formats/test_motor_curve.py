@@ -5,12 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mavsysid.formats.motor_curve import (
+    check_pwm_outputs,
     pwm_from_rotor_speed,
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
     throttle_from_pwm,
 )
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
+
+from mavsysid.errors import LogFormatError
 
 
 @pytest.mark.parametrize(("u", "expo", "expected"), [
@@ -46,3 +49,16 @@ def test_pwm_is_the_inverse_of_the_readers_motor_curve():
     n = np.random.default_rng(2).uniform(0.0, vehicle.limits.rotor_speed_max, (50, 4))
     np.testing.assert_allclose(rotor_speed_from_pwm(pwm_from_rotor_speed(n, vehicle), vehicle),
                                n, rtol=1e-9, atol=1e-6)
+
+
+def test_pwm_outputs_in_range_pass_and_others_are_refused(firefly: VehicleConfig) -> None:
+    """Armed PWM (zeros while disarmed) passes; a mixer's 0..1 or a 12-bit scale do not."""
+    low, high = firefly.motor.pwm_min, firefly.motor.pwm_max
+    rng = np.random.default_rng(5)
+    pwm = rng.uniform(low + 0.1 * (high - low), high, size=(500, 4))
+    pwm[:50] = 0.0
+    check_pwm_outputs(pwm, firefly, "log.tlog: SERVO_OUTPUT_RAW")
+    for outputs in (pwm / high, 4.095 * (pwm - low)):
+        with pytest.raises(LogFormatError, match=r"^log\.tlog: SERVO_OUTPUT_RAW: the motor "
+                           r"outputs are not PWM in the vehicle's \[motor\] range"):
+            check_pwm_outputs(outputs, firefly, "log.tlog: SERVO_OUTPUT_RAW")

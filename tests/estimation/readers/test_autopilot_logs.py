@@ -129,3 +129,24 @@ def test_named_frame_takes_its_motors_of_more_outputs(
     np.testing.assert_allclose(data.rotor_speeds, expected, atol=0.5)
     assert any("motor outputs 5..8 are not motors of ardupilot:quad_x" in w
                for w in data.warnings)
+
+
+def _normalised_outputs(topics: dict[str, list[dict[str, float]]]) -> None:
+    """actuator_outputs as a mixer's 0..1 where PWM (1000–2000 µs) was."""
+    for row in topics["actuator_outputs"]:
+        row.update({key: (value - 1000.0) / 1000.0 for key, value in row.items()
+                    if key.startswith("output[") and value > 1000.0})
+
+
+def test_motor_outputs_that_are_not_pwm_give_no_rotor_speeds(
+        tmp_path: Path, ulog_writer: Callable[..., Path]) -> None:
+    """Outputs in another unit are refused in one line, not clipped into a made-up c_T."""
+    quad = load_vehicle("quad_x")
+    path = ulog_writer(tmp_path / "mixer.ulg", lambda t: synthetic_truth(quad, t), quad,
+                       rotors="outputs", edit=_normalised_outputs)
+    with pytest.raises(LogFormatError) as info:
+        load_flight(path, quad)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(f"{path}: actuator_outputs: the motor outputs are not PWM in the "
+                              "vehicle's [motor] range")
