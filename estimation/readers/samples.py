@@ -51,6 +51,7 @@ __all__ = [
     "ACCEL_MEDIAN_RANGE",
     "FLYING_THRUST",
     "GYRO_GAIN_RANGE",
+    "GYRO_SIZE_MAX",
     "HOVER_FACTOR",
     "MAX_BODY_RATE",
     "MAX_GAP",
@@ -804,6 +805,9 @@ ACCEL_MEDIAN_RANGE = (0.5 * GRAVITY, 2.0 * GRAVITY)
 #: The gyro's rates against the attitude's: a gain outside this range is another unit
 #: (deg/s reads 57×) or frame (FRD read as FLU turns the y and z gains negative).
 GYRO_GAIN_RANGE = (0.7, 1.4)
+#: The gyro's rotation over `_GYRO_CHECK_WINDOW` against the attitude's (RMS ratio) above
+#: which it is another unit, whatever their correlation.
+GYRO_SIZE_MAX = 2.0
 #: Attitude rates (RMS, rad/s) and their correlation with the gyro below which the gain
 #: is not judged (a flight that hardly turns, or a pose too noisy to tell), over windows
 #: of this many seconds (long enough that the attitude's noise does not matter).
@@ -871,6 +875,13 @@ def _check_gyro(gyro: ImuSeries, t: np.ndarray, q: np.ndarray, source: str) -> N
                 f"{source}: {gyro.label} about {name} reads {gain:.3g} × the rate of the "
                 "logged attitude (expected about 1): not rad/s in the body frame FLU (deg/s "
                 "reads 57 ×, a frame mix-up −1)")
+        # Rates too large to be the attitude's, correlated or not (deg/s wrapped in an
+        # int16 field correlates with nothing).
+        size = np.sqrt(float(got @ got) / power)
+        if size > GYRO_SIZE_MAX:
+            raise LogFormatError(
+                f"{source}: {gyro.label} about {name} reads rates {size:.3g} × as large as "
+                "the logged attitude's (RMS): not rad/s (deg/s reads 57 ×)")
 
 
 def clean_imu(imu: Imu | None, t: np.ndarray, q: np.ndarray, source: str

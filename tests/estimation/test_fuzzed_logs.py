@@ -28,7 +28,7 @@ from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError, JobFailedError, LogFormatError
 from tests.support.fuzz_run import estimate_outcome, fuzz_plan
-from tests.support.log_fuzz import FORMATS, CleanFlight, clean_flight, fuzz_case
+from tests.support.log_fuzz import FORMATS, CleanFlight, clean_flight, fuzz_case, write_tlog
 
 #: s a fuzzed log of a few seconds may take to be read or refused: far above the
 #: clean read (< 1 s), far below a hang.
@@ -162,6 +162,8 @@ _BENCH_VIOLATIONS = [
     # The IMU at 10 Hz held on its 100 Hz pose rows, read at 100 Hz: j_x 40 %, j_y 32 % off
     # (12 σ), answered by the balance.
     (".csv", "imu_rate", 1694238303),
+    # A gyro in deg/s, wrapped in RAW_IMU's int16 mrad/s: c_D 83 % low "at the bound".
+    (".tlog", "imu_deg_s", 337615883),
 ]
 
 
@@ -193,6 +195,16 @@ def test_imu_held_on_pose_rows_is_read_at_its_own_rate(flight: CleanFlight,
     np.testing.assert_array_equal(data.imu.gyro.t, flight.t[slow])
     np.testing.assert_allclose(data.imu.accel.values, flight.accel[slow], rtol=1e-9)
     assert any("repeating the previous one exactly" in note for note in data.warnings)
+
+
+def test_gyro_in_deg_s_wrapped_in_int16_is_refused(flight: CleanFlight, tmp_path: Path) -> None:
+    """deg/s in RAW_IMU's int16 mrad/s wraps: it correlates with no attitude, but its
+    rates are far larger than the attitude's."""
+    path = tmp_path / "flight.tlog"
+    write_tlog(path, dataclasses.replace(flight, gyro=np.degrees(flight.gyro)), "RAW_IMU")
+    with pytest.raises(LogFormatError, match=r"RAW_IMU xgyro\.\.zgyro about [xyz] reads rates "
+                       r"[\d.]+ × as large as the logged attitude's"):
+        load_flight(path, load_vehicle("firefly"))
 
 
 @pytest.mark.parametrize("scale", [0.7, 1.5, 4.0])

@@ -72,6 +72,7 @@ def estimate_outcome(path: Path, vehicle: str, theta: np.ndarray) -> Outcome:
                           if run.result.status else np.ones(six, dtype=bool))
     with np.errstate(divide="ignore", invalid="ignore"):
         in_sigma = off / final.sigma[:six]
+    in_sigma[~np.isfinite(in_sigma)] = np.inf  # no σ, or none to speak of, is no interval
     sigma_error = float(np.max(in_sigma[determined], initial=0.0))
     return Outcome("exit0", error, time.perf_counter() - start, "", sigma_error)
 

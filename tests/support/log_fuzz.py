@@ -33,7 +33,7 @@ from mavsysid.vehicle.frames import enu_to_ned, flu_to_frd, quaternion_enu_to_ne
 from tests.support.hidden import hidden_flight
 
 __all__ = ["BYTE_MUTATIONS", "FORMATS", "IMU_MESSAGE_CHOICES", "IMU_MUTATIONS", "VALUE_MUTATIONS",
-           "WRITERS", "CleanFlight", "FuzzCase", "clean_flight", "fuzz_case"]
+           "WRITERS", "CleanFlight", "FuzzCase", "clean_flight", "fuzz_case", "write_tlog"]
 
 _RAD_S_TO_RPM = 60.0 / (2.0 * np.pi)
 _BOOT = 30.0  # s, autopilot time at the flight's t = 0
