@@ -20,15 +20,6 @@ its attenuation of fast content applies to both sides and cancels.
 **Band-pass** (`Band`): a zero-phase Butterworth band (or low-pass) along time, applied
 alike to both sides of a balance.
 
-**The pose's noise** (`measured_pose_noise`, `pose_sigma`). Each coordinate is fitted by
-a local cubic over `NOISE_WINDOW` samples; the residual of a local polynomial fit is the
-white part of the noise times √(1 − c₀) (c₀ the fit's centre weight), and its robust scale
-(1.4826 × MAD) ignores the odd outlier and manoeuvre. Attitude: a small rotation δ moves q
-by |δ|/2, so the per-axis angle σ is 2 √(Σ σ_c² / 3). An on-board estimator's pose is
-smoothed: its white residual collapses although its error does not, so `pose_sigma` takes
-the measured σ only when it clearly exceeds the σ assumed for the pose's source
-(`NOISE_TOLERANCE`).
-
 **States from the pose** (`pose_states`): position, attitude and their central
 differences, where the nuisance quantities' terms are evaluated before a filter pass.
 """

@@ -6,6 +6,14 @@ tests and the reader tests.
 
 from __future__ import annotations
 
+import os
+
+# Every run of the suite compiles the numba kernels afresh (their cache is keyed by the
+# sources), in each worker. LLVM's level 1 compiles them in about two thirds of level 3's
+# time and runs the suite's short flights as fast; without fastmath every level keeps IEEE
+# semantics, so the numbers are the same to the bit. A user's runs keep numba's default.
+os.environ["NUMBA_OPT"] = os.environ.get("NUMBA_OPT", "1")
+
 import numpy as np
 import pytest
 from mavsysid.vehicle.config import SHIPPED_VEHICLES, VehicleConfig, load_vehicle

@@ -17,6 +17,15 @@ innovations correlated; `decorrelated_attempt` raises σ to the white σ of equa
 information (`correlated_noise_sigma`). After `MAX_RESTARTS` the estimate is refused
 (`JobFailedError`, one line); the batch refinement never starts from a diverged filter.
 
+**The pose's noise** (`measured_pose_noise`, `pose_sigma`). Each coordinate is fitted by
+a local cubic over `NOISE_WINDOW` samples; the residual of a local polynomial fit is the
+white part of the noise times √(1 − c₀) (c₀ the fit's centre weight), and its robust scale
+(1.4826 × MAD) ignores the odd outlier and manoeuvre. Attitude: a small rotation δ moves q
+by |δ|/2, so the per-axis angle σ is 2 √(Σ σ_c² / 3). An on-board estimator's pose is
+smoothed: its white residual collapses although its error does not, so `pose_sigma` takes
+the measured σ only when it clearly exceeds the σ assumed for the pose's source
+(`NOISE_TOLERANCE`).
+
 **Contradiction** (`check_agreement`). The final θ and the equation-error θ are two
 estimates from one log, both consistent when the model fits it. They disagree when they
 differ by more than `AGREEMENT_SIGMAS` × √(σ² + σ_EE²) *and* by more than the relative

@@ -143,7 +143,7 @@ def test_estimate_reads_the_streamed_tlog(ardupilot_flight, tmp_path):
         assert "triangle inequality" in str(error) and "flight.tlog" in str(error)
     else:
         truth = read_meta(ardupilot_flight["truth"] / "meta.json")["truth"]["parameters"]
-        theta = dict(zip(("c_T", "c_D", "c_M", "j_x", "j_y", "j_z"), run.result.final.theta,
+        theta = dict(zip(("c_T", "c_D", "c_M", "j_x", "j_y", "j_z"), run.result.final.theta.value,
                          strict=True))
         for name in ("c_T", "c_M", "j_x", "j_y", "j_z"):
             assert theta[name] == pytest.approx(truth[name], rel=0.05), name
