@@ -14,7 +14,8 @@ longer than `MAX_GAP` (`gap_limit`) splits the flight into segments; segments sh
 
 **Repairs**, reported with counts as warnings: rows with NaN dropped, out-of-order
 timestamps sorted, duplicate timestamps dropped, short gaps, slightly non-unit
-quaternions normalised.
+quaternions normalised; IMU samples repeating the previous one exactly (held on the pose's
+rows, or stuck) left out (`clean_imu`).
 
 **Samples no working sensor produces in flight** (`drop_unphysical_samples`): a measured
 position, attitude or set of rotor speeds never repeats to the last bit while the vehicle
@@ -50,6 +51,7 @@ __all__ = [
     "ACCEL_MEDIAN_RANGE",
     "FLYING_THRUST",
     "GYRO_GAIN_RANGE",
+    "GYRO_SIZE_MAX",
     "HOVER_FACTOR",
     "MAX_BODY_RATE",
     "MAX_GAP",
@@ -803,6 +805,9 @@ ACCEL_MEDIAN_RANGE = (0.5 * GRAVITY, 2.0 * GRAVITY)
 #: The gyro's rates against the attitude's: a gain outside this range is another unit
 #: (deg/s reads 57×) or frame (FRD read as FLU turns the y and z gains negative).
 GYRO_GAIN_RANGE = (0.7, 1.4)
+#: The gyro's rotation over `_GYRO_CHECK_WINDOW` against the attitude's (RMS ratio) above
+#: which it is another unit, whatever their correlation.
+GYRO_SIZE_MAX = 2.0
 #: Attitude rates (RMS, rad/s) and their correlation with the gyro below which the gain
 #: is not judged (a flight that hardly turns, or a pose too noisy to tell), over windows
 #: of this many seconds (long enough that the attitude's noise does not matter).
@@ -812,10 +817,23 @@ _GYRO_CHECK_RATE, _GYRO_CHECK_CORRELATION, _GYRO_CHECK_WINDOW = 0.1, 0.8, 0.2
 def _clean_sensor(series: ImuSeries | None, t: np.ndarray, source: str
                   ) -> tuple[ImuSeries | None, list[str]]:
     """A sensor's samples repaired and kept within the pose's span (one sample either
-    side), or None with a note when fewer than two remain."""
+    side), or None with a note when fewer than two remain.
+
+    A sample repeating the one before it exactly on all three axes is left out: a sensor's
+    noise never repeats to the last bit, so it is a held reading (an IMU slower than the
+    pose, written on every pose row) or a stuck one, not a new measurement at its time.
+    """
     if series is None:
         return None, []
-    ts, vs, notes = repair_samples(series.t, series.values, source, series.label)
+    values = np.asarray(series.values, dtype=float)
+    held = np.concatenate([[False], np.all(values[1:] == values[:-1], axis=1)])
+    notes = []
+    if held.any():
+        notes.append(f"{source}: dropped {_plural(int(held.sum()), 'sample')} of {series.label} "
+                     "repeating the previous one exactly (a held or stuck reading)")
+    ts, vs, more = repair_samples(np.asarray(series.t, dtype=float)[~held], values[~held],
+                                  source, series.label)
+    notes += more
     inside = _inside(ts, (float(t[0]), float(t[-1])), margin=1)
     ts, vs = ts[inside], vs[inside]
     if ts.shape[0] < 2:
@@ -857,6 +875,13 @@ def _check_gyro(gyro: ImuSeries, t: np.ndarray, q: np.ndarray, source: str) -> N
                 f"{source}: {gyro.label} about {name} reads {gain:.3g} × the rate of the "
                 "logged attitude (expected about 1): not rad/s in the body frame FLU (deg/s "
                 "reads 57 ×, a frame mix-up −1)")
+        # Rates too large to be the attitude's, correlated or not (deg/s wrapped in an
+        # int16 field correlates with nothing).
+        size = np.sqrt(float(got @ got) / power)
+        if size > GYRO_SIZE_MAX:
+            raise LogFormatError(
+                f"{source}: {gyro.label} about {name} reads rates {size:.3g} × as large as "
+                "the logged attitude's (RMS): not rad/s (deg/s reads 57 ×)")
 
 
 def clean_imu(imu: Imu | None, t: np.ndarray, q: np.ndarray, source: str

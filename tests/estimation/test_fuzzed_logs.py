@@ -28,7 +28,7 @@ from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import InputError, JobFailedError, LogFormatError
 from tests.support.fuzz_run import estimate_outcome, fuzz_plan
-from tests.support.log_fuzz import FORMATS, CleanFlight, clean_flight, fuzz_case
+from tests.support.log_fuzz import FORMATS, CleanFlight, clean_flight, fuzz_case, write_tlog
 
 #: s a fuzzed log of a few seconds may take to be read or refused: far above the
 #: clean read (< 1 s), far below a hang.
@@ -55,9 +55,9 @@ def _read_or_refuse(path: Path) -> str:
 @pytest.mark.slow
 def test_fuzzed_logs_are_read_or_refused_in_one_line(
         flight: CleanFlight, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
-    """100 seeded value and byte mutations over the four formats, at the reader level."""
+    """60 seeded value and byte mutations over the four formats, at the reader level."""
     outcomes = []
-    for i, (suffix, value, byte, seed) in enumerate(fuzz_plan(100, seed=7)):
+    for i, (suffix, value, byte, seed) in enumerate(fuzz_plan(60, seed=7)):
         case = fuzz_case(tmp_path / f"c{i}", flight, suffix, value, byte, seed, 3 * 1024**3)
         start = time.perf_counter()
         outcomes.append(_read_or_refuse(case.path))
@@ -159,6 +159,11 @@ _BENCH_VIOLATIONS = [
     (".ulg", "rotor_zero", 649464057),
     (".csv", "rotor_zero", 1089395762),
     (".csv", "position_scale", 942962511),
+    # The IMU at 10 Hz held on its 100 Hz pose rows, read at 100 Hz: j_x 40 %, j_y 32 % off
+    # (12 σ), answered by the balance.
+    (".csv", "imu_rate", 1694238303),
+    # A gyro in deg/s, wrapped in RAW_IMU's int16 mrad/s: c_D 83 % low "at the bound".
+    (".tlog", "imu_deg_s", 337615883),
 ]
 
 
@@ -168,13 +173,38 @@ def test_bench_violation_is_refused_or_right(flight: CleanFlight, tmp_path: Path
     case = fuzz_case(tmp_path, flight, suffix, value, "none", seed)
     outcome = estimate_outcome(case.path, "firefly", load_vehicle("firefly").theta)
     assert outcome.kind != "traceback", outcome.message
-    assert outcome.kind != "exit0" or outcome.error <= 0.5, (case, outcome)
+    # The clean logs' estimates are 6–7 σ from the truth (bench/fuzz_logs.py), not 10.
+    assert outcome.kind != "exit0" or (outcome.error <= 0.5 and outcome.sigma_error <= 10.0), (
+        case, outcome)
 
 
 def _flight_data(flight: CleanFlight, tmp_path: Path, **changes: np.ndarray) -> FlightData:
     mutated = dataclasses.replace(flight, **changes)
     return load_flight(fuzz_case(tmp_path, mutated, ".csv", "none", "none", 0).path,
                        load_vehicle("firefly"))
+
+
+def test_imu_held_on_pose_rows_is_read_at_its_own_rate(flight: CleanFlight,
+                                                       tmp_path: Path) -> None:
+    """An IMU slower than the pose, its latest sample written on every row: each sample
+    once, at the row where it first appears, with a note."""
+    slow = slice(None, None, 10)
+    data = _flight_data(flight, tmp_path, imu_t=flight.imu_t[slow], gyro=flight.gyro[slow],
+                        accel=flight.accel[slow])
+    assert data.imu is not None and data.imu.gyro is not None and data.imu.accel is not None
+    np.testing.assert_array_equal(data.imu.gyro.t, flight.t[slow])
+    np.testing.assert_allclose(data.imu.accel.values, flight.accel[slow], rtol=1e-9)
+    assert any("repeating the previous one exactly" in note for note in data.warnings)
+
+
+def test_gyro_in_deg_s_wrapped_in_int16_is_refused(flight: CleanFlight, tmp_path: Path) -> None:
+    """deg/s in RAW_IMU's int16 mrad/s wraps: it correlates with no attitude, but its
+    rates are far larger than the attitude's."""
+    path = tmp_path / "flight.tlog"
+    write_tlog(path, dataclasses.replace(flight, gyro=np.degrees(flight.gyro)), "RAW_IMU")
+    with pytest.raises(LogFormatError, match=r"RAW_IMU xgyro\.\.zgyro about [xyz] reads rates "
+                       r"[\d.]+ × as large as the logged attitude's"):
+        load_flight(path, load_vehicle("firefly"))
 
 
 @pytest.mark.parametrize("scale", [0.7, 1.5, 4.0])

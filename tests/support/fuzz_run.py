@@ -2,9 +2,12 @@
 
 `estimate_outcome` calls the library entry point the CLI calls
 (`mavsysid.pipeline.estimate.run_estimate`) and sorts the result into exit 0 (with
-the largest relative error of θ against the truth), a documented refusal (the exception
-type that maps to exit 2 or 3), or a traceback (any other exception: exit 1, a bug).
-`fuzz_plan` draws the seeded mix of (format, value mutation, byte mutation) cases.
+the largest relative error of θ against the truth, and the largest distance of the truth
+in σ over the determined parameters), a documented refusal (the exception type that maps
+to exit 2 or 3), or a traceback (any other exception: exit 1, a bug). `fuzz_plan` draws
+the seeded mix of (format, value mutation, byte mutation) cases, the IMU's mutations
+among the value mutations; `imu_plan` gives every IMU value mutation in every format in
+turn.
 """
 
 from __future__ import annotations
@@ -15,12 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from mavsysid.estimation.results import DETERMINED
 from mavsysid.pipeline.estimate import run_estimate
 
 from mavsysid.errors import MavsysidError
-from tests.support.log_fuzz import BYTE_MUTATIONS, FORMATS, VALUE_MUTATIONS
+from tests.support.log_fuzz import BYTE_MUTATIONS, FORMATS, IMU_MUTATIONS, VALUE_MUTATIONS
 
-__all__ = ["Outcome", "estimate_outcome", "fuzz_plan"]
+__all__ = ["Outcome", "estimate_outcome", "fuzz_plan", "imu_plan"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +38,9 @@ class Outcome:
         ``"traceback"``.
     error : float
         Exit 0: max over θ of |θ̂ − θ| / |θ|; else NaN.
+    sigma_error : float
+        Exit 0: max over the parameters of θ the estimate calls determined of |θ̂ − θ| / σ
+        (0 when none is); else NaN.
     seconds : float
         Wall time of the call, s.
     message : str
@@ -44,6 +51,7 @@ class Outcome:
     error: float
     seconds: float
     message: str
+    sigma_error: float = np.nan
 
 
 def estimate_outcome(path: Path, vehicle: str, theta: np.ndarray) -> Outcome:
@@ -57,9 +65,16 @@ def estimate_outcome(path: Path, vehicle: str, theta: np.ndarray) -> Outcome:
         last = traceback.format_exc().strip().splitlines()[-1]
         return Outcome("traceback", np.nan, time.perf_counter() - start,
                        f"{last} | {traceback.format_exc()}")
-    value = run.result.final.value
-    error = float(np.max(np.abs(value - theta) / np.abs(theta)))
-    return Outcome("exit0", error, time.perf_counter() - start, "")
+    final, six = run.result.final, len(theta)  # θ first, nuisance quantities after
+    off = np.abs(final.value[:six] - theta)
+    error = float(np.max(off / np.abs(theta)))
+    determined = np.array([s == DETERMINED for s in run.result.status[:six]]
+                          if run.result.status else np.ones(six, dtype=bool))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        in_sigma = off / final.sigma[:six]
+    in_sigma[~np.isfinite(in_sigma)] = np.inf  # no σ, or none to speak of, is no interval
+    sigma_error = float(np.max(in_sigma[determined], initial=0.0))
+    return Outcome("exit0", error, time.perf_counter() - start, "", sigma_error)
 
 
 def fuzz_plan(count: int, seed: int) -> list[tuple[str, str, str, int]]:
@@ -81,3 +96,14 @@ def fuzz_plan(count: int, seed: int) -> list[tuple[str, str, str, int]]:
         byte = "none" if r < 0.5 else str(rng.choice(byte_choices))
         plan.append((suffix, value, byte, int(rng.integers(0, 2**31))))
     return plan
+
+
+def imu_plan(count: int, seed: int) -> list[tuple[str, str, str, int]]:
+    """``count`` seeded cases of the IMU's value mutations alone (byte mutation
+    ``"none"``): every (format, IMU mutation) pair in turn, the pairs' order shuffled
+    once, so that ``count`` ≥ k × pairs covers each pair k times."""
+    rng = np.random.default_rng(seed)
+    pairs = [(suffix, m) for m in IMU_MUTATIONS for suffix in FORMATS]
+    order = rng.permutation(len(pairs))
+    return [(*pairs[order[i % len(pairs)]], "none", int(rng.integers(0, 2**31)))
+            for i in range(count)]
