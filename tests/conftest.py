@@ -58,37 +58,3 @@ def _aggressive(duration: float = 3.0) -> PiecewisePolynomial:
 def aggressive_trajectory() -> PiecewisePolynomial:
     """A short aggressive polynomial trajectory within the Firefly's actuator limits."""
     return _aggressive()
-
-
-#: The files that take longest (``--durations``, real-time SITL flights first): started
-#: first, so that none of them is left to run alone at the end.
-LONGEST_FILES = (
-    "tests/pipeline/test_autopilot_experiment.py",
-    "tests/flight/ground/test_sitl_flight.py",
-    "tests/flight/ground/test_sitl_abort.py",
-    "tests/flight/ground/test_sitl_dry_run.py",
-    "tests/planner/test_robust_plan.py",
-    "tests/cli/test_experiment_cli.py",
-    "tests/flight/ground/test_recovery.py",
-    "tests/flight/ground/test_stream_end_to_end.py",
-)
-
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The longest files first, then the other files holding slow tests, each file's order
-    kept.
-
-    Two workers share the files one at a time (``--dist loadfile``, in collection order:
-    pyproject turns xdist's reordering by test count off); a real-time SITL flight of 1–2
-    minutes started last would leave the other worker idle.
-    """
-    root = config.rootpath
-    slow = {item.path for item in items if item.get_closest_marker("slow")}
-
-    def rank(item: pytest.Item) -> tuple[int, int]:
-        name = item.path.relative_to(root).as_posix()
-        if name in LONGEST_FILES:
-            return 0, LONGEST_FILES.index(name)
-        return (1 if item.path in slow else 2), 0
-
-    items.sort(key=rank)

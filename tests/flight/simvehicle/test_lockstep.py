@@ -21,7 +21,7 @@ from mavsysid.formats.poselog import read_pose_log
 from tests.support.stream_flights import SimProcess, export_excitation, flight_dir, run_stream
 
 #: Busy processes competing for the cores in the loaded flight (more than the 2 cores).
-BUSY = 3
+BUSY = 4
 
 
 def _frame(ms: int, unix_us: int | None = None):
@@ -195,7 +195,7 @@ def _fly(work: Path, trajectory: Path, busy: int) -> tuple[dict, np.ndarray]:
 def test_same_flight_idle_and_under_load(tmp_path):
     """The same lock-step flight (sensor noise on, seeded) idle and with `BUSY` busy
     processes on the cores: the same samples, the same poses, the same tracking."""
-    trajectory = export_excitation(tmp_path / "figure.json", 8.0)
+    trajectory = export_excitation(tmp_path / "figure.json", 10.0)
     (tmp_path / "idle").mkdir()
     (tmp_path / "loaded").mkdir()
     idle_meta, idle = _fly(tmp_path / "idle", trajectory, 0)
