@@ -401,8 +401,8 @@ def rescale_wrong_rotor(flight: FlightData, config: VehicleConfig,
     -------
     flight : FlightData
         Unchanged when the centroid is within ``max_offset`` or no single-rotor scale brings
-        it there (then `check_rotor_balance` refuses it); else with the rotor's speeds
-        multiplied by s.
+        it there (then `check_rotor_balance` refuses it); else with the rotor's speeds, at
+        the pose's rows and as logged (``inputs``), multiplied by s.
     note : str or None
         What was corrected, and why.
     """
@@ -436,5 +436,6 @@ def rescale_wrong_rotor(flight: FlightData, config: VehicleConfig,
             f"the vehicle holds its attitude; its channel reads {100 / scale:.0f} % of the "
             f"speed that balances the others and was multiplied by {scale:.3g} (a rotor-speed "
             "channel reading a constant share; check its sensor)")
-    return dataclasses.replace(flight, rotor_speeds=corrected,
+    inputs = None if flight.inputs is None else flight.inputs.scaled(worst, scale)
+    return dataclasses.replace(flight, rotor_speeds=corrected, inputs=inputs,
                                warnings=(*flight.warnings, note)), note

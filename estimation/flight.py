@@ -89,6 +89,25 @@ class InputSamples:
 
     series: tuple[tuple[np.ndarray, np.ndarray], ...]
 
+    def scaled(self, rotor: int, factor: float) -> InputSamples:
+        """These samples with rotor ``rotor``'s speeds (0-based) multiplied by ``factor``.
+
+        Parameters
+        ----------
+        rotor : int
+            Index among the concatenated columns.
+        factor : float
+            The scale.
+        """
+        series, first = [], 0
+        for ts, vs in self.series:
+            if first <= rotor < first + vs.shape[1]:
+                vs = vs.copy()
+                vs[:, rotor - first] *= factor
+            series.append((ts, vs))
+            first += vs.shape[1]
+        return InputSamples(tuple(series))
+
     def interpolate(self, t: np.ndarray) -> np.ndarray:
         """Rotor speeds at times ``t`` (N,), rad/s, shape (N, k): linear, curvature-corrected.
 

@@ -354,8 +354,35 @@ def _interp_columns(t_new: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarr
     return np.column_stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])])
 
 
+class _RotorsOnGrid:
+    """Rotor speeds logged at their own times, read on a segment's grid ``t``."""
+
+    t: np.ndarray
+    rotor_time: np.ndarray
+    rotor_samples: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def rotor_step(self) -> float:
+        """The median interval of the logged rotor speeds, s."""
+        return float(np.median(np.diff(self.rotor_time))) if self.rotor_time.size > 1 else 0.0
+
+    def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
+        """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s.
+
+        Parameters
+        ----------
+        delay : float
+            s by which the grid's samples (pose or IMU) lag the rotor speeds (held at the
+            ends).
+        """
+        return _interp_columns(self.t - delay, self.rotor_time, self.rotor_samples)
+
+
 @dataclass(frozen=True)
-class UniformSegment:
+class UniformSegment(_RotorsOnGrid):
     """One contiguous stretch of a flight on a uniform grid (M samples).
 
     Attributes
@@ -387,23 +414,6 @@ class UniformSegment:
     fresh_fraction: float
     flight_start: float = 0.0
 
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
-    @property
-    def rotor_step(self) -> float:
-        """The median interval of the logged rotor speeds, s."""
-        return float(np.median(np.diff(self.rotor_time))) if self.rotor_time.size > 1 else 0.0
-
-    def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
-        """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s.
-
-        Parameters
-        ----------
-        delay : float
-            s by which the pose lags the rotor speeds (held at the ends).
-        """
-        return _interp_columns(self.t - delay, self.rotor_time, self.rotor_samples)
 
 
 def _segment(t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
@@ -457,7 +467,7 @@ VELOCITY_WINDOW = 0.4
 
 
 @dataclass(frozen=True)
-class ImuSegment:
+class ImuSegment(_RotorsOnGrid):
     """One contiguous stretch of a flight on the IMU's uniform grid (M samples).
 
     Attributes
@@ -509,30 +519,6 @@ class ImuSegment:
     gyro_cutoff_hz: float | None = None
     accel_cutoff_hz: float | None = None
 
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
-    @property
-    def rotor_step(self) -> float:
-        """The median interval of the logged rotor speeds, s."""
-        return float(np.median(np.diff(self.rotor_time))) if self.rotor_time.size > 1 else 0.0
-
-    def rotor_speeds(self, delay: float = 0.0) -> np.ndarray:
-        """Rotor speeds at t − ``delay`` on the grid, shape (M, k), rad/s.
-
-        Parameters
-        ----------
-        delay : float
-            s by which the IMU lags the rotor speeds (held at the ends).
-        """
-        return _interp_columns(self.t - delay, self.rotor_time, self.rotor_samples)
-
-
-def _fresh_imu(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The samples that do not repeat their predecessor exactly (a logger faster than the
-    sensor writes the last reading again)."""
-    keep = np.concatenate([[True], np.any(np.diff(values, axis=0) != 0.0, axis=1)])
-    return t[keep], values[keep]
 
 
 def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float, force_from_pose: bool
@@ -540,8 +526,9 @@ def _imu_segment(flight: FlightData, pose: UniformSegment, dt: float, force_from
     imu = flight.imu
     assert imu is not None and imu.gyro is not None and imu.accel is not None
     t0, t1 = pose.t[0], pose.t[-1]
-    tg, gyro = _fresh_imu(*_span(imu.gyro.t, imu.gyro.values, t0, t1))
-    ta, accel = _fresh_imu(*_span(imu.accel.t, imu.accel.values, t0, t1))
+    # The readers leave held readings out (`mavsysid.estimation.readers.samples`).
+    tg, gyro = _span(imu.gyro.t, imu.gyro.values, t0, t1)
+    ta, accel = _span(imu.accel.t, imu.accel.values, t0, t1)
     if tg.size < 4 or ta.size < 4:
         return None
     start, stop = max(tg[0], ta[0]), min(tg[-1], ta[-1])
