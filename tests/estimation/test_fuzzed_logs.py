@@ -20,9 +20,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavsysid.estimation.checks import check_kinematics, tilt_gain
-from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.flight import FlightData, InputSamples
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.readers.samples import MAX_GAP, attitude_jumps, drop_unphysical_samples
+from mavsysid.estimation.readers.samples import (
+    MAX_GAP,
+    attitude_jumps,
+    drop_unphysical_samples,
+    validate_flight,
+)
 from mavsysid.formats import bounded_parse
 from mavsysid.vehicle.config import load_vehicle
 
@@ -261,6 +266,19 @@ def test_one_dead_rotor_channel_is_filled_from_the_others(flight: CleanFlight) -
     assert live.sum() > 100
     truth = flight.rotor_speeds[300:500, 2]
     assert abs(np.median(filled[live] / truth[live]) - 1.0) < 0.1
+
+
+def test_a_filled_channel_is_filled_in_the_logged_inputs_too(flight: CleanFlight) -> None:
+    """What the IMU balance reads at the rotors' own rate (``inputs``) is what the rows say
+    after the fill, not the dead channel's zeros."""
+    n = flight.rotor_speeds.copy()
+    n[300:500, 2] = 0.0
+    data = FlightData(flight.t, flight.position, flight.quaternion, n, "x",
+                      inputs=InputSamples(((flight.t, n),)))
+    repaired = validate_flight(data, load_vehicle("firefly"))
+    assert (repaired.rotor_speeds[300:500, 2] > 0.0).sum() > 100
+    np.testing.assert_array_equal(repaired.inputs.interpolate(repaired.t),
+                                  repaired.rotor_speeds)
 
 
 @pytest.mark.parametrize("kind", ["zero", "stuck"])
