@@ -430,7 +430,7 @@ def _balance(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
         return None, str(error).splitlines()[0].removeprefix(f"{flight.source}: ")
     except np.linalg.LinAlgError:
         return None, "the force and torque balance is numerically singular on this flight"
-    if not balance.determined.any():
+    if not balance.determined[:len(PAPER_THETA)].any():  # a sensor's bias alone is no answer
         return balance, ("the force and torque balance determines no parameter of θ (every "
                          f"σ above {100 * MAX_RELATIVE_SIGMA:g} % of its value)")
     return balance, None

@@ -162,10 +162,12 @@ def theta_from_coefficients(coefficients: np.ndarray, covariance: np.ndarray) ->
                                 c_t / x[_AY], j_z], _extras(x, extra_weight),
                                [x[_BZ], -x[_RZ]]])
 
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # A coefficient near 0 makes the quotients infinite: their σ is then not a number,
+    # which the determination rule reads as undetermined.
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         full = theta(b)
         jac = _jacobian(theta, b)
-    full_cov = jac @ cov @ jac.T
+        full_cov = jac @ cov @ jac.T
     # A coefficient the flight does not excite makes everything that uses it unknown.
     unknown = (np.abs(jac[:, unexcited]) > 0).any(axis=1) if unexcited.any() else \
         np.zeros(full.size, bool)

@@ -303,7 +303,7 @@ def _noise(x, info, dt, mass, Qc, A, G, rows, R, C):
     span = info[_SPAN]
     overlap = min(span, dt) if span > 0.0 else 0.0
     alpha = info[_WEIGHT_GYRO]
-    GQ = G @ Qc[:, 0:3]
+    GQ = G @ np.ascontiguousarray(Qc[:, 0:3])
     AGQ = A @ GQ
     for a in range(rows.shape[0]):
         i = rows[a]
