@@ -35,10 +35,12 @@ time mapped as below). ESC_TELEMETRY and ATT_POS_MOCAP carry no autopilot time (
 ``time_usec`` is the sender's clock), so they are stamped with the tlog's receipt time
 mapped onto the autopilot clock: receipt − time_boot_ms over all autopilot messages
 with a ``time_boot_ms`` is the clock offset plus that message's link latency, and its
-minimum (the fastest message) is taken as the offset. Stamps mapped so are late by their
-own latency minus the smallest one, typically a few ms on a direct link; clock drift
-(tens of ppm) is ignored. SERVO_OUTPUT_RAW carries the autopilot's ``time_usec``, used
-as is (and in the offset estimate). Without any autopilot time the receipt times are
+minimum (the fastest message) within each `LAG_WINDOW` of receipt time is taken as the
+offset there (so a clock that stops, as a lock-stepped simulator's
+does while it waits for its peer, or drifts, is followed). Stamps mapped so are late by
+their own latency minus the smallest one, typically a few ms on a direct link.
+SERVO_OUTPUT_RAW carries the autopilot's ``time_usec``, used as is (and in the offset
+estimate). Without any autopilot time the receipt times are
 used, from the first message.
 
 Only messages from the autopilot (the sender of the first HEARTBEAT from an autopilot)
@@ -50,6 +52,7 @@ from __future__ import annotations
 import struct
 import threading
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Protocol
@@ -195,13 +198,33 @@ def _from_autopilot(found: _Messages, mavlink: ModuleType) -> _Messages:
     return {name: [row for row in rows if row[1] == beats[0]] for name, rows in found.items()}
 
 
-def _clock_offset(own: _Messages) -> float | None:
-    """Receipt time minus autopilot time, s (see the module docstring), or None."""
-    lags = [receipt - m.time_boot_ms * 1e-3
-            for name in _CLOCKED for receipt, _, m in own.get(name, [])]
+#: Receipt-time span, s, over which the fastest message's lag stands for the clock offset:
+#: long enough to hold a fast message, short enough to follow a clock that stops (a
+#: lock-stepped simulator waiting for its peer) or drifts.
+LAG_WINDOW = 2.0
+
+
+def _receipt_clock(own: _Messages) -> Callable[[np.ndarray], np.ndarray] | None:
+    """Receipt time → autopilot time, s (see the module docstring), or None."""
+    pairs = [(receipt, receipt - m.time_boot_ms * 1e-3)
+             for name in _CLOCKED for receipt, _, m in own.get(name, [])]
     # SERVO_OUTPUT_RAW's time_usec is the same clock (it wraps, but that only raises lags).
-    lags += [receipt - m.time_usec * 1e-6 for receipt, _, m in own.get("SERVO_OUTPUT_RAW", [])]
-    return min(lags) if lags else None
+    pairs += [(receipt, receipt - m.time_usec * 1e-6)
+              for receipt, _, m in own.get("SERVO_OUTPUT_RAW", [])]
+    if not pairs:
+        return None
+    receipt, lag = np.array(sorted(pairs)).T
+    window = np.floor((receipt - receipt[0]) / LAG_WINDOW)
+    starts = np.flatnonzero(np.r_[True, np.diff(window) > 0])
+    fastest = np.minimum.reduceat(lag, starts)
+    edges = receipt[starts]
+
+    def to_autopilot(t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        j = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 1)
+        return t - fastest[j]
+
+    return to_autopilot
 
 
 def _unwrap_us(ticks: np.ndarray) -> np.ndarray:
@@ -211,11 +234,12 @@ def _unwrap_us(ticks: np.ndarray) -> np.ndarray:
     return (ticks + wraps * 2.0**32) * 1e-6
 
 
-def _pose(found: _Messages, own: _Messages, offset: float) -> _Pose:
+def _pose(found: _Messages, own: _Messages, clock: Callable[[np.ndarray], np.ndarray]
+          ) -> _Pose:
     """Motion-capture pose, else local position and attitude (NED/FRD); the pose's origin."""
     mocap = found.get("ATT_POS_MOCAP", [])
     if mocap:
-        t = np.array([r for r, _, _ in mocap]) - offset
+        t = clock(np.array([r for r, _, _ in mocap]))
         p = np.array([[m.x, m.y, m.z] for _, _, m in mocap], dtype=float)
         q = np.array([list(m.q) for _, _, m in mocap], dtype=float)
         return Series(t, np.column_stack([p, q]), "ATT_POS_MOCAP"), None, None, "motion_capture"
@@ -240,7 +264,7 @@ def _pose(found: _Messages, own: _Messages, offset: float) -> _Pose:
     return None, position, attitude, "autopilot"
 
 
-def _esc_rotors(path: Path, own: _Messages, offset: float,
+def _esc_rotors(path: Path, own: _Messages, clock: Callable[[np.ndarray], np.ndarray],
                 k: int) -> tuple[Series, ...]:
     """Rotor speeds from ESC_TELEMETRY_*: as many rotors as ESCs that ever turned."""
     present = {name: own[name] for name in ESC_TELEMETRY if own.get(name)}
@@ -257,7 +281,7 @@ def _esc_rotors(path: Path, own: _Messages, offset: float,
             raise LogFormatError(f"{path}: ESC rpm for rotors {base + 1}..{base + 4} missing "
                                  f"(no {name}) while rotors up to {count} report theirs")
         width = min(4, count - base)
-        t = np.array([r for r, _, _ in rows]) - offset
+        t = clock(np.array([r for r, _, _ in rows]))
         rpm = np.array([list(m.rpm)[:width] for _, _, m in rows], dtype=float)
         series.append(Series(t, rpm * RPM_TO_RAD_S, f"{name} rpm"))
     return tuple(series)
@@ -285,14 +309,15 @@ def _parameters(own: _Messages) -> dict[str, float]:
     return {str(m.param_id): float(m.param_value) for _, _, m in own.get("PARAM_VALUE", [])}
 
 
-def _imu_times(rows: list[tuple[float, tuple[int, int], Any]], offset: float) -> np.ndarray:
+def _imu_times(rows: list[tuple[float, tuple[int, int], Any]],
+               clock: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """The rows' autopilot times, s: time_boot_ms, or time_usec since boot (a Unix
     time_usec: the receipt time mapped onto the autopilot clock)."""
     m = rows[0][2]
     if hasattr(m, "time_boot_ms"):
         return np.array([r[2].time_boot_ms * 1e-3 for r in rows])
     usec = np.array([r[2].time_usec for r in rows], dtype=float)
-    receipt = np.array([r[0] for r in rows]) - offset
+    receipt = clock(np.array([r[0] for r in rows]))
     return np.where(usec < _EPOCH_USEC, usec * 1e-6, receipt)
 
 
@@ -308,10 +333,11 @@ def _imu_rows(own: _Messages, name: str, autopilot: int | None, mavlink: ModuleT
     return rows
 
 
-def _highres(rows: list[tuple[float, tuple[int, int], Any]], offset: float
+def _highres(rows: list[tuple[float, tuple[int, int], Any]],
+             clock: Callable[[np.ndarray], np.ndarray]
              ) -> tuple[Series | None, Series | None]:
     """HIGHRES_IMU gyro and accelerometer, each of the rows that flag it updated."""
-    t = _imu_times(rows, offset)
+    t = _imu_times(rows, clock)
     flags = np.array([int(m.fields_updated) for _, _, m in rows])
     values = np.array([[m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc] for _, _, m in rows],
                       dtype=float)
@@ -325,17 +351,18 @@ def _highres(rows: list[tuple[float, tuple[int, int], Any]], offset: float
     return out[0], out[1]
 
 
-def _scaled(name: str, rows: list[tuple[float, tuple[int, int], Any]], offset: float
+def _scaled(name: str, rows: list[tuple[float, tuple[int, int], Any]],
+            clock: Callable[[np.ndarray], np.ndarray]
             ) -> tuple[Series, Series]:
     """SCALED_IMU* / RAW_IMU (ArduPilot) gyro (mrad/s) and accelerometer (mG), in SI."""
-    t = _imu_times(rows, offset)
+    t = _imu_times(rows, clock)
     values = np.array([[m.xgyro, m.ygyro, m.zgyro, m.xacc, m.yacc, m.zacc] for _, _, m in rows],
                       dtype=float) * 1e-3
     return (Series(t, values[:, :3], f"{name} xgyro..zgyro"),
             Series(t, values[:, 3:] * STANDARD_GRAVITY, f"{name} xacc..zacc"))
 
 
-def _imu(own: _Messages, offset: float, mavlink: ModuleType
+def _imu(own: _Messages, clock: Callable[[np.ndarray], np.ndarray], mavlink: ModuleType
          ) -> tuple[Series | None, Series | None, list[str]]:
     """The primary IMU's gyro and accelerometer (module docstring); notes."""
     beats = [m for _, _, m in own.get("HEARTBEAT", [])]
@@ -346,7 +373,7 @@ def _imu(own: _Messages, offset: float, mavlink: ModuleType
         rows = _imu_rows(own, name, autopilot, mavlink)
         if not rows:
             continue
-        g, a = _highres(rows, offset) if name == "HIGHRES_IMU" else _scaled(name, rows, offset)
+        g, a = _highres(rows, clock) if name == "HIGHRES_IMU" else _scaled(name, rows, clock)
         if gyro is None and g is not None:
             gyro, notes = g, notes + ([f"the gyro is {name}'s, not the first IMU's"]
                                       if name.endswith(("2", "3")) else [])
@@ -385,12 +412,13 @@ def _imu_settings(own: _Messages, gyro: Series | None, accel: Series | None
                                ", ".join(f"PARAM_VALUE {n}" for n in stated))
 
 
-def _modes(own: _Messages, mavutil: ModuleType, offset: float) -> ModeChanges | None:
+def _modes(own: _Messages, mavutil: ModuleType, clock: Callable[[np.ndarray], np.ndarray]
+           ) -> ModeChanges | None:
     """The modes of the autopilot's HEARTBEATs, periodic reports; None without any."""
     beats = own.get("HEARTBEAT", [])
     if not beats:
         return None
-    t = np.array([r for r, _, _ in beats]) - offset
+    t = clock(np.array([r for r, _, _ in beats]))
     modes = tuple(mavutil.mode_string_v10(m) for _, _, m in beats)
     return ModeChanges(t=t, modes=modes, events=False, end=float(t[-1]))
 
@@ -420,18 +448,19 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     mavutil = import_parser("pymavlink.mavutil", path)
     own = _from_autopilot(found, mavutil.mavlink)
     notes: list[str] = []
-    offset = _clock_offset(own)
-    if offset is None:
-        offset = min(rows[0][0] for rows in found.values())
+    clock = _receipt_clock(own)
+    if clock is None:
+        first = min(rows[0][0] for rows in found.values())
+        clock = lambda t: np.asarray(t, dtype=float) - first  # noqa: E731
         notes.append(f"{path}: no autopilot time_boot_ms in the log; times are its receipt "
                      "times from the first message")
     rotor_notes = []
     with parsing(path, "a MAVLink telemetry log with the usual message fields"):
-        pose, position, attitude, pose_source = _pose(found, own, offset)
+        pose, position, attitude, pose_source = _pose(found, own, clock)
         outputs = _servo_outputs(own)
         escs: tuple[Series, ...] = ()
         if any(own.get(name) for name in ESC_TELEMETRY):
-            rotors = escs = _esc_rotors(path, own, offset, vehicle.rotor_count)
+            rotors = escs = _esc_rotors(path, own, clock, vehicle.rotor_count)
         elif outputs is not None:
             check_pwm_outputs(outputs.series.values, vehicle, f"{path}: SERVO_OUTPUT_RAW")
             rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
@@ -442,8 +471,8 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
                                  "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")
-        modes = _modes(own, mavutil, offset)
-        gyro, accel, imu_notes = _imu(own, offset, mavutil.mavlink)
+        modes = _modes(own, mavutil, clock)
+        gyro, accel, imu_notes = _imu(own, clock, mavutil.mavlink)
         imu_position, imu_filter = _imu_settings(own, gyro, accel)
     notes += [f"{path}: {note}" for note in imu_notes]
     return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,

@@ -22,14 +22,17 @@ AUTOPILOT = (1, 1)
 MOCAP = (255, 190)
 
 
-def _flight(truth: Truth, vehicle: VehicleConfig, pose: str, rotors: str) -> list[Any]:
-    """Records of a 4 s flight: HEARTBEAT, pose messages and rotor messages."""
+def _flight(truth: Truth, vehicle: VehicleConfig, pose: str, rotors: str,
+            hold: float = 0.0) -> list[Any]:
+    """Records of a 4 s flight: HEARTBEAT, pose messages and rotor messages; the autopilot's
+    clock stopped for ``hold`` s of receipt time 0.5 s into it (a lock-stepped simulator
+    waiting for its peer)."""
     from pymavlink.dialects.v20 import ardupilotmega as m
 
     records: list[Any] = []
 
     def receipt(t: float) -> float:
-        return EPOCH + t + LATENCY
+        return EPOCH + t + LATENCY + (hold if t > BOOT + 0.5 else 0.0)
 
     records.append((receipt(BOOT - 0.5), m.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3),
                     AUTOPILOT))
@@ -115,3 +118,15 @@ def test_tlog_without_rotor_information_names_the_file(tmp_path: Path, firefly: 
     message = str(info.value)
     assert message.count(str(path)) == 2 and "\n" not in message
     assert "no rotor speeds or motor outputs in" in message
+
+
+def test_a_stopped_autopilot_clock_keeps_the_esc_rpm_in_place(
+        tmp_path: Path, firefly: VehicleConfig, truth: Truth, tlog_writer: Callable[..., None],
+        assert_matches_truth: Callable[..., None]) -> None:
+    """ESC rpm carries no autopilot time: stamped from its receipt, it stays on the
+    autopilot's clock where that clock stood still for 30 s of receipt time."""
+    path = tmp_path / "flight.tlog"
+    tlog_writer(path, _flight(truth, firefly, "autopilot", "esc", hold=30.0))
+    data = load_flight(path, firefly)
+    assert data.t[-1] == pytest.approx(BOOT + 3.98, abs=0.03)
+    assert_matches_truth(data, truth, 0.1, pose_atol=1e-4)
