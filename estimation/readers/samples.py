@@ -610,8 +610,12 @@ def validate_flight(data: FlightData, vehicle: VehicleConfig,
     if t.shape[0] < 2:
         raise LogFormatError(f"{source}: {_plural(t.shape[0], 'usable sample')}; need at least "
                              f"{MIN_DURATION:g} s of pose and rotor speeds")
-    t, stacked, unphysical = drop_unphysical_samples(t, stacked, source, vehicle, MAX_GAP)
-    notes += unphysical
+    logged_t, logged_rotors = t, stacked[:, 7:7 + k]
+    t, stacked, more = drop_unphysical_samples(t, stacked, source, vehicle, MAX_GAP)
+    notes += more
+    # A dead channel filled: the series as logged no longer says what the rows do, so the
+    # rows become the inputs (else its zeros would come back where the inputs are read).
+    filled = not np.array_equal(logged_rotors[np.isin(logged_t, t)], stacked[:, 7:7 + k])
     q, more = normalise_quaternions(stacked[:, 3:7], t, source, "pose")
     notes += more
     duration = float(t[-1] - t[0])
@@ -628,9 +632,7 @@ def validate_flight(data: FlightData, vehicle: VehicleConfig,
         raise LogFormatError(f"{source}: no stretch of {MIN_DURATION:g} s of pose and rotor "
                              f"speeds without a gap longer than {MAX_GAP:g} s")
     t, stacked, q = t[keep], stacked[keep], q[keep]
-    # Rotor samples left out or filled: the series as logged no longer says what the rows
-    # do, so the rows become the inputs (else a dead channel's zeros would come back).
-    inputs = InputSamples(((t, stacked[:, 7:7 + k]),)) if unphysical else data.inputs
+    inputs = InputSamples(((t, stacked[:, 7:7 + k]),)) if filled else data.inputs
     repaired = dataclasses.replace(data, t=t, position=stacked[:, :3], quaternion=q,
                                    rotor_speeds=stacked[:, 7:7 + k], inputs=inputs,
                                    warnings=(*data.warnings, *notes), segment_starts=starts)
