@@ -34,7 +34,11 @@ sensor's (the IMU's biases and offset, `with_imu_quantities`) are the balance's.
 
 A filter determines a quantity by the balance's own rule
 (`mavsysid.estimation.results.quantity_status`). The covariance keeps the cross terms
-within each source and none between sources. A filter that cannot follow the flight, or
+within each source and none between sources, but one: where the balance rejects the
+filter's value of a quantity, the filter's other quantities are conditioned on that
+quantity's answer (`follow_rejected`), and those that leaned on the rejected value (c_M and
+j_z on c_D, where the yaw determines only their ratio) follow it, or are no longer
+determined. A filter that cannot follow the flight, or
 whose θ `check_result` refuses (physically impossible, far outside the prior, contradicted
 by the balance), leaves the balance's answer with the reason in the notes; a flight is
 refused only when neither determines anything.
@@ -44,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from mavsysid.estimation.balance.fit import fit_wrench_balance
@@ -90,8 +94,9 @@ from mavsysid.vehicle.parameters import (
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "FilterEstimator", "answer_parameters",
-           "balance_only_result", "check_result", "estimate", "with_answer"]
+__all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "FilterEstimator", "ParameterAnswer",
+           "answer_parameters", "balance_only_result", "check_result", "estimate",
+           "follow_rejected", "with_answer"]
 
 #: What estimates θ with the filter and batch from a read flight, given the balance's θ
 #: as the equation-error reference (None: it computes its own): `estimate_parameters`, or
@@ -172,10 +177,37 @@ def _sources(f_est: ParameterEstimate | None, balance: WrenchBalanceResult | Non
     return source, disagree, mismatch
 
 
+@dataclass(frozen=True)
+class ParameterAnswer:
+    """The per-quantity answer of `answer_parameters`.
+
+    Attributes
+    ----------
+    estimate : ParameterEstimate
+        The quantities and their covariance, SI.
+    status : tuple of str
+        `DETERMINED`, `NOT_DETERMINED` or `AT_BOUND` per quantity.
+    source : tuple of str
+        "filter", "balance" or "prior" per quantity.
+    mismatch : tuple of str
+        One phrase per quantity where the filter and the balance disagree.
+    leaning : tuple of str
+        Per quantity whose filter value leans on one the filter was rejected on, and so
+        follows that one's answer (`follow_rejected`): its name and the correlation.
+    """
+
+    estimate: ParameterEstimate
+    status: tuple[str, ...]
+    source: tuple[str, ...]
+    mismatch: tuple[str, ...]
+    leaning: tuple[str, ...] = ()
+
+
 def answer_parameters(
     filter_result: EstimationResult | None, balance: WrenchBalanceResult | None,
     prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...] = PAPER_THETA,
-) -> tuple[ParameterEstimate, tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    refused_filter: EstimationResult | None = None,
+) -> ParameterAnswer:
     """Each quantity from the filter's result and the balance (module docstring).
 
     Parameters
@@ -188,17 +220,14 @@ def answer_parameters(
         The prior of the quantities (SI).
     quantities : tuple of EstimatedQuantity
         θ and the nuisance quantities (`VehicleConfig.quantities`), in the estimates' order.
+    refused_filter : EstimationResult, optional
+        A filter result that was refused (`check_result`) and gives no value: where it
+        disagrees with the balance, the balance's value is still contradicted, so c_D is
+        not put at its bound there.
 
     Returns
     -------
-    estimate : ParameterEstimate
-        The quantities and their covariance, SI.
-    status : tuple of str
-        `DETERMINED`, `NOT_DETERMINED` or `AT_BOUND` per quantity.
-    source : tuple of str
-        "filter", "balance" or "prior" per quantity.
-    mismatch : tuple of str
-        One phrase per quantity where the filter and the balance disagree.
+    ParameterAnswer
 
     Raises
     ------
@@ -209,9 +238,35 @@ def answer_parameters(
         raise JobFailedError("no estimate to answer from")
     f_est = None if filter_result is None else filter_result.final.on(prior)
     source, disagree, mismatch = _sources(f_est, balance, prior, quantities)
+    if f_est is None and refused_filter is not None and balance is not None:
+        _, disagree, mismatch = _sources(_unwidened(refused_filter).on(prior), balance,
+                                         prior, quantities)
     b_val, b_sig = _balance_data(balance, len(quantities))
     # A bound is the answer only where nothing contradicts the balance's value.
     bound = _at_bound(b_val, b_sig, prior) & (source == "prior") & ~disagree
+    value, cov = _assemble(source, f_est, balance, prior)
+    leaning: tuple[str, ...] = ()
+    if f_est is not None:
+        value, cov, leaning, dropped = follow_rejected(f_est, source, disagree, value, cov,
+                                                       prior)
+        b_det = np.zeros(len(source), bool) if balance is None else balance.determined
+        for k in dropped:
+            source[k] = "balance" if b_det[k] else "prior"
+            _take_from(k, balance.estimate if source[k] == "balance" else prior, value, cov)
+    status = [DETERMINED if s != "prior" else NOT_DETERMINED for s in source]
+    for j in np.flatnonzero(bound):
+        value[j] = max(float(b_val[j]), 0.0)
+        cov[j, :] = cov[:, j] = 0.0
+        cov[j, j] = float(b_sig[j]) ** 2
+        status[j], source[j] = AT_BOUND, "balance"
+    return ParameterAnswer(ParameterEstimate(value, cov, prior.names), tuple(status),
+                           tuple(str(s) for s in source), tuple(mismatch), leaning)
+
+
+def _assemble(source: np.ndarray, f_est: ParameterEstimate | None,
+              balance: WrenchBalanceResult | None, prior: ParameterEstimate
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Value and covariance per quantity from its source, cross terms within each source."""
     value = prior.value.astype(float).copy()
     cov = np.diag(prior.sigma**2)
     for name, est in (("filter", f_est), ("balance", None if balance is None
@@ -221,14 +276,67 @@ def answer_parameters(
             continue
         value[idx] = est.value[idx]
         cov[np.ix_(idx, idx)] = est.covariance[np.ix_(idx, idx)]
-    status = [DETERMINED if s != "prior" else NOT_DETERMINED for s in source]
-    for j in np.flatnonzero(bound):
-        value[j] = max(float(b_val[j]), 0.0)
-        cov[j, :] = cov[:, j] = 0.0
-        cov[j, j] = float(b_sig[j]) ** 2
-        status[j], source[j] = AT_BOUND, "balance"
-    return (ParameterEstimate(value, cov, prior.names), tuple(status),
-            tuple(str(s) for s in source), tuple(mismatch))
+    return value, cov
+
+
+def _take_from(j: int, est: ParameterEstimate, value: np.ndarray, cov: np.ndarray) -> None:
+    """Quantity j's value and variance from ``est``, without cross terms (in place)."""
+    value[j] = est.value[j]
+    cov[j, :] = cov[:, j] = 0.0
+    cov[j, j] = est.covariance[j, j]
+
+
+def follow_rejected(f_est: ParameterEstimate, source: np.ndarray, disagree: np.ndarray,
+                    value: np.ndarray, cov: np.ndarray, prior: ParameterEstimate
+                    ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], np.ndarray]:
+    """The filter's answered quantities conditioned on the answer for those it was rejected on.
+
+    Where the balance rejects the filter's value of a quantity (r), the filter's values of
+    the others it answers (k) lean on that value through its covariance S: with r's answer
+    a ~ N(a, A) in place of the filter's x_r, they become (the Gaussian conditional carried
+    over to the new marginal)
+
+        x_k + K (a − x_r),   S_kk − K S_rk + K A Kᵀ,   K = S_kr S_rr⁻¹,
+
+    so a pair the flight determines only as a ratio (c_M and j_z, both scaled by the c_D
+    that damps the yaw) does not keep a σ that the rejected c_D's value bought.
+
+    Returns
+    -------
+    value, cov : ndarray
+        The answer with the filter's quantities conditioned.
+    leaning : tuple of str
+        Per filter quantity whose σ at least doubled or whose value moved by more than its
+        former σ: its name and its correlation with the rejected quantity it leans on most.
+    dropped : ndarray of int
+        The filter's quantities no longer determined once conditioned (`quantity_status`).
+    """
+    rejected = np.flatnonzero(disagree & (source != "filter"))
+    kept = np.flatnonzero(source == "filter")
+    if not rejected.size or not kept.size:
+        return value, cov, (), np.zeros(0, int)
+    s = f_est.covariance
+    gain = np.linalg.solve(s[np.ix_(rejected, rejected)], s[np.ix_(rejected, kept)]).T
+    answered = cov[np.ix_(rejected, rejected)]
+    value, cov = value.copy(), cov.copy()
+    value[kept] = f_est.value[kept] + gain @ (value[rejected] - f_est.value[rejected])
+    cov[np.ix_(kept, kept)] = (s[np.ix_(kept, kept)] - gain @ s[np.ix_(rejected, kept)]
+                               + gain @ answered @ gain.T)
+    cov[np.ix_(kept, rejected)] = gain @ answered
+    cov[np.ix_(rejected, kept)] = cov[np.ix_(kept, rejected)].T
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    old_sigma = f_est.sigma
+    moved = (sigma[kept] >= 2.0 * old_sigma[kept]) | (
+        np.abs(value[kept] - f_est.value[kept]) > old_sigma[kept])
+    leaning = []
+    corr = s / np.sqrt(np.outer(np.diag(s), np.diag(s)))
+    for j, k in enumerate(kept):
+        if moved[j]:
+            r = rejected[int(np.argmax(np.abs(corr[k, rejected])))]
+            leaning.append(f"{prior.names[k]} (correlation {corr[k, r]:+.2f} with "
+                           f"{prior.names[r]})")
+    still = quantity_status(value, sigma, prior.sigma)
+    return value, cov, tuple(leaning), kept[~still[kept]]
 
 
 def _empty_history() -> EstimationHistory:
@@ -355,6 +463,7 @@ def estimate(flight: FlightData, config: VehicleConfig,
     filter_config = config if settings.filter_imu else _pose_filter_config(config)
     if reference is not None:
         reference = reference.subset(quantity_names(filter_config.extra_quantities))
+    result: EstimationResult | None = None
     try:
         result = (filter_estimate or estimate_parameters)(flight, filter_config, settings,
                                                           reference)
@@ -368,7 +477,8 @@ def estimate(flight: FlightData, config: VehicleConfig,
                 f"{flight.source}: this flight determines no parameter: {balance_refusal}; "
                 f"and {reason}") from error
         assert balance is not None
-        return _answered(None, reason, balance, config, flight, prior)
+        return _answered(None, reason, balance, config, flight, prior, refused=result)
+    assert result is not None
     if balance_refusal is not None:
         return replace(result, notes=result.notes + (
             f"no force and torque balance check: {balance_refusal}",))
@@ -438,10 +548,13 @@ def _balance(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate
 
 def _answered(result: EstimationResult | None, filter_refusal: str | None,
               balance: WrenchBalanceResult, config: VehicleConfig, flight: FlightData,
-              prior: ParameterEstimate) -> EstimationResult:
-    """The per-parameter answer (`answer_parameters`) and its notes."""
-    estimate, status, source, mismatch = answer_parameters(result, balance, prior,
-                                                           config.quantities)
+              prior: ParameterEstimate, refused: EstimationResult | None = None
+              ) -> EstimationResult:
+    """The per-parameter answer (`answer_parameters`) and its notes; ``refused``, a filter
+    result `check_result` refused, still says where the balance is contradicted."""
+    answer = answer_parameters(result, balance, prior, config.quantities, refused)
+    estimate, status, source, mismatch = (answer.estimate, answer.status, answer.source,
+                                          answer.mismatch)
     notes = list(balance.notes)
     if result is None:
         notes.append(f"the filter and batch could not follow this flight ({filter_refusal}); "
@@ -455,6 +568,9 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
                      + "; ".join(mismatch) + ": the balance answers for them (where it "
                      "determines them; not determined where it does not); the model "
                      "misses something (mavsysid diagnose names what)")
+    if answer.leaning:
+        notes.append("the filter's " + ", ".join(answer.leaning) + " lean on a value the "
+                     "balance rejected: value and σ follow that quantity's answer")
     for label, why in ((NOT_DETERMINED, "the prior's value and σ are kept"),
                        (AT_BOUND, f"the data put it within {BOUND_SIGMAS:g} σ of 0")):
         names = [n for n, s in zip(estimate.names, status, strict=True) if s == label]
@@ -510,9 +626,12 @@ def check_result(source: str, result: EstimationResult,
              vanishing_floor(effects, float(final.value[C_T]), rotor_speed_max))
     check_plausible(source, final.value, final.sigma, prior.value, prior.sigma,
                     may_vanish=vanishing_parameters(e.name for e in effects), floor=floor)
-    final = result.final
     if result.equation_error is not None:
-        factor = result.mismatch_widening
-        unwidened = final if factor is None else ParameterEstimate(
-            final.value, final.covariance / np.outer(factor, factor), final.names)
-        check_agreement(source, unwidened, result.equation_error)
+        check_agreement(source, _unwidened(result), result.equation_error)
+
+
+def _unwidened(result: EstimationResult) -> ParameterEstimate:
+    """The filter's final estimate with its σ as before a disagreement widened it."""
+    final, factor = result.final, result.mismatch_widening
+    return final if factor is None else ParameterEstimate(
+        final.value, final.covariance / np.outer(factor, factor), final.names)

@@ -52,6 +52,7 @@ __all__ = [
     "default_noise_densities",
     "load_vehicle",
     "save_vehicle",
+    "vehicle_from_toml",
     "vehicle_to_toml",
 ]
 
@@ -154,3 +155,28 @@ def load_vehicle(spec: str | Path) -> VehicleConfig:
     config = _build(values, name, source)
     check_vehicle(source, config)
     return config
+
+
+def vehicle_from_toml(text: str, label: str) -> VehicleConfig:
+    """A vehicle configuration from TOML text, as a flight's ``meta.json`` or a trajectory
+    file records it (`vehicle_to_toml`).
+
+    Parameters
+    ----------
+    text : str
+        The configuration as TOML.
+    label : str
+        Where the text comes from, as error messages name it.
+
+    Raises
+    ------
+    ConfigError
+        Not TOML, or a document that does not satisfy the schema; one line.
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        detail = " ".join(str(exc).split())
+        raise ConfigError(f"{label}: TOML syntax: valid TOML, got {detail}") from None
+    values = validate_document(label, doc)
+    return _build(values, values["name"] or label, label)

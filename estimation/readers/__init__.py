@@ -26,6 +26,7 @@ from mavsysid.estimation.readers.logs import (
     read_autopilot_log,
     read_pose_csv,
 )
+from mavsysid.estimation.readers.recorded_vehicle import check_recorded_vehicle
 from mavsysid.estimation.readers.samples import LogStreams, to_flight_data
 from mavsysid.formats.bounded_parse import check_log_size
 from mavsysid.formats.dataflash import read_dataflash, read_dataflash_modes
@@ -126,7 +127,8 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     Raises
     ------
     InputError
-        An unsupported extension or a missing file.
+        An unsupported extension or a missing file; a flight whose ``meta.json`` says it
+        was flown as another vehicle (`check_recorded_vehicle`).
     LogFormatError
         A log that cannot be read or fails a check (`mavsysid.estimation.readers.samples`); the
         message is one line naming the file.
@@ -139,8 +141,12 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
                          f"expected one of {known}")
     if pose is None and time_offset is not None:
         raise InputError(f"{path}: a time offset applies only with a motion-capture pose file")
+    edited = check_recorded_vehicle(path, vehicle)
     streams = reader(path, vehicle)
     streams, window = _windowed(streams, path, start, end, auto_window)
     if pose is not None:
         streams = merge_pose(streams, _existing_file(pose, "motion-capture pose"), time_offset)
-    return to_flight_data(streams, vehicle, None if window is None else window.bounds)
+    flight = to_flight_data(streams, vehicle, None if window is None else window.bounds)
+    if edited is None:
+        return flight
+    return dataclasses.replace(flight, warnings=(*flight.warnings, edited))
