@@ -20,9 +20,9 @@ import argparse
 
 import numpy as np
 from mavsysid.estimation.answer import with_imu_quantities
-from mavsysid.estimation.balance.fit import WrenchBalanceSettings, _answer
+from mavsysid.estimation.balance.fit import balance_coefficients
 from mavsysid.estimation.balance.rows import STACKED_COEFFICIENTS
-from mavsysid.estimation.balance.theta import coefficients_from_theta, stack
+from mavsysid.estimation.balance.theta import coefficients_from_theta
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.results import prior_from_config
 from mavsysid.vehicle.config import load_vehicle
@@ -34,8 +34,7 @@ def coefficient_table(log: str, vehicle: str) -> list[tuple[str, float, float]]:
     flight = load_flight(log, config)
     config = with_imu_quantities(config, flight)
     prior = prior_from_config(config)
-    _, fit = _answer(flight, config, prior, WrenchBalanceSettings())
-    value = stack(fit.force.coefficients, fit.torque.coefficients)
+    value = balance_coefficients(flight, config, prior)
     implied = coefficients_from_theta(np.concatenate([config.theta,
                                                       prior.value[len(config.theta):]]))
     return [(name, float(value[i]), float(implied[i]))

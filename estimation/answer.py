@@ -301,6 +301,19 @@ def follow_rejected(f_est: ParameterEstimate, source: np.ndarray, disagree: np.n
     so a pair the flight determines only as a ratio (c_M and j_z, both scaled by the c_D
     that damps the yaw) does not keep a σ that the rejected c_D's value bought.
 
+    Parameters
+    ----------
+    f_est : ParameterEstimate
+        The filter's estimate on the prior's quantities.
+    source : ndarray of str, shape (P,)
+        Which estimate answers each quantity ("filter", "balance", "prior").
+    disagree : ndarray of bool, shape (P,)
+        Where the balance rejected the filter's value.
+    value, cov : ndarray, shapes (P,) and (P, P)
+        The answer as assembled from the sources, SI.
+    prior : ParameterEstimate
+        The prior (names, and σ for `quantity_status`).
+
     Returns
     -------
     value, cov : ndarray
@@ -449,20 +462,17 @@ def estimate(flight: FlightData, config: VehicleConfig,
         The logged motion contradicts the logged tilt: a wrong clock or position unit
         (`mavsysid.estimation.checks.check_kinematics`).
     """
-    check_kinematics(flight)
+    wind = check_kinematics(flight)
+    if wind is not None:
+        flight = replace(flight, warnings=(*flight.warnings, wind))
     settings = settings or EstimatorSettings()
     config = with_imu_quantities(config, flight, every_sensor=settings.filter_imu)
     prior = prior_from_config(config, settings)
     if flight.rotor_count == config.rotor_count:
         flight, _ = rescale_wrong_rotor(flight, config)
     balance, balance_refusal = _balance(flight, config, prior)
-    reference = None if balance is None else balance.with_prior(prior)
-    if balance is not None and balance_refusal is None:
-        report_stage("the force and torque balance answered; checking it with the filter")
-        settings = replace(settings, restart_diverged=False)
-    filter_config = config if settings.filter_imu else _pose_filter_config(config)
-    if reference is not None:
-        reference = reference.subset(quantity_names(filter_config.extra_quantities))
+    filter_config, settings, reference = _filter_inputs(config, settings, balance,
+                                                        balance_refusal is None, prior)
     result: EstimationResult | None = None
     try:
         result = (filter_estimate or estimate_parameters)(flight, filter_config, settings,
@@ -473,9 +483,10 @@ def estimate(flight: FlightData, config: VehicleConfig,
         if balance_refusal is None and balance is None:
             raise
         if balance_refusal is not None:
+            force = "" if wind is None else "; " + wind.removeprefix(f"{flight.source}: ")
             raise JobFailedError(
                 f"{flight.source}: this flight determines no parameter: {balance_refusal}; "
-                f"and {reason}") from error
+                f"and {reason}{force}") from error
         assert balance is not None
         return _answered(None, reason, balance, config, flight, prior, refused=result)
     assert result is not None
@@ -485,6 +496,22 @@ def estimate(flight: FlightData, config: VehicleConfig,
     if balance is None:
         return result
     return _answered(result, None, balance, config, flight, prior)
+
+
+def _filter_inputs(config: VehicleConfig, settings: EstimatorSettings,
+                   balance: WrenchBalanceResult | None, answered: bool,
+                   prior: ParameterEstimate
+                   ) -> tuple[VehicleConfig, EstimatorSettings, ParameterEstimate | None]:
+    """The filter's vehicle, settings and equation-error reference (the balance's θ on the
+    filter's quantities); a balance that answered keeps the filter from restarting."""
+    reference = None if balance is None else balance.with_prior(prior)
+    if balance is not None and answered:
+        report_stage("the force and torque balance answered; checking it with the filter")
+        settings = replace(settings, restart_diverged=False)
+    filter_config = config if settings.filter_imu else _pose_filter_config(config)
+    if reference is not None:
+        reference = reference.subset(quantity_names(filter_config.extra_quantities))
+    return filter_config, settings, reference
 
 
 def _pose_filter_config(config: VehicleConfig) -> VehicleConfig:

@@ -15,7 +15,12 @@ along the body z axis, so per horizontal axis a_h = λ (a_z + g) b_h / b_z + μ 
 mass and inertia. λ = 1 for a consistent log; a clock s times off scales it by 1/s², a
 position in mm read as m by 10⁻³, and the inertia would come out wrong by s² with a small
 σ. λ outside [1 / `TIME_SCALE_FACTOR`, `TIME_SCALE_FACTOR`] is refused, when the flight
-tilts enough to tell (`MIN_TILT_ACCELERATION`).
+tilts enough to tell (`MIN_TILT_ACCELERATION`), unless the log's accelerometer says the
+clock is right: the horizontal specific force it measures, turned into the world, is the
+position's acceleration whatever pushes the vehicle, and a clock s times off scales their
+ratio κ (`imu_gain`) by s² too. With κ within `IMU_AGREEMENT` of 1, what the tilt does not
+explain is a horizontal force the model lacks (strong wind, drag beyond the model's): that
+is said in a note, not refused.
 
 **A rotor channel reading wrong** (`check_rotor_balance`, `rescale_wrong_rotor`). A
 vehicle holding its attitude keeps the thrust-weighted centroid of its rotor hubs,
@@ -45,12 +50,14 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleCon
 from mavsysid.vehicle.config_checks import INERTIA_TRIANGLE_SLACK, triangle_violation
 from mavsysid.vehicle.constants import GRAVITY
 from mavsysid.vehicle.model_effects import ModelEffect
+from scipy.signal import savgol_filter
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["MAX_CENTROID_OFFSET", "MIN_TILT_ACCELERATION", "PRIOR_FACTOR_MAX", "TIME_SCALE_FACTOR",
-           "VANISHES_WITH", "VANISH_SIGMAS", "check_kinematics", "check_plausible",
-           "check_rotor_balance", "implausibility", "rescale_wrong_rotor",
+__all__ = ["IMU_AGREEMENT", "MAX_CENTROID_OFFSET", "MIN_TILT_ACCELERATION", "PRIOR_FACTOR_MAX",
+           "TIME_SCALE_FACTOR", "VANISHES_WITH", "VANISH_SIGMAS", "check_kinematics",
+           "check_plausible", "check_rotor_balance", "implausibility", "imu_gain",
+           "rescale_wrong_rotor",
            "thrust_centroid_offset", "tilt_gain", "vanishing_floor", "vanishing_parameters"]
 
 
@@ -311,17 +318,81 @@ def tilt_gain(flight: FlightData) -> float | None:
     return float(solution[0])
 
 
-def check_kinematics(flight: FlightData) -> None:
+#: κ (`imu_gain`) within this share of 1 says the clock and position unit are right.
+IMU_AGREEMENT = 0.15
+
+
+def imu_gain(flight: FlightData) -> float | None:
+    """κ of the module docstring: the accelerometer's horizontal specific force, turned into
+    the world, over the position's horizontal acceleration (both smoothed alike).
+
+    Parameters
+    ----------
+    flight : FlightData
+        Pose and, in ``imu``, the accelerometer (body FLU specific force).
+
+    Returns
+    -------
+    float or None
+        None without an accelerometer, or when the flight does not accelerate enough.
+    """
+    imu = flight.imu
+    if imu is None or imu.accel is None or len(imu.accel) < 2:
+        return None
+    rows, targets = [], []
+    segments = list(uniform_segments(flight, 0.0))
+    for index, segment in enumerate(segments):
+        settings = SmootherSettings(window=TILT_WINDOW, polyorder=3)
+        window = settings.samples(segment.dt)
+        if len(segment) < 3 * window:
+            continue
+        pose = smooth_pose(segment.t, segment.position, segment.quaternion, settings)
+        force = np.column_stack([np.interp(segment.t, imu.accel.t, imu.accel.values[:, i])
+                                 for i in range(3)])
+        world = np.einsum("nij,nj->ni", pose.rotation(), force)
+        world = savgol_filter(world, window, 3, axis=0)
+        cut = slice(window // 2, len(segment) - window // 2)
+        for axis in range(2):
+            offsets = np.zeros((len(segment), 2 * len(segments)))
+            offsets[:, 2 * index + axis] = 1.0  # an accelerometer bias per segment and axis
+            rows.append(np.column_stack([pose.acceleration[:, axis], offsets])[cut])
+            targets.append(world[cut, axis])
+    if not rows:
+        return None
+    design, target = np.vstack(rows), np.concatenate(targets)
+    centred = design[:, 0] - np.mean(design[:, 0])
+    if not np.isfinite(design).all() or not np.isfinite(target).all() or (
+            np.sqrt(np.mean(centred**2)) < MIN_TILT_ACCELERATION):
+        return None
+    solution, *_ = np.linalg.lstsq(design, target, rcond=None)
+    return float(solution[0])
+
+
+def check_kinematics(flight: FlightData) -> str | None:
     """Refuse, in one line naming the log, a flight whose motion contradicts its attitude.
+
+    Returns
+    -------
+    str or None
+        A note where the tilt does not explain the motion but the accelerometer agrees
+        with the position (`imu_gain`): a horizontal force the model lacks.
 
     Raises
     ------
     JobFailedError
-        λ (`tilt_gain`) outside [1 / `TIME_SCALE_FACTOR`, `TIME_SCALE_FACTOR`].
+        λ (`tilt_gain`) outside [1 / `TIME_SCALE_FACTOR`, `TIME_SCALE_FACTOR`], and no
+        accelerometer that says the clock is right.
     """
     gain = tilt_gain(flight)
     if gain is None or 1.0 / TIME_SCALE_FACTOR <= gain <= TIME_SCALE_FACTOR:
-        return
+        return None
+    kappa = imu_gain(flight)
+    if kappa is not None and abs(kappa - 1.0) <= IMU_AGREEMENT:
+        return (f"{flight.source}: the horizontal acceleration of the logged position is "
+                f"{gain:.3g} × what the logged tilt demands, and the accelerometer agrees "
+                f"with the position ({kappa:.3g} ×): a horizontal force the model lacks "
+                "pushes the vehicle (strong wind, or drag beyond the model's); mavsysid "
+                "diagnose names it")
     raise JobFailedError(
         f"{flight.source}: the horizontal acceleration of the logged position is {gain:.3g} × "
         "what the logged tilt demands (thrust along the body z axis; expected about 1): the "

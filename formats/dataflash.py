@@ -99,6 +99,7 @@ from typing import Any
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import (
+    battery_scale,
     check_pwm_outputs,
     pwm_curve_caveat,
     rotor_speed_from_pwm,
@@ -308,7 +309,7 @@ _POSE_TYPES = ("VISP", "POS", "ATT", *(name for ekf in (_EKF3, _EKF2, _EKF1) for
 _POSE_HINT = ("no VISP, nor XKF1 with XKQ, NKF1 with NKQ, XKF1, NKF1 or EKF1 with ATT, or POS "
               "with ATT")
 _IMU_TYPES = ("IMU", "GYR", "ACC", "GYR1", "ACC1", "ISBH", "ISBD", "RATE", "PARM")
-_TYPES = [*_POSE_TYPES, *_MOTOR_TYPES, *_IMU_TYPES]
+_TYPES = [*_POSE_TYPES, *_MOTOR_TYPES, *_IMU_TYPES, "BAT"]
 
 # pose (m = 7) or position and attitude, and where the pose comes from.
 _Pose = tuple[Series | None, Series | None, Series | None, PoseSource]
@@ -625,6 +626,15 @@ def _collect(path: Path) -> _Messages:
     return found
 
 
+def _battery(rows: list[Any]) -> Series | None:
+    """The first battery's BAT.Volt, V, s since boot; None without one."""
+    rows = [m for m in rows if getattr(m, "Inst", 0) == 0]
+    if not rows:
+        return None
+    t = np.array([m.TimeUS for m in rows], float) * 1e-6
+    return Series(t, np.array([[m.Volt] for m in rows], float), "BAT Volt")
+
+
 def _rcou_outputs(rows: list[Any]) -> MotorOutputs | None:
     """RCOU PWM (µs) of the channels 1..k that drive motors; None if none ever outputs."""
     t, pwm = _rcou_channels(rows)
@@ -666,10 +676,15 @@ def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
             rotors = escs
         elif outputs is not None:
             check_pwm_outputs(outputs.series.values, vehicle, f"{path}: RCOU")
-            rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
-                                                                    vehicle), "RCOU PWM"),)
+            speeds = rotor_speed_from_pwm(outputs.series.values, vehicle)
+            scale, battery_note = battery_scale(outputs.series.t, _battery(found["BAT"]),
+                                                vehicle, f"{path}: BAT")
+            rotors = (Series(outputs.series.t,
+                             speeds if scale is None else speeds * scale[:, None],
+                             "RCOU PWM"),)
             notes.append(f"{path}: no ESC rpm; rotor speeds are RCOU motor outputs "
                          f"{pwm_curve_caveat(vehicle)}")
+            notes += [battery_note] if battery_note else []
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no ESC "
                                  "RPM, no RCOU)")

@@ -11,18 +11,26 @@ Readers of logs (`mavsysid.formats.tlog`, `mavsysid.formats.ulog`,
 (`mavsysid.flight.offline`) apply its inverse to commanded rotor speeds. This is a
 commanded speed through a nominal curve, not a measured one: the `[motor]` keys of the
 vehicle config (``pwm_min``, ``pwm_max``, ``thrust_expo``) set it.
+
+The curve holds at one battery voltage. At a given output a motor turns as fast as its
+back-EMF balances the voltage the output applies, so its speed goes as the supply
+voltage: n(V) = n · V / V_ref. Where the vehicle file states V_ref (``[motor] voltage``)
+and the log has the battery's voltage, `battery_scale` gives that factor per output sample;
+where it does not and the battery fell in flight, it says how far the commanded speeds are
+off (a 10 % sag is 19 % of thrust at the same output).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from mavsysid.formats.parsed_log import Series
 from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["check_pwm_outputs", "describe_curve", "pwm_curve_caveat", "pwm_from_rotor_speed",
-           "rotor_speed_from_pwm", "rotor_speed_from_throttle", "throttle_from_pwm",
-           "throttle_from_rotor_speed"]
+__all__ = ["VOLTAGE_SAG_NOTE", "battery_scale", "check_pwm_outputs", "describe_curve",
+           "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
+           "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
 
 
 def throttle_from_pwm(pwm: np.ndarray, pwm_min: float, pwm_max: float) -> np.ndarray:
@@ -221,3 +229,54 @@ def pwm_curve_caveat(vehicle: VehicleConfig) -> str:
     """
     return (f"through the motor curve {describe_curve(vehicle, pwm=True)}: commanded, not "
             "measured, and only as right as the [motor] keys of the vehicle config")
+
+
+#: A battery that falls by more than this share while the motors run, with no ``[motor]
+#: voltage`` to scale by, is said in a note.
+VOLTAGE_SAG_NOTE = 0.03
+#: Battery readings outside this range, V, are "unknown" markers (0, UINT16_MAX mV).
+_VOLTAGE_RANGE = (1.0, 60.0)
+
+
+def battery_scale(t: np.ndarray, battery: Series | None, vehicle: VehicleConfig,
+                  where: str) -> tuple[np.ndarray | None, str | None]:
+    """The factor V(t) / V_ref commanded rotor speeds take, and a note (module docstring).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Times of the motor outputs, s, on the battery series' clock.
+    battery : Series or None
+        The battery voltage, V (one column), as logged.
+    vehicle : VehicleConfig
+        ``[motor] voltage``, V_ref (0: not stated).
+    where : str
+        The log and message, for the note.
+
+    Returns
+    -------
+    scale : ndarray, shape (N,), or None
+        Per output sample; None where nothing is scaled.
+    note : str or None
+        What was scaled, or how far the battery fell when nothing was.
+    """
+    if battery is None or not len(battery.t):
+        return None, None
+    volts = np.asarray(battery.values, float)[:, 0]
+    ok = np.isfinite(volts) & (volts > _VOLTAGE_RANGE[0]) & (volts < _VOLTAGE_RANGE[1])
+    if ok.sum() < 2:
+        return None, None
+    at = np.interp(t, battery.t[ok], volts[ok])
+    low, high = float(np.min(at)), float(np.max(at))
+    reference = vehicle.motor.voltage
+    if reference > 0.0:
+        return at / reference, (
+            f"{where}: commanded rotor speeds scaled by the battery voltage "
+            f"({low:.2f}–{high:.2f} V against [motor] voltage {reference:g} V)")
+    if high > 0.0 and 1.0 - low / high > VOLTAGE_SAG_NOTE:
+        return None, (
+            f"{where}: the battery fell from {high:.2f} to {low:.2f} V in the log; commanded "
+            f"rotor speeds do not see it ({100 * (1 - (low / high) ** 2):.0f} % of thrust "
+            "at the same output): state [motor] voltage, the voltage the curve holds at, to "
+            "scale them")
+    return None, None

@@ -60,6 +60,7 @@ from typing import Any, Protocol
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import (
+    battery_scale,
     check_pwm_outputs,
     pwm_curve_caveat,
     rotor_speed_from_pwm,
@@ -93,7 +94,8 @@ IMU_MESSAGES = ("HIGHRES_IMU", "SCALED_IMU", "RAW_IMU", "SCALED_IMU2", "SCALED_I
 #: m/s² per G of the mG unit of SCALED_IMU* and RAW_IMU (ArduPilot's GRAVITY_MSS, PX4's
 #: CONSTANTS_ONE_G).
 STANDARD_GRAVITY = 9.80665
-_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", "PARAM_VALUE", *_CLOCKED,
+_TYPES = ["HEARTBEAT", "ATT_POS_MOCAP", "SERVO_OUTPUT_RAW", "PARAM_VALUE", "SYS_STATUS",
+          *_CLOCKED,
           *ESC_TELEMETRY, *IMU_MESSAGES]
 #: HIGHRES_IMU.fields_updated bits of the accelerometer (x, y, z) and the gyro.
 _HIGHRES_ACCEL, _HIGHRES_GYRO = 0b000111, 0b111000
@@ -304,6 +306,16 @@ def _servo_outputs(own: _Messages) -> MotorOutputs | None:
 # --- IMU ---------------------------------------------------------------------------------
 
 
+def _battery(own: _Messages, clock: Callable[[np.ndarray], np.ndarray]) -> Series | None:
+    """SYS_STATUS battery voltage, V, on the autopilot's clock; None without one."""
+    rows = own.get("SYS_STATUS", [])
+    if not rows:
+        return None
+    t = clock(np.array([receipt for receipt, _, _ in rows]))
+    volts = np.array([m.voltage_battery for _, _, m in rows], float) / 1000.0
+    return Series(t, volts[:, None], "SYS_STATUS voltage_battery")
+
+
 def _parameters(own: _Messages) -> dict[str, float]:
     """The autopilot's PARAM_VALUEs in the log, by name (the last of each)."""
     return {str(m.param_id): float(m.param_value) for _, _, m in own.get("PARAM_VALUE", [])}
@@ -463,11 +475,15 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
             rotors = escs = _esc_rotors(path, own, clock, vehicle.rotor_count)
         elif outputs is not None:
             check_pwm_outputs(outputs.series.values, vehicle, f"{path}: SERVO_OUTPUT_RAW")
-            rotors = (Series(outputs.series.t, rotor_speed_from_pwm(outputs.series.values,
-                                                                    vehicle),
+            speeds = rotor_speed_from_pwm(outputs.series.values, vehicle)
+            scale, battery_note = battery_scale(outputs.series.t, _battery(own, clock),
+                                                vehicle, f"{path}: SYS_STATUS")
+            rotors = (Series(outputs.series.t,
+                             speeds if scale is None else speeds * scale[:, None],
                              "SERVO_OUTPUT_RAW PWM"),)
             rotor_notes.append(f"{path}: no ESC rpm; rotor speeds are motor outputs "
                                f"(SERVO_OUTPUT_RAW) {pwm_curve_caveat(vehicle)}")
+            rotor_notes += [battery_note] if battery_note else []
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
                                  "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")

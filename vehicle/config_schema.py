@@ -118,6 +118,7 @@ _MOTOR: dict[str, tuple[str, str]] = {
     "pwm_min": ("µs", "nonnegative"),
     "pwm_max": ("µs", "positive"),
     "thrust_expo": ("between 0 and 1", "nonnegative"),
+    "voltage": ("V", "nonnegative"),
 }
 _NOISE: dict[str, tuple[str, str]] = {
     "position_sigma": ("m", "nonnegative"),

@@ -173,12 +173,17 @@ class MotorConfig:
     thrust_expo : float
         ArduPilot's MOT_THST_EXPO e in [0, 1]: thrust ∝ (1 − e) u + e u², so a rotor
         speed is rotor_speed_max · sqrt((1 − e) u + e u²).
+    voltage : float
+        Battery voltage at which that curve holds, V; commanded rotor speeds then scale
+        with the logged battery voltage (`mavsysid.formats.motor_curve`). 0: not stated,
+        not scaled.
     """
 
     time_constant: float = 0.02
     pwm_min: float = 1000.0
     pwm_max: float = 2000.0
     thrust_expo: float = 0.65
+    voltage: float = 0.0
 
 
 @dataclass(frozen=True)

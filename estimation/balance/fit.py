@@ -75,8 +75,8 @@ from mavsysid.vehicle.parameters import C_D, C_M, C_T, INERTIA
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["SMOOTHING_WINDOW", "WrenchBalanceSettings", "WrenchComparison", "compare_wrench",
-           "fit_wrench_balance", "predict_holdout"]
+__all__ = ["SMOOTHING_WINDOW", "WrenchBalanceSettings", "WrenchComparison",
+           "balance_coefficients", "compare_wrench", "fit_wrench_balance", "predict_holdout"]
 
 
 def predict_holdout(segments: list[Segment], config: VehicleConfig,
@@ -328,6 +328,28 @@ def fit_wrench_balance(flight: FlightData, config: VehicleConfig,
                                result.sigma_parts, result.combination_sigma, prior,
                                result.choices, result.delay_sigma, holdout, result.rows,
                                result.notes)
+
+
+def balance_coefficients(flight: FlightData, config: VehicleConfig,
+                         prior: ParameterEstimate | None = None) -> np.ndarray:
+    """The stacked coefficients the balance fits on a flight, before θ is formed from them.
+
+    Parameters
+    ----------
+    flight : FlightData
+    config : VehicleConfig
+    prior : ParameterEstimate, optional
+        Default: the config's θ with the tool's default relative σ.
+
+    Returns
+    -------
+    ndarray, shape (len(STACKED_COEFFICIENTS) + 2E,)
+        `mavsysid.estimation.balance.rows.STACKED_COEFFICIENTS`, then the nuisance
+        quantities' force and torque coefficients.
+    """
+    prior = prior or prior_from_config(config)
+    _, fit = _answer(flight, config, prior, WrenchBalanceSettings())
+    return stack(fit.force.coefficients, fit.torque.coefficients)
 
 
 def _holdout(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,

@@ -31,6 +31,11 @@ ROTOR_TOLERANCE = 1e-3
 def recorded_vehicle(log: Path) -> VehicleConfig | None:
     """The vehicle recorded in the ``meta.json`` beside ``log``; None without one.
 
+    Parameters
+    ----------
+    log : Path
+        The flight log.
+
     Raises
     ------
     LogFormatError
@@ -50,7 +55,13 @@ def recorded_vehicle(log: Path) -> VehicleConfig | None:
 
 
 def vehicle_differences(recorded: VehicleConfig, given: VehicleConfig) -> list[str]:
-    """What the estimate takes as known that differs between two vehicle files, in words."""
+    """What the estimate takes as known that differs between two vehicle files, in words.
+
+    Parameters
+    ----------
+    recorded, given : VehicleConfig
+        The vehicle the flight was flown as, and the one given to read it with.
+    """
     out = []
     if not math.isclose(recorded.mass, given.mass, rel_tol=MASS_TOLERANCE):
         out.append(f"mass {recorded.mass:g} kg (not {given.mass:g} kg)")

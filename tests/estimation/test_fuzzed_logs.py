@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mavsysid.estimation.checks import check_kinematics, tilt_gain
+from mavsysid.estimation import checks
+from mavsysid.estimation.checks import check_kinematics, imu_gain, tilt_gain
 from mavsysid.estimation.flight import FlightData, InputSamples
 from mavsysid.estimation.readers import load_flight
 from mavsysid.estimation.readers.samples import (
@@ -222,6 +223,25 @@ def test_stretched_clock_contradicts_the_tilt(flight: CleanFlight, tmp_path: Pat
     assert tilt_gain(stretched) == pytest.approx(clean / scale**2, rel=0.2)
     with pytest.raises(JobFailedError, match=r"pose\.csv: the horizontal acceleration of the "
                        r"logged position is .* × what the logged tilt demands"):
+        check_kinematics(stretched)
+
+
+def test_an_accelerometer_that_agrees_names_a_force_not_a_clock(
+        flight: CleanFlight, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """κ ≈ 1 on the clean log with its IMU, ≈ s² with the clock s × slow (IMU and pose
+    alike, the gyro's rates slowed with it): where the tilt alone disagrees (λ 0.58, as
+    under an 8 m/s wind), a note names a force; where the accelerometer disagrees too,
+    the clock is refused."""
+    clean = _flight_data(flight, tmp_path / "clean")
+    assert imu_gain(clean) == pytest.approx(1.0, abs=0.05)
+    assert flight.imu_t is not None and flight.gyro is not None
+    stretched = _flight_data(flight, tmp_path / "s", t=flight.t * 1.5,
+                             imu_t=flight.imu_t * 1.5, gyro=flight.gyro / 1.5)
+    assert imu_gain(stretched) == pytest.approx(1.5**2, rel=0.1)
+    monkeypatch.setattr(checks, "tilt_gain", lambda data: 0.58)
+    note = check_kinematics(clean)
+    assert note is not None and "a horizontal force the model lacks" in note
+    with pytest.raises(JobFailedError, match="clock or position unit is wrong"):
         check_kinematics(stretched)
 
 

@@ -130,3 +130,38 @@ def test_a_stopped_autopilot_clock_keeps_the_esc_rpm_in_place(
     data = load_flight(path, firefly)
     assert data.t[-1] == pytest.approx(BOOT + 3.98, abs=0.03)
     assert_matches_truth(data, truth, 0.1, pose_atol=1e-4)
+
+
+def _sagging_battery(start: float, end: float) -> list[Any]:
+    """SYS_STATUS at 2 Hz over the 4 s flight, the battery falling linearly start → end V."""
+    from pymavlink.dialects.v20 import ardupilotmega as m
+
+    records = []
+    for t in BOOT + np.arange(9) / 2.0:
+        volts = start + (end - start) * (t - BOOT) / 4.0
+        msg = m.MAVLink_sys_status_message(0, 0, 0, 500, round(volts * 1000), 3000, 50,
+                                           0, 0, 0, 0, 0, 0)
+        records.append((EPOCH + t + LATENCY, msg, AUTOPILOT))
+    return records
+
+
+def test_commanded_rotor_speeds_follow_the_battery_voltage(
+        tmp_path: Path, firefly: VehicleConfig, truth: Truth,
+        tlog_writer: Callable[..., None]) -> None:
+    """Servo outputs with the battery falling 16.8 → 14.0 V: with [motor] voltage 16.8 the
+    rotor speeds are the curve's times V/16.8 (a motor turns as fast as its supply lets);
+    without it they are the curve's, and a note says how far the battery fell."""
+    import dataclasses
+
+    path = tmp_path / "flight.tlog"
+    tlog_writer(path, sorted(_flight(truth, firefly, "autopilot", "servo")
+                             + _sagging_battery(16.8, 14.0), key=lambda r: r[0]))
+    plain = load_flight(path, firefly)
+    stated = dataclasses.replace(firefly, motor=dataclasses.replace(firefly.motor,
+                                                                    voltage=16.8))
+    scaled = load_flight(path, stated)
+    volts = 16.8 - 2.8 * np.clip((scaled.t - BOOT) / 4.0, 0.0, 1.0)
+    np.testing.assert_allclose(scaled.rotor_speeds, plain.rotor_speeds * (volts / 16.8)[:, None],
+                               rtol=2e-3)
+    assert [w for w in plain.warnings if "battery fell from 16.80 to 14.0" in w]
+    assert [w for w in scaled.warnings if "scaled by the battery voltage" in w]
