@@ -28,7 +28,8 @@ from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["VOLTAGE_SAG_NOTE", "battery_scale", "check_pwm_outputs", "describe_curve",
+__all__ = ["CURVE_RPM_TOLERANCE", "VOLTAGE_SAG_NOTE", "battery_scale", "check_curve_against_rpm",
+           "check_pwm_outputs", "describe_curve",
            "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
            "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
 
@@ -280,3 +281,48 @@ def battery_scale(t: np.ndarray, battery: Series | None, vehicle: VehicleConfig,
             "at the same output): state [motor] voltage, the voltage the curve holds at, to "
             "scale them")
     return None, None
+
+
+#: The motor curve's rotor speeds may lie this share off a log's own ESC rpm (its median
+#: ratio over the flight) before they are refused: c_T goes as the square of the error.
+CURVE_RPM_TOLERANCE = 0.15
+
+
+def check_curve_against_rpm(commanded: Series, esc: Series, where: str) -> None:
+    """Refuse commanded rotor speeds that the same log's ESC rpm, even sparse, contradicts.
+
+    A log whose ESC rpm comes too seldom to follow a manoeuvre still says how fast the
+    rotors turn on average: the ratio of the summed ESC speeds to the summed commanded ones
+    at the ESC's times, its median over the samples where both run, must lie within
+    `CURVE_RPM_TOLERANCE` of 1 (a sum, so the two need not number the rotors alike).
+
+    Parameters
+    ----------
+    commanded : Series
+        Rotor speeds through the motor curve, rad/s, shape (N, k).
+    esc : Series
+        The ESC's rotor speeds, rad/s, shape (M, k'), on the same clock.
+    where : str
+        The log and the messages, for the message.
+
+    Raises
+    ------
+    LogFormatError
+        The median ratio beyond the tolerance; one line with the ratio and what to fix.
+    """
+    measured = np.nansum(np.asarray(esc.values, float), axis=1)
+    curve = np.sum([np.interp(esc.t, commanded.t, column)
+                    for column in np.asarray(commanded.values, float).T], axis=0)
+    inside = (esc.t >= commanded.t[0]) & (esc.t <= commanded.t[-1])
+    running = inside & (measured > 0.0) & (curve > 0.0)
+    if running.sum() < 3:
+        return
+    ratio = float(np.median(measured[running] / curve[running]))
+    if abs(ratio - 1.0) <= CURVE_RPM_TOLERANCE:
+        return
+    raise LogFormatError(
+        f"{where}: the motor curve's rotor speeds are {1.0 / ratio:.3g} × what the log's "
+        f"own ESC rpm says (median over {int(running.sum())} ESC samples): the [motor] curve "
+        "and rotor_speed_max do not describe these motors, and c_T from them would be "
+        f"{ratio**2:.3g} × off; correct the curve (rotor_speed_max × {ratio:.3g}) or log "
+        "the ESC rpm at 10 Hz or more")

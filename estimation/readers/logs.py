@@ -48,6 +48,7 @@ from mavsysid.estimation.readers.samples import (
     repair_samples,
 )
 from mavsysid.formats.flight_dir import STREAM_SOURCE, read_meta
+from mavsysid.formats.motor_curve import check_curve_against_rpm
 from mavsysid.formats.parsed_log import ModeChanges, ParsedLog, Series
 from mavsysid.formats.poselog import read_external_pose, read_pose_log
 from mavsysid.vehicle.config import VehicleConfig
@@ -355,9 +356,15 @@ def read_autopilot_log(read: Callable[[Path, VehicleConfig], ParsedLog], path: P
     ------
     LogFormatError
         What the reader raises, separately timed position and attitude that cannot be
-        combined, or more motor outputs than rotors without an autopilot frame.
+        combined, more motor outputs than rotors without an autopilot frame, or commanded
+        rotor speeds the log's own ESC rpm contradicts
+        (`mavsysid.formats.motor_curve.check_curve_against_rpm`).
     """
     log = read(path, vehicle)
+    commanded = [r for r in log.rotors if all(r is not e for e in log.esc_speeds)]
+    if len(commanded) == 1 and len(log.esc_speeds) == 1:
+        check_curve_against_rpm(commanded[0], log.esc_speeds[0],
+                                f"{path}: {commanded[0].label} against {log.esc_speeds[0].label}")
     notes = list(log.notes)
     pose = None
     if log.pose is not None:

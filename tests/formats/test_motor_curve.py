@@ -5,12 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mavsysid.formats.motor_curve import (
+    check_curve_against_rpm,
     check_pwm_outputs,
     pwm_from_rotor_speed,
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
     throttle_from_pwm,
 )
+from mavsysid.formats.parsed_log import Series
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
 from mavsysid.errors import LogFormatError
@@ -62,3 +64,19 @@ def test_pwm_outputs_in_range_pass_and_others_are_refused(firefly: VehicleConfig
         with pytest.raises(LogFormatError, match=r"^log\.tlog: SERVO_OUTPUT_RAW: the motor "
                            r"outputs are not PWM in the vehicle's \[motor\] range"):
             check_pwm_outputs(outputs, firefly, "log.tlog: SERVO_OUTPUT_RAW")
+
+
+def test_commanded_speeds_are_checked_against_sparse_esc_rpm() -> None:
+    """ESC rpm at 3 Hz beside outputs at 100 Hz: a curve within 15 % of it passes; one 20 ×
+    off (DroneCAN commands read as PWM through a PWM curve) is refused in one line."""
+    t = np.arange(0.0, 10.0, 0.01)
+    n = 400.0 + 50.0 * np.sin(t)[:, None] * np.array([1.0, -1.0, 1.0, -1.0])
+    commanded = Series(t, n, "actuator_outputs PWM")
+    slow = np.arange(0.05, 10.0, 0.3)
+    esc = Series(slow, 1.1 * (400.0 + 50.0 * np.sin(slow)[:, None]
+                              * np.array([-1.0, 1.0, -1.0, 1.0])), "esc_status rpm")
+    check_curve_against_rpm(commanded, esc, "log.ulg: actuator_outputs against esc_status")
+    far = Series(slow, 20.0 * esc.values, "esc_status rpm")
+    with pytest.raises(LogFormatError, match=r"^log\.ulg: actuator_outputs against esc_status: "
+                       r"the motor curve's rotor speeds are 0\.04\d+ × what the log's own ESC"):
+        check_curve_against_rpm(commanded, far, "log.ulg: actuator_outputs against esc_status")

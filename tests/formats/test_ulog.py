@@ -5,6 +5,8 @@ Flights are written with the synthetic-flight writer (`tests.support.synthetic_l
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -15,6 +17,7 @@ from mavsysid.estimation.readers import READERS, load_flight
 from mavsysid.formats.ulog import flattened_fields, write_ulog
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
 
+from mavsysid.errors import LogFormatError
 from tests.support.synthetic_logs import ULOG_FORMATS
 
 Truth = Callable[[np.ndarray], dict[str, np.ndarray]]
@@ -176,11 +179,19 @@ def test_multi_instance_topics_use_the_motors_and_the_primary_pose(
 
 
 def test_real_px4_log_with_4_hz_esc_status_reads_its_motor_commands() -> None:
-    """pyulog's sample_px4_events.ulg: esc_status at ~4 Hz, actuator_motors at 10 Hz."""
+    """pyulog's sample_px4_events.ulg: esc_status at ~4 Hz, actuator_motors at 10 Hz. Through
+    quad_x's curve the commands contradict the log's own ESC rpm: refused in one line; with
+    rotor_speed_max corrected as the message says, they read and agree."""
     path = REAL_LOGS / "px4-sample_px4_events.ulg"
     if not path.is_file():
         pytest.skip(f"no {path}")
+    with pytest.raises(LogFormatError, match="what the log's own ESC rpm says") as refused:
+        load_flight(path, load_vehicle("quad_x"))
+    assert "\n" not in str(refused.value)
+    factor = float(re.search(r"rotor_speed_max × ([\d.]+)", str(refused.value)).group(1))
     quad = load_vehicle("quad_x")
+    quad = dataclasses.replace(quad, limits=dataclasses.replace(
+        quad.limits, rotor_speed_max=quad.limits.rotor_speed_max * factor))
     streams = READERS[".ulg"](path, quad)
     (rotors,) = streams.rotors
     assert rotors.label == "actuator_motors" and rotors.values.shape[1] == 4
