@@ -35,11 +35,7 @@ from mavsysid.planner.settings import PlannerSettings
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["FLIGHT_LOG", "ExperimentOutcome", "run_autopilot_experiment"]
-
-#: The log θ is estimated from: the streamer's MAVLink log, the rotor speeds from the
-#: vehicle's ESC telemetry or its motor outputs through the vehicle file's motor curve.
-FLIGHT_LOG = "flight.tlog"
+__all__ = ["ExperimentOutcome", "run_autopilot_experiment"]
 
 
 @dataclass(frozen=True)
@@ -129,13 +125,14 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
     staged.replace(trajectory)
     if stream.dry_run:
         return ExperimentOutcome(source, plan, flight, trajectory, None, None)
-    log = flight.directory / FLIGHT_LOG
-    say(f"estimating θ from {log}")
+    say(f"estimating θ from {flight.directory} (its log with the most telling rotor speeds)")
     try:
-        estimate = run_estimate(log, vehicle, settings=estimator)
+        estimate = run_estimate(flight.directory, vehicle, settings=estimator)
     except JobFailedError as refused:
         raise JobFailedError(f"flown and recorded in {flight.directory}, but no estimate: "
                              f"{refused}") from refused
+    log = Path(estimate.flight.source)
+    say(f"estimated from {log.name}")
     estimate_file = flight.directory / "estimate.json"
     write_estimate_json(estimate_file, estimate.result, estimate.config, log)
     return ExperimentOutcome(source, plan, flight, trajectory, estimate, estimate_file)

@@ -18,6 +18,7 @@ from functools import partial
 from pathlib import Path
 
 from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.readers.flight_source import choose_flight_log
 from mavsysid.estimation.readers.logs import (
     TimeWindow,
     choose_window,
@@ -99,7 +100,9 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     Parameters
     ----------
     path : str or Path
-        The flight log: ``.csv``, ``.tlog``, ``.ulg`` or ``.bin`` (case-insensitive).
+        The flight log: ``.csv``, ``.tlog``, ``.ulg`` or ``.bin`` (case-insensitive); or a
+        flight directory, whose log with the most telling rotor speeds is read
+        (`mavsysid.estimation.readers.flight_source.choose_flight_log`, said in a note).
     vehicle : VehicleConfig
         The vehicle that flew: rotor count, nominal c_T and mass for the checks, and the
         ``[motor]`` curve for logs with motor outputs but no rotor speeds.
@@ -133,6 +136,9 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
         A log that cannot be read or fails a check (`mavsysid.estimation.readers.samples`); the
         message is one line naming the file.
     """
+    chosen = None
+    if Path(path).is_dir():
+        path, streams, chosen = choose_flight_log(Path(path), vehicle, READERS)
     path = _existing_file(path, "flight log")
     reader = READERS.get(path.suffix.lower())
     if reader is None:
@@ -142,7 +148,10 @@ def load_flight(path: str | Path, vehicle: VehicleConfig, pose: str | Path | Non
     if pose is None and time_offset is not None:
         raise InputError(f"{path}: a time offset applies only with a motion-capture pose file")
     edited = check_recorded_vehicle(path, vehicle)
-    streams = reader(path, vehicle)
+    if chosen is None:
+        streams = reader(path, vehicle)
+    else:
+        streams = dataclasses.replace(streams, warnings=(chosen, *streams.warnings))
     streams, window = _windowed(streams, path, start, end, auto_window)
     if pose is not None:
         streams = merge_pose(streams, _existing_file(pose, "motion-capture pose"), time_offset)

@@ -204,5 +204,7 @@ def next_step(outcome: ExperimentOutcome, vehicle: str) -> str:
     """
     if outcome.estimate_file is None:
         return "next: the same command without --dry-run flies it"
-    return (f"next: mavsysid diagnose {outcome.flight.directory / 'flight.tlog'} --vehicle "
-            f"{vehicle} --estimate {outcome.estimate_file}")
+    log = (outcome.flight.directory / "flight.tlog" if outcome.estimate is None
+           else outcome.estimate.flight.source)
+    return (f"next: mavsysid diagnose {log} --vehicle {vehicle} --estimate "
+            f"{outcome.estimate_file}")

@@ -31,7 +31,8 @@ def add_log_arguments(parser: argparse.ArgumentParser, kinds: str) -> None:
     kinds : str
         The logs the command reads, in words (`mavsysid.estimation.describe_log_kinds`).
     """
-    parser.add_argument("log", type=Path, help=f"flight log: {kinds}")
+    parser.add_argument("log", type=Path, help=f"flight log: {kinds}; or a flight "
+                        "directory (its log with the most telling rotor speeds)")
     parser.add_argument("--vehicle", default="firefly",
                         help="shipped vehicle name or TOML path (default: firefly)")
 

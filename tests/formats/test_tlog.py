@@ -165,3 +165,25 @@ def test_commanded_rotor_speeds_follow_the_battery_voltage(
                                rtol=2e-3)
     assert [w for w in plain.warnings if "battery fell from 16.80 to 14.0" in w]
     assert [w for w in scaled.warnings if "scaled by the battery voltage" in w]
+
+
+def test_a_flight_directory_reads_its_log_with_measured_rotor_speeds(
+        tmp_path: Path, firefly: VehicleConfig, truth: Truth,
+        tlog_writer: Callable[..., None]) -> None:
+    """Given the flight directory, its log with ESC rpm is read over the one with servo
+    outputs at the same rate, and a note says which and why; the servo log alone, named
+    by meta.json, is read when the other is unreadable."""
+    import json
+
+    tlog_writer(tmp_path / "flight.tlog", _flight(truth, firefly, "autopilot", "servo"))
+    tlog_writer(tmp_path / "autopilot.tlog", _flight(truth, firefly, "autopilot", "esc"))
+    (tmp_path / "meta.json").write_text(json.dumps(
+        {"files": {"tlog": "flight.tlog", "autopilot_log": "autopilot.tlog"}}))
+    data = load_flight(tmp_path, firefly)
+    assert data.source == str(tmp_path / "autopilot.tlog")
+    assert [w for w in data.warnings if "estimating from autopilot.tlog: its rotor speeds "
+            "(measured rpm) at 50 Hz, against flight.tlog 50 Hz" in w], data.warnings
+    (tmp_path / "autopilot.tlog").write_bytes(b"\x00" * 10)
+    data = load_flight(tmp_path, firefly)
+    assert data.source == str(tmp_path / "flight.tlog")
+    assert [w for w in data.warnings if "autopilot.tlog unreadable" in w], data.warnings
