@@ -33,7 +33,13 @@ Reader = Callable[[Path, VehicleConfig], LogStreams]
 
 
 def rotor_rate(streams: LogStreams) -> tuple[float, bool]:
-    """The rotor speeds' median sample rate, Hz, and whether they are measured rpm."""
+    """The rotor speeds' median sample rate, Hz, and whether they are measured rpm.
+
+    Parameters
+    ----------
+    streams : LogStreams
+        A log as read; its first rotor series is judged.
+    """
     series = streams.rotors[0]
     steps = np.diff(np.asarray(series.t, float))
     steps = steps[steps > 0.0]
