@@ -94,9 +94,9 @@ from mavsysid.vehicle.parameters import (
 
 from mavsysid.errors import JobFailedError
 
-__all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "FilterEstimator", "ParameterAnswer",
-           "answer_parameters", "balance_only_result", "check_result", "estimate",
-           "follow_rejected", "with_answer"]
+__all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "MIN_TORQUE_INPUT_RATE", "FilterEstimator",
+           "ParameterAnswer", "answer_parameters", "balance_only_result", "check_result",
+           "estimate", "follow_rejected", "input_rate", "with_answer"]
 
 #: What estimates θ with the filter and batch from a read flight, given the balance's θ
 #: as the equation-error reference (None: it computes its own): `estimate_parameters`, or
@@ -110,6 +110,31 @@ FilterEstimator = Callable[[FlightData, VehicleConfig, EstimatorSettings | None,
 AGREEMENT_SIGMAS = Z95
 #: A data value within this many σ of 0 puts c_D at its bound.
 BOUND_SIGMAS = 2.0
+#: Rotor speeds sampled slower than this, Hz, do not resolve the attitude's excitation (a
+#: few Hz) for the filter: interpolated between samples, their differences lag and smear
+#: the torques, which the filter reads as inertia (ArduCopter SITL's tlog thinned to
+#: 10 Hz: j_x +83 % at 5.4 σ, c_T still right). The balance's band stops at 0.15 of the
+#: rate; below this rate the torque quantities (c_M, J) are the balance's or none.
+MIN_TORQUE_INPUT_RATE = 20.0
+_TORQUE = np.array([name == "c_M" or name.startswith("j_") for name in PARAMETER_NAMES])
+
+
+def input_rate(flight: FlightData) -> float | None:
+    """The slowest rotor-speed series' median sample rate as logged, Hz; None unknown.
+
+    Parameters
+    ----------
+    flight : FlightData
+    """
+    if flight.inputs is None or not flight.inputs.series:
+        return None
+    rates = []
+    for t, _ in flight.inputs.series:
+        steps = np.diff(np.asarray(t, float))
+        steps = steps[steps > 0.0]
+        if steps.size:
+            rates.append(1.0 / float(np.median(steps)))
+    return min(rates) if rates else None
 
 
 def _balance_data(balance: WrenchBalanceResult | None, count: int
@@ -146,13 +171,17 @@ def _at_bound(b_val: np.ndarray, b_sig: np.ndarray, prior: ParameterEstimate) ->
 
 
 def _sources(f_est: ParameterEstimate | None, balance: WrenchBalanceResult | None,
-             prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...]
+             prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...],
+             excluded: np.ndarray | None = None
              ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Per quantity, the estimate that answers ("filter", "balance", "prior"), where the
-    filter and the balance disagree, and the disagreements in words (module docstring)."""
+    filter and the balance disagree, and the disagreements in words (module docstring);
+    the filter determines none of ``excluded``."""
     n = len(quantities)
     f_det = (np.zeros(n, bool) if f_est is None
              else quantity_status(f_est.value, f_est.sigma, prior.sigma))
+    if excluded is not None:
+        f_det &= ~excluded
     b_det = np.zeros(n, bool) if balance is None else np.asarray(balance.determined, bool)
     b_val, b_sig = _balance_data(balance, n)
     source = np.full(n, "prior", dtype=object)
@@ -206,7 +235,7 @@ class ParameterAnswer:
 def answer_parameters(
     filter_result: EstimationResult | None, balance: WrenchBalanceResult | None,
     prior: ParameterEstimate, quantities: tuple[EstimatedQuantity, ...] = PAPER_THETA,
-    refused_filter: EstimationResult | None = None,
+    refused_filter: EstimationResult | None = None, slow_inputs: bool = False,
 ) -> ParameterAnswer:
     """Each quantity from the filter's result and the balance (module docstring).
 
@@ -224,6 +253,9 @@ def answer_parameters(
         A filter result that was refused (`check_result`) and gives no value: where it
         disagrees with the balance, the balance's value is still contradicted, so c_D is
         not put at its bound there.
+    slow_inputs : bool
+        The rotor speeds were sampled slower than `MIN_TORQUE_INPUT_RATE`: the filter's
+        torque quantities (c_M, J) are not taken.
 
     Returns
     -------
@@ -237,13 +269,21 @@ def answer_parameters(
     if filter_result is None and balance is None:
         raise JobFailedError("no estimate to answer from")
     f_est = None if filter_result is None else filter_result.final.on(prior)
-    source, disagree, mismatch = _sources(f_est, balance, prior, quantities)
+    excluded = np.zeros(len(quantities), bool)
+    excluded[:len(PARAMETER_NAMES)] = _TORQUE & slow_inputs
+    source, disagree, mismatch = _sources(f_est, balance, prior, quantities, excluded)
     if f_est is None and refused_filter is not None and balance is not None:
         _, disagree, mismatch = _sources(_unwidened(refused_filter).on(prior), balance,
                                          prior, quantities)
     b_val, b_sig = _balance_data(balance, len(quantities))
     # A bound is the answer only where nothing contradicts the balance's value.
     bound = _at_bound(b_val, b_sig, prior) & (source == "prior") & ~disagree
+    checker = f_est if f_est is not None or refused_filter is None else _unwidened(
+        refused_filter).on(prior)
+    if checker is not None and bound[C_D]:  # a filter value that contradicts the bound
+        bound[C_D] = _filter_stands(float(checker.value[C_D]), float(checker.sigma[C_D]),
+                                    float(b_val[C_D]), float(b_sig[C_D]),
+                                    quantities[C_D].tolerance)[0]
     value, cov = _assemble(source, f_est, balance, prior)
     leaning: tuple[str, ...] = ()
     if f_est is not None:
@@ -579,7 +619,9 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
               ) -> EstimationResult:
     """The per-parameter answer (`answer_parameters`) and its notes; ``refused``, a filter
     result `check_result` refused, still says where the balance is contradicted."""
-    answer = answer_parameters(result, balance, prior, config.quantities, refused)
+    rate = input_rate(flight)
+    slow = rate is not None and rate < MIN_TORQUE_INPUT_RATE
+    answer = answer_parameters(result, balance, prior, config.quantities, refused, slow)
     estimate, status, source, mismatch = (answer.estimate, answer.status, answer.source,
                                           answer.mismatch)
     notes = list(balance.notes)
@@ -595,6 +637,10 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
                      + "; ".join(mismatch) + ": the balance answers for them (where it "
                      "determines them; not determined where it does not); the model "
                      "misses something (mavsysid diagnose names what)")
+    if slow and result is not None:
+        notes.append(f"rotor speeds sampled at {rate:.3g} Hz (below "
+                     f"{MIN_TORQUE_INPUT_RATE:g} Hz) do not resolve the attitude's torques "
+                     "for the filter: c_M and J are the balance's, where it determines them")
     if answer.leaning:
         notes.append("the filter's " + ", ".join(answer.leaning) + " lean on a value the "
                      "balance rejected: value and σ follow that quantity's answer")

@@ -204,3 +204,25 @@ def test_a_refused_filter_still_keeps_c_d_off_its_bound():
     assert answer.status[1] == NOT_DETERMINED and answer.source[1] == "prior"
     assert [m.split(":")[0] for m in answer.mismatch] == ["c_D"]
     assert answer_parameters(None, balance, PRIOR).status[1] == AT_BOUND
+
+
+def test_slow_rotor_speeds_leave_the_torque_quantities_to_the_balance():
+    """Rotor speeds below 20 Hz: the filter's c_M and J (here 40 % off, σ 3 %) are not
+    taken where the balance does not determine them; its c_T and c_D still are."""
+    rel = np.array([0.01, 0.05, 0.5, 0.5, 0.5, 0.5])
+    filt = _filter(THETA * np.array([1, 1, 1.4, 1.4, 1.4, 1.4]), 0.03)
+    answer = answer_parameters(filt, _balance(THETA, rel), PRIOR, slow_inputs=True)
+    assert [answer.status[i] for i in (2, 3, 4, 5)] == [NOT_DETERMINED] * 4
+    assert answer.source[:2] == ("filter", "filter")
+    assert answer_parameters(filt, _balance(THETA, rel), PRIOR).source[3] == "filter"
+
+
+def test_a_filter_c_d_it_does_not_determine_still_contradicts_the_bound():
+    """The balance puts c_D within 2 σ of 0; the filter's c_D, at the truth with σ 16 %
+    (not determined), lies 6 σ of their difference away: not at the bound."""
+    rel = np.array([0.01, 1.0, 0.05, 0.05, 0.05, 0.05])
+    balance = _balance(THETA * np.array([1, 0.05, 1, 1, 1, 1]), rel)
+    answer = answer_parameters(_filter(THETA, 0.16), balance, PRIOR)
+    assert answer.status[1] == NOT_DETERMINED
+    assert answer_parameters(_filter(THETA * np.array([1, 0.05, 1, 1, 1, 1]), 0.16),
+                             balance, PRIOR).status[1] == AT_BOUND
