@@ -96,7 +96,7 @@ from mavsysid.errors import JobFailedError
 
 __all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "MIN_TORQUE_INPUT_RATE", "FilterEstimator",
            "ParameterAnswer", "answer_parameters", "balance_only_result", "check_result",
-           "estimate", "follow_rejected", "input_rate", "with_answer"]
+           "estimate", "follow_rejected", "with_answer"]
 
 #: What estimates θ with the filter and batch from a read flight, given the balance's θ
 #: as the equation-error reference (None: it computes its own): `estimate_parameters`, or
@@ -117,24 +117,6 @@ BOUND_SIGMAS = 2.0
 #: rate; below this rate the torque quantities (c_M, J) are the balance's or none.
 MIN_TORQUE_INPUT_RATE = 20.0
 _TORQUE = np.array([name == "c_M" or name.startswith("j_") for name in PARAMETER_NAMES])
-
-
-def input_rate(flight: FlightData) -> float | None:
-    """The slowest rotor-speed series' median sample rate as logged, Hz; None unknown.
-
-    Parameters
-    ----------
-    flight : FlightData
-    """
-    if flight.inputs is None or not flight.inputs.series:
-        return None
-    rates = []
-    for t, _ in flight.inputs.series:
-        steps = np.diff(np.asarray(t, float))
-        steps = steps[steps > 0.0]
-        if steps.size:
-            rates.append(1.0 / float(np.median(steps)))
-    return min(rates) if rates else None
 
 
 def _balance_data(balance: WrenchBalanceResult | None, count: int
@@ -619,7 +601,7 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
               ) -> EstimationResult:
     """The per-parameter answer (`answer_parameters`) and its notes; ``refused``, a filter
     result `check_result` refused, still says where the balance is contradicted."""
-    rate = input_rate(flight)
+    rate = None if flight.inputs is None else flight.inputs.slowest_rate
     slow = rate is not None and rate < MIN_TORQUE_INPUT_RATE
     answer = answer_parameters(result, balance, prior, config.quantities, refused, slow)
     estimate, status, source, mismatch = (answer.estimate, answer.status, answer.source,

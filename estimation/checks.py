@@ -41,6 +41,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 from mavsysid.estimation.flight import FlightData
 from mavsysid.estimation.signals import (
+    SmoothedPose,
     SmootherSettings,
     UniformSegment,
     smooth_pose,
@@ -274,19 +275,43 @@ MIN_TILT_ACCELERATION = 0.3
 TILT_WINDOW = 0.3
 
 
-def _segment_terms(segment: UniformSegment) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Measured a_h, tilt-predicted a_h and v_h of one uniform segment, each shape (M, 2)."""
+def _smoothed(segment: UniformSegment) -> tuple[SmoothedPose, int, slice] | None:
+    """The segment's pose smoothed as the kinematic checks smooth it, and the rows clear of
+    the smoother's one-sided edges; None for a segment too short."""
     settings = SmootherSettings(window=TILT_WINDOW, polyorder=3)
     window = settings.samples(segment.dt)
     if len(segment) < 3 * window:
         return None
     pose = smooth_pose(segment.t, segment.position, segment.quaternion, settings)
+    return pose, window, slice(window // 2, len(segment) - window // 2)
+
+
+def _segment_terms(segment: UniformSegment) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Measured a_h, tilt-predicted a_h and v_h of one uniform segment, each shape (M, 2)."""
+    smoothed = _smoothed(segment)
+    if smoothed is None:
+        return None
+    pose, _, cut = smoothed
     a, v, b = pose.acceleration, pose.velocity, pose.rotation()[:, :, 2]
     upright = b[:, 2] > 0.3  # beyond ~70° of tilt the ratio b_h / b_z means nothing
     predicted = (a[:, 2:3] + GRAVITY) * b[:, :2] / np.where(upright, b[:, 2], 1.0)[:, None]
-    cut = slice(window // 2, len(segment) - window // 2)  # the smoother's edges are one-sided
     keep = upright[cut]
     return a[cut, :2][keep], predicted[cut][keep], v[cut, :2][keep]
+
+
+def _gain(rows: list[np.ndarray], targets: list[np.ndarray]) -> float | None:
+    """The first coefficient of the stacked regression, when its column varies enough
+    (`MIN_TILT_ACCELERATION`) and everything is finite; None otherwise."""
+    if not rows:
+        return None
+    design, target = np.vstack(rows), np.concatenate(targets)
+    if not (np.isfinite(design).all() and np.isfinite(target).all()):
+        return None
+    centred = design[:, 0] - np.mean(design[:, 0])
+    if np.sqrt(np.mean(centred**2)) < MIN_TILT_ACCELERATION:
+        return None
+    solution, *_ = np.linalg.lstsq(design, target, rcond=None)
+    return float(solution[0])
 
 
 def tilt_gain(flight: FlightData) -> float | None:
@@ -299,8 +324,6 @@ def tilt_gain(flight: FlightData) -> float | None:
     """
     parts = [_segment_terms(s) for s in uniform_segments(flight, 0.0)]
     parts = [x for x in parts if x is not None and x[0].shape[0] > 0]
-    if not parts:
-        return None
     rows, targets = [], []
     for s, (a, predicted, v) in enumerate(parts):
         for axis in range(2):
@@ -308,14 +331,7 @@ def tilt_gain(flight: FlightData) -> float | None:
             offsets[:, 2 * s + axis] = 1.0  # one constant per segment and axis
             rows.append(np.column_stack([predicted[:, axis], v[:, axis], offsets]))
             targets.append(a[:, axis])
-    design, target = np.vstack(rows), np.concatenate(targets)
-    if not (np.isfinite(design).all() and np.isfinite(target).all()):
-        return None
-    centred = design[:, 0] - np.mean(design[:, 0])
-    if np.sqrt(np.mean(centred**2)) < MIN_TILT_ACCELERATION:
-        return None
-    solution, *_ = np.linalg.lstsq(design, target, rcond=None)
-    return float(solution[0])
+    return _gain(rows, targets)
 
 
 #: κ (`imu_gain`) within this share of 1 says the clock and position unit are right.
@@ -342,30 +358,20 @@ def imu_gain(flight: FlightData) -> float | None:
     rows, targets = [], []
     segments = list(uniform_segments(flight, 0.0))
     for index, segment in enumerate(segments):
-        settings = SmootherSettings(window=TILT_WINDOW, polyorder=3)
-        window = settings.samples(segment.dt)
-        if len(segment) < 3 * window:
+        smoothed = _smoothed(segment)
+        if smoothed is None:
             continue
-        pose = smooth_pose(segment.t, segment.position, segment.quaternion, settings)
+        pose, window, cut = smoothed
         force = np.column_stack([np.interp(segment.t, imu.accel.t, imu.accel.values[:, i])
                                  for i in range(3)])
-        world = np.einsum("nij,nj->ni", pose.rotation(), force)
-        world = savgol_filter(world, window, 3, axis=0)
-        cut = slice(window // 2, len(segment) - window // 2)
+        world = savgol_filter(np.einsum("nij,nj->ni", pose.rotation(), force), window, 3,
+                              axis=0)
         for axis in range(2):
             offsets = np.zeros((len(segment), 2 * len(segments)))
             offsets[:, 2 * index + axis] = 1.0  # an accelerometer bias per segment and axis
             rows.append(np.column_stack([pose.acceleration[:, axis], offsets])[cut])
             targets.append(world[cut, axis])
-    if not rows:
-        return None
-    design, target = np.vstack(rows), np.concatenate(targets)
-    centred = design[:, 0] - np.mean(design[:, 0])
-    if not np.isfinite(design).all() or not np.isfinite(target).all() or (
-            np.sqrt(np.mean(centred**2)) < MIN_TILT_ACCELERATION):
-        return None
-    solution, *_ = np.linalg.lstsq(design, target, rcond=None)
-    return float(solution[0])
+    return _gain(rows, targets)
 
 
 def check_kinematics(flight: FlightData) -> str | None:

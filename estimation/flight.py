@@ -89,6 +89,17 @@ class InputSamples:
 
     series: tuple[tuple[np.ndarray, np.ndarray], ...]
 
+    @property
+    def slowest_rate(self) -> float | None:
+        """The slowest series' median sample rate, Hz; None without two distinct times."""
+        rates = []
+        for ts, _ in self.series:
+            steps = np.diff(np.asarray(ts, float))
+            steps = steps[steps > 0.0]
+            if steps.size:
+                rates.append(1.0 / float(np.median(steps)))
+        return min(rates) if rates else None
+
     def scaled(self, rotor: int, factor: float) -> InputSamples:
         """These samples with rotor ``rotor``'s speeds (0-based) multiplied by ``factor``.
 

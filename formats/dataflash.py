@@ -98,12 +98,7 @@ from typing import Any
 
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
-from mavsysid.formats.motor_curve import (
-    battery_scale,
-    check_pwm_outputs,
-    pwm_curve_caveat,
-    rotor_speed_from_pwm,
-)
+from mavsysid.formats.motor_curve import commanded_rotor_speeds
 from mavsysid.formats.parsed_log import (
     ImuFilter,
     ModeChanges,
@@ -675,16 +670,10 @@ def read_dataflash(path: Path, vehicle: VehicleConfig) -> ParsedLog:
         if escs is not None:
             rotors = escs
         elif outputs is not None:
-            check_pwm_outputs(outputs.series.values, vehicle, f"{path}: RCOU")
-            speeds = rotor_speed_from_pwm(outputs.series.values, vehicle)
-            scale, battery_note = battery_scale(outputs.series.t, _battery(found["BAT"]),
-                                                vehicle, f"{path}: BAT")
-            rotors = (Series(outputs.series.t,
-                             speeds if scale is None else speeds * scale[:, None],
-                             "RCOU PWM"),)
-            notes.append(f"{path}: no ESC rpm; rotor speeds are RCOU motor outputs "
-                         f"{pwm_curve_caveat(vehicle)}")
-            notes += [battery_note] if battery_note else []
+            speeds, said = commanded_rotor_speeds(str(path), outputs.series, "RCOU",
+                                                  _battery(found["BAT"]), "BAT", vehicle)
+            rotors = (speeds,)
+            notes += said
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no ESC "
                                  "RPM, no RCOU)")

@@ -29,7 +29,7 @@ from mavsysid.vehicle.config import VehicleConfig
 from mavsysid.errors import LogFormatError
 
 __all__ = ["CURVE_RPM_TOLERANCE", "VOLTAGE_SAG_NOTE", "battery_scale", "check_curve_against_rpm",
-           "check_pwm_outputs", "describe_curve",
+           "check_pwm_outputs", "commanded_rotor_speeds", "describe_curve",
            "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
            "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
 
@@ -281,6 +281,45 @@ def battery_scale(t: np.ndarray, battery: Series | None, vehicle: VehicleConfig,
             "at the same output): state [motor] voltage, the voltage the curve holds at, to "
             "scale them")
     return None, None
+
+
+def commanded_rotor_speeds(log: str, outputs: Series, message: str, battery: Series | None,
+                           battery_message: str, vehicle: VehicleConfig
+                           ) -> tuple[Series, list[str]]:
+    """Rotor speeds from logged PWM motor outputs: checked as PWM (`check_pwm_outputs`),
+    through the vehicle's curve, scaled by the battery (`battery_scale`).
+
+    Parameters
+    ----------
+    log : str
+        The log, for messages.
+    outputs : Series
+        The motor outputs, µs, shape (N, k).
+    message : str
+        The log's message (or topic) of the outputs.
+    battery : Series or None
+        The battery voltage, V, on the outputs' clock.
+    battery_message : str
+        The log's message of the voltage.
+    vehicle : VehicleConfig
+
+    Returns
+    -------
+    speeds : Series
+        rad/s, labelled as ``outputs``.
+    notes : list of str
+        What they are (`pwm_curve_caveat`) and what the battery did to them.
+    """
+    check_pwm_outputs(outputs.values, vehicle, f"{log}: {message}")
+    speeds = rotor_speed_from_pwm(outputs.values, vehicle)
+    scale, battery_note = battery_scale(outputs.t, battery, vehicle, f"{log}: {battery_message}")
+    if scale is not None:
+        speeds = speeds * scale[:, None]
+    notes = [f"{log}: no ESC rpm; rotor speeds are motor outputs ({message}) "
+             f"{pwm_curve_caveat(vehicle)}"]
+    if battery_note:
+        notes.append(battery_note)
+    return Series(outputs.t, speeds, outputs.label), notes
 
 
 #: The motor curve's rotor speeds may lie this share off a log's own ESC rpm (its median

@@ -59,12 +59,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
-from mavsysid.formats.motor_curve import (
-    battery_scale,
-    check_pwm_outputs,
-    pwm_curve_caveat,
-    rotor_speed_from_pwm,
-)
+from mavsysid.formats.motor_curve import commanded_rotor_speeds
 from mavsysid.formats.parsed_log import (
     ImuFilter,
     ModeChanges,
@@ -474,16 +469,11 @@ def read_tlog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
         if any(own.get(name) for name in ESC_TELEMETRY):
             rotors = escs = _esc_rotors(path, own, clock, vehicle.rotor_count)
         elif outputs is not None:
-            check_pwm_outputs(outputs.series.values, vehicle, f"{path}: SERVO_OUTPUT_RAW")
-            speeds = rotor_speed_from_pwm(outputs.series.values, vehicle)
-            scale, battery_note = battery_scale(outputs.series.t, _battery(own, clock),
-                                                vehicle, f"{path}: SYS_STATUS")
-            rotors = (Series(outputs.series.t,
-                             speeds if scale is None else speeds * scale[:, None],
-                             "SERVO_OUTPUT_RAW PWM"),)
-            rotor_notes.append(f"{path}: no ESC rpm; rotor speeds are motor outputs "
-                               f"(SERVO_OUTPUT_RAW) {pwm_curve_caveat(vehicle)}")
-            rotor_notes += [battery_note] if battery_note else []
+            speeds, said = commanded_rotor_speeds(
+                str(path), outputs.series, "SERVO_OUTPUT_RAW", _battery(own, clock),
+                "SYS_STATUS", vehicle)
+            rotors = (speeds,)
+            rotor_notes += said
         else:
             raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no "
                                  "ESC_TELEMETRY_* rpm, no SERVO_OUTPUT_RAW)")
