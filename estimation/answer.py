@@ -42,6 +42,11 @@ determined. A filter that cannot follow the flight, or
 whose θ `check_result` refuses (physically impossible, far outside the prior, contradicted
 by the balance), leaves the balance's answer with the reason in the notes; a flight is
 refused only when neither determines anything.
+
+Rotor speeds that are motor outputs through the vehicle's motor curve are only as right as
+the curve: a common scale s on them (T = c_T n², so c_T and c_M come out as 1/s² of the
+truth, c_D and J unchanged) adds its relative σ, twice, to c_T and c_M, fully correlated
+(`with_rotor_scale`); a quantity it widens beyond the rule is no longer determined.
 """
 
 from __future__ import annotations
@@ -84,6 +89,7 @@ from mavsysid.vehicle.imu import imu_quantities
 from mavsysid.vehicle.linearization import MEAS_DIM
 from mavsysid.vehicle.parameters import (
     C_D,
+    C_M,
     C_T,
     INERTIA,
     PAPER_THETA,
@@ -96,7 +102,8 @@ from mavsysid.errors import JobFailedError
 
 __all__ = ["AGREEMENT_SIGMAS", "BOUND_SIGMAS", "MIN_TORQUE_INPUT_RATE", "FilterEstimator",
            "ParameterAnswer", "answer_parameters", "balance_only_result", "check_result",
-           "estimate", "follow_rejected", "with_answer"]
+           "estimate", "follow_rejected", "with_answer", "with_curve_uncertainty",
+           "with_rotor_scale"]
 
 #: What estimates θ with the filter and batch from a read flight, given the balance's θ
 #: as the equation-error reference (None: it computes its own): `estimate_parameters`, or
@@ -513,11 +520,21 @@ def estimate(flight: FlightData, config: VehicleConfig,
         return _answered(None, reason, balance, config, flight, prior, refused=result)
     assert result is not None
     if balance_refusal is not None:
-        return replace(result, notes=result.notes + (
+        result = replace(result, notes=result.notes + (
             f"no force and torque balance check: {balance_refusal}",))
-    if balance is None:
-        return result
+    if balance_refusal is not None or balance is None:
+        return _filterwith_curve_uncertainty(result, flight.rotor_scale_sigma)
     return _answered(result, None, balance, config, flight, prior)
+
+
+def _filterwith_curve_uncertainty(result: EstimationResult, scale_sigma: float) -> EstimationResult:
+    """A filter's answer alone with the motor curve's uncertainty (`with_rotor_scale`)."""
+    if scale_sigma <= 0.0:
+        return result
+    widened = with_rotor_scale(result.final, scale_sigma, np.ones(result.final.value.size, bool))
+    return replace(result, answer=widened, notes=result.notes + (
+        f"rotor speeds are motor outputs through the motor curve, known to "
+        f"{100 * scale_sigma:.2g} %: c_T and c_M carry twice that in their σ",))
 
 
 def _filter_inputs(config: VehicleConfig, settings: EstimatorSettings,
@@ -604,9 +621,10 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
     rate = None if flight.inputs is None else flight.inputs.slowest_rate
     slow = rate is not None and rate < MIN_TORQUE_INPUT_RATE
     answer = answer_parameters(result, balance, prior, config.quantities, refused, slow)
+    answer, curve = with_curve_uncertainty(answer, flight.rotor_scale_sigma, prior)
     estimate, status, source, mismatch = (answer.estimate, answer.status, answer.source,
                                           answer.mismatch)
-    notes = list(balance.notes)
+    notes = [*balance.notes, *curve]
     if result is None:
         notes.append(f"the filter and batch could not follow this flight ({filter_refusal}); "
                      "the answer is the force and torque balance's")
@@ -634,6 +652,73 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
     notes.extend(_triangle_note(estimate, status))
     return with_answer(result, estimate, status, source, mismatch, balance, filter_refusal,
                        tuple(notes))
+
+
+def with_rotor_scale(estimate: ParameterEstimate, scale_sigma: float,
+                     determined: np.ndarray) -> ParameterEstimate:
+    """``estimate`` with the rotor speeds' scale uncertainty on c_T and c_M (module docstring).
+
+    Parameters
+    ----------
+    estimate : ParameterEstimate
+        SI; θ first.
+    scale_sigma : float
+        Relative 1σ of the rotor speeds' common scale.
+    determined : ndarray of bool, shape (P,)
+        The quantities the data gave (a prior's σ already holds the scale).
+
+    Returns
+    -------
+    ParameterEstimate
+        Σ + σ² g gᵀ, g = −2 (c_T, 0, c_M, 0, …) on the determined c_T and c_M.
+    """
+    g = np.zeros(estimate.value.size)
+    for j in (C_T, C_M):
+        if determined[j]:
+            g[j] = -2.0 * float(estimate.value[j])
+    return ParameterEstimate(estimate.value, estimate.covariance + scale_sigma**2 * np.outer(g, g),
+                             estimate.names)
+
+
+def with_curve_uncertainty(answer: ParameterAnswer, scale_sigma: float, prior: ParameterEstimate
+                  ) -> tuple[ParameterAnswer, list[str]]:
+    """The answer with the motor curve's uncertainty (`with_rotor_scale`), and its note.
+
+    Parameters
+    ----------
+    answer : ParameterAnswer
+    scale_sigma : float
+        Relative 1σ of the rotor speeds' scale (0: measured; the answer is returned as is).
+    prior : ParameterEstimate
+        What a quantity widened beyond `MAX_RELATIVE_SIGMA` falls back to.
+
+    Returns
+    -------
+    ParameterAnswer, list of str
+        The widened answer (c_T, c_M no longer determined where too wide) and its note.
+    """
+    if scale_sigma <= 0.0:
+        return answer, []
+    status, source = list(answer.status), list(answer.source)
+    determined = np.array([s == DETERMINED for s in status])
+    widened = with_rotor_scale(answer.estimate, scale_sigma, determined)
+    value, cov = widened.value.copy(), widened.covariance.copy()
+    names = [PARAMETER_NAMES[j] for j in (C_T, C_M) if determined[j]]
+    lost = []
+    for j in (C_T, C_M):
+        relative = math.sqrt(cov[j, j]) / abs(value[j]) if value[j] else math.inf
+        if determined[j] and relative > MAX_RELATIVE_SIGMA:
+            _take_from(j, prior, value, cov)
+            status[j], source[j] = NOT_DETERMINED, "prior"
+            lost.append(PARAMETER_NAMES[j])
+    if not names:
+        return answer, []
+    note = (f"rotor speeds are motor outputs through the motor curve, known to "
+            f"{100 * scale_sigma:.2g} %: {' and '.join(names)} carry twice that in their σ")
+    if lost:
+        note += f" ({', '.join(lost)} then not determined)"
+    return replace(answer, estimate=ParameterEstimate(value, cov, widened.names),
+                   status=tuple(status), source=tuple(source)), [note]
 
 
 def _triangle_note(estimate: ParameterEstimate, status: tuple[str, ...]) -> list[str]:

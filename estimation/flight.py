@@ -362,6 +362,11 @@ class FlightData:
         None: the rotor speeds are exact at ``t`` (as in a pose log).
     imu : Imu or None
         The vehicle's IMU over the flight, at its own rates; None when the log has none.
+    rotor_scale_sigma : float
+        Relative 1σ of the rotor speeds' common scale: the motor curve's, where they are
+        motor outputs through it (the vehicle file's ``[motor] curve_sigma``, or its fit
+        to the log's own ESC rpm); 0 where they are measured or exact. c_T and c_M go as
+        its square; c_D and J do not depend on it.
     """
 
     t: np.ndarray
@@ -375,6 +380,7 @@ class FlightData:
     segment_starts: tuple[int, ...] = (0,)
     inputs: InputSamples | None = None
     imu: Imu | None = None
+    rotor_scale_sigma: float = 0.0
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -18,9 +18,15 @@ voltage: n(V) = n · V / V_ref. Where the vehicle file states V_ref (``[motor] v
 and the log has the battery's voltage, `battery_scale` gives that factor per output sample;
 where it does not and the battery fell in flight, it says how far the commanded speeds are
 off (a 10 % sag is 19 % of thrust at the same output).
+
+A log with ESC rpm too sparse to be the rotor speeds still measures the curve's scale
+(`fit_curve_scale`): the readers' callers take the curve times that scale, with its σ, and
+refuse a curve too far off to be these motors' (`check_curve_against_rpm`).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from mavsysid.formats.parsed_log import Series
@@ -28,8 +34,9 @@ from mavsysid.vehicle.config import VehicleConfig
 
 from mavsysid.errors import LogFormatError
 
-__all__ = ["CURVE_RPM_TOLERANCE", "VOLTAGE_SAG_NOTE", "battery_scale", "check_curve_against_rpm",
-           "check_pwm_outputs", "commanded_rotor_speeds", "describe_curve",
+__all__ = ["CURVE_RPM_TOLERANCE", "VOLTAGE_SAG_NOTE", "CurveScale", "battery_scale",
+           "check_curve_against_rpm", "check_pwm_outputs", "commanded_rotor_speeds",
+           "describe_curve", "fit_curve_scale",
            "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
            "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
 
@@ -327,13 +334,79 @@ def commanded_rotor_speeds(log: str, outputs: Series, message: str, battery: Ser
 CURVE_RPM_TOLERANCE = 0.15
 
 
-def check_curve_against_rpm(commanded: Series, esc: Series, where: str) -> None:
-    """Refuse commanded rotor speeds that the same log's ESC rpm, even sparse, contradicts.
+#: Share of the flight's high commanded speed (its 90th percentile, summed over rotors)
+#: above which an ESC sample carries the vehicle and counts in the curve's scale.
+CARRYING_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class CurveScale:
+    """The motor curve's scale fitted to a log's own ESC rpm.
+
+    Attributes
+    ----------
+    factor : float
+        ESC rotor speed / the curve's, the median over the flight: the curve with
+        ``rotor_speed_max × factor`` gives the ESC's speeds.
+    sigma : float
+        1σ of ``factor``: the ratios' robust spread over the square root of their
+        effective number (their lag-1 correlation counted).
+    samples : int
+        ESC samples where both ran.
+    """
+
+    factor: float
+    sigma: float
+    samples: int
+
+
+def fit_curve_scale(commanded: Series, esc: Series) -> CurveScale | None:
+    """The scale that takes the curve's rotor speeds to the log's ESC rpm, however sparse.
 
     A log whose ESC rpm comes too seldom to follow a manoeuvre still says how fast the
     rotors turn on average: the ratio of the summed ESC speeds to the summed commanded ones
-    at the ESC's times, its median over the samples where both run, must lie within
-    `CURVE_RPM_TOLERANCE` of 1 (a sum, so the two need not number the rotors alike).
+    at the ESC's times (a sum, so the two need not number the rotors alike), its median
+    over the samples where both run and the rotors carry the vehicle (`CARRYING_SHARE`).
+
+    Parameters
+    ----------
+    commanded : Series
+        Rotor speeds through the motor curve, rad/s, shape (N, k).
+    esc : Series
+        The ESC's rotor speeds, rad/s, shape (M, k'), on the same clock.
+
+    Returns
+    -------
+    CurveScale or None
+        None with fewer than three samples where both run.
+    """
+    measured = np.nansum(np.asarray(esc.values, float), axis=1)
+    curve = np.sum([np.interp(esc.t, commanded.t, column)
+                    for column in np.asarray(commanded.values, float).T], axis=0)
+    inside = (esc.t >= commanded.t[0]) & (esc.t <= commanded.t[-1])
+    running = inside & (measured > 0.0) & (curve > 0.0)
+    if running.sum() >= 3:
+        # Idle and spin-up do not carry the vehicle (the curve's low end is an idle
+        # setting, and the ESC lags a spin-up between its sparse samples).
+        running &= curve >= CARRYING_SHARE * np.percentile(curve[running], 90)
+    count = int(running.sum())
+    if count < 3:
+        return None
+    ratio = measured[running] / curve[running]
+    factor = float(np.median(ratio))
+    deviation = ratio - factor
+    spread = 1.4826 * float(np.median(np.abs(deviation)))
+    rho = 0.0
+    if count > 3 and np.std(deviation) > 0.0:
+        rho = float(np.clip(np.corrcoef(deviation[:-1], deviation[1:])[0, 1], 0.0, 0.99))
+    effective = max(count * (1.0 - rho) / (1.0 + rho), 1.0)
+    # 1.2533: the median's σ over the mean's, for Gaussian ratios.
+    return CurveScale(factor, 1.2533 * spread / np.sqrt(effective), count)
+
+
+def check_curve_against_rpm(commanded: Series, esc: Series, where: str) -> CurveScale | None:
+    """The curve's scale fitted to the log's ESC rpm (`fit_curve_scale`), refused beyond
+    `CURVE_RPM_TOLERANCE`.
 
     Parameters
     ----------
@@ -344,24 +417,23 @@ def check_curve_against_rpm(commanded: Series, esc: Series, where: str) -> None:
     where : str
         The log and the messages, for the message.
 
+    Returns
+    -------
+    CurveScale or None
+        None where the two never run together.
+
     Raises
     ------
     LogFormatError
         The median ratio beyond the tolerance; one line with the ratio and what to fix.
     """
-    measured = np.nansum(np.asarray(esc.values, float), axis=1)
-    curve = np.sum([np.interp(esc.t, commanded.t, column)
-                    for column in np.asarray(commanded.values, float).T], axis=0)
-    inside = (esc.t >= commanded.t[0]) & (esc.t <= commanded.t[-1])
-    running = inside & (measured > 0.0) & (curve > 0.0)
-    if running.sum() < 3:
-        return
-    ratio = float(np.median(measured[running] / curve[running]))
-    if abs(ratio - 1.0) <= CURVE_RPM_TOLERANCE:
-        return
+    fit = fit_curve_scale(commanded, esc)
+    if fit is None or abs(fit.factor - 1.0) <= CURVE_RPM_TOLERANCE:
+        return fit
+    ratio = fit.factor
     raise LogFormatError(
         f"{where}: the motor curve's rotor speeds are {1.0 / ratio:.3g} × what the log's "
-        f"own ESC rpm says (median over {int(running.sum())} ESC samples): the [motor] curve "
+        f"own ESC rpm says (median over {fit.samples} ESC samples): the [motor] curve "
         "and rotor_speed_max do not describe these motors, and c_T from them would be "
         f"{ratio**2:.3g} × off; correct the curve (rotor_speed_max × {ratio:.3g}) or log "
         "the ESC rpm at 10 Hz or more")

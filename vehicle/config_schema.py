@@ -119,6 +119,7 @@ _MOTOR: dict[str, tuple[str, str]] = {
     "pwm_max": ("µs", "positive"),
     "thrust_expo": ("between 0 and 1", "nonnegative"),
     "voltage": ("V", "nonnegative"),
+    "curve_sigma": ("relative", "nonnegative"),
 }
 _NOISE: dict[str, tuple[str, str]] = {
     "position_sigma": ("m", "nonnegative"),

@@ -30,6 +30,7 @@ __all__ = [
     "ACCEL_BIAS_SIGMA",
     "ACCEL_SIGMA",
     "ALLOCATION_MODES",
+    "CURVE_SIGMA",
     "ANGULAR_NOISE_DENSITY",
     "GYRO_BIAS_SIGMA",
     "GYRO_SIGMA",
@@ -73,6 +74,10 @@ ACCEL_SIGMA = 0.04
 GYRO_BIAS_SIGMA = 0.005
 #: σ of an accelerometer's constant bias per axis, m/s².
 ACCEL_BIAS_SIGMA = 0.1
+
+#: Relative 1σ of a motor curve's rotor speeds: a datasheet's top speed against the one
+#: under load (KV and propeller spread, the ESC's timing) is good to a few per cent.
+CURVE_SIGMA = 0.05
 
 
 @dataclass(frozen=True)
@@ -177,6 +182,11 @@ class MotorConfig:
         Battery voltage at which that curve holds, V; commanded rotor speeds then scale
         with the logged battery voltage (`mavsysid.formats.motor_curve`). 0: not stated,
         not scaled.
+    curve_sigma : float
+        Relative 1σ of the curve's rotor speeds (of ``rotor_speed_max``): how well the
+        curve is known. c_T and c_M from commanded rotor speeds carry twice it. The
+        default, 5 %, is a curve from a motor's datasheet; a thrust-stand fit states its
+        own; 0 is a curve exact by construction (a simulator's).
     """
 
     time_constant: float = 0.02
@@ -184,6 +194,7 @@ class MotorConfig:
     pwm_max: float = 2000.0
     thrust_expo: float = 0.65
     voltage: float = 0.0
+    curve_sigma: float = CURVE_SIGMA
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ from mavsysid.estimation.balance.theta import (
     theta_from_coefficients,
     unstack,
     widened_sigma,
+    with_nuisance_prior,
 )
 from mavsysid.estimation.checks import check_rotor_balance
 from mavsysid.estimation.flight import FlightData
@@ -146,19 +147,23 @@ class WrenchBalanceSettings:
 
 
 def _theta(fit_force: np.ndarray, fit_torque: np.ndarray, cov_force: np.ndarray,
-           cov_torque: np.ndarray) -> DataTheta:
-    return theta_from_coefficients(stack(fit_force, fit_torque),
+           cov_torque: np.ndarray, prior: ParameterEstimate) -> DataTheta:
+    """θ of a force and a torque fit, combined with the sensors' priors."""
+    data = theta_from_coefficients(stack(fit_force, fit_torque),
                                    stacked_covariance(cov_force, cov_torque))
+    return with_nuisance_prior(data, prior.value, prior.sigma)
 
 
-def _fit_theta(fit: BalanceFit) -> DataTheta:
+def _fit_theta(fit: BalanceFit, prior: ParameterEstimate) -> DataTheta:
     return _theta(fit.force.coefficients, fit.torque.coefficients, fit.force.covariance,
-                  fit.torque.covariance)
+                  fit.torque.covariance, prior)
 
 
-def _eiv_sigma(fit: BalanceFit, base: DataTheta) -> tuple[np.ndarray, np.ndarray]:
+def _eiv_sigma(fit: BalanceFit, base: DataTheta, prior: ParameterEstimate
+               ) -> tuple[np.ndarray, np.ndarray]:
     """σ of θ and of the combinations from each main column's reverse value."""
     parts, combos = [], []
+    covariance = stacked_covariance(fit.force.covariance, fit.torque.covariance)
     for name, offset in (("force", 0), ("torque", TORQUE_START)):
         for column, _ in MAIN_COLUMNS[name]:
             reverse = fit.reverse[name].get(column)
@@ -166,8 +171,9 @@ def _eiv_sigma(fit: BalanceFit, base: DataTheta) -> tuple[np.ndarray, np.ndarray
                 continue
             b = stack(fit.force.coefficients, fit.torque.coefficients)
             b[offset + column] = reverse
-            with np.errstate(divide="ignore", invalid="ignore"):
-                other = theta_from_coefficients(b, np.zeros((b.size, b.size)))
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                other = with_nuisance_prior(theta_from_coefficients(b, covariance),
+                                            prior.value, prior.sigma)
             parts.append(errors_in_variables_sigma(base.value, other.value))
             combos.append(errors_in_variables_sigma(base.combinations, other.combinations))
     if not parts:
@@ -175,15 +181,15 @@ def _eiv_sigma(fit: BalanceFit, base: DataTheta) -> tuple[np.ndarray, np.ndarray
     return widened_sigma(parts), widened_sigma(combos)
 
 
-def _split_sigma(rows_a: list[BalanceRows], rows_b: list[BalanceRows], count: int
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """σ added by two parts of the rows that disagree beyond their own σ (``count``
+def _split_sigma(rows_a: list[BalanceRows], rows_b: list[BalanceRows],
+                 prior: ParameterEstimate) -> tuple[np.ndarray, np.ndarray]:
+    """σ added by two parts of the rows that disagree beyond their own σ (the prior's
     quantities, then the combinations)."""
     try:
         fits = [regress(rows) for rows in (rows_a, rows_b)]
     except np.linalg.LinAlgError:
-        return np.zeros(count), np.zeros(len(COMBINATION_NAMES))
-    a, b = (_theta(f.coefficients, m.coefficients, f.covariance, m.covariance)
+        return np.zeros(prior.value.size), np.zeros(len(COMBINATION_NAMES))
+    a, b = (_theta(f.coefficients, m.coefficients, f.covariance, m.covariance, prior)
             for f, m, _ in fits)
     return (split_widening(a.value, a.sigma, b.value, b.sigma),
             split_widening(a.combinations, a.combination_sigma, b.combinations,
@@ -240,6 +246,16 @@ def _band_halves(builders: list[BalanceBuilder], choices: FitChoices
     return low, high
 
 
+def _sensor_prior(config: VehicleConfig, prior: ParameterEstimate) -> ParameterEstimate:
+    """The prior of the sensors' quantities (a calibration the vehicle file states), σ 0
+    elsewhere: θ's prior is a guess, and a model effect's a search range, not a measurement
+    (`mavsysid.estimation.balance.theta.with_nuisance_prior`)."""
+    sensor = np.array([q.term is not None and q.term.channel != "wrench"
+                       for q in config.quantities])
+    sigma = np.where(sensor, prior.sigma, 0.0)
+    return ParameterEstimate(prior.value, np.diag(sigma**2), prior.names)
+
+
 def _segments(flight: FlightData, settings: WrenchBalanceSettings) -> list[Segment]:
     segments = balance_segments(flight, settings.min_segment)
     if not segments:
@@ -254,11 +270,12 @@ def _answer(flight: FlightData, config: VehicleConfig, prior: ParameterEstimate,
     """The fit, θ, its widened σ and the statuses (no held-out check)."""
     segments = _segments(flight, settings)
     fit, builders = fit_balance(segments, config, float(prior.value[C_D]))
-    base = _fit_theta(fit)
-    eiv, eiv_c = _eiv_sigma(fit, base)
+    sensors = _sensor_prior(config, prior)
+    base = _fit_theta(fit, sensors)
+    eiv, eiv_c = _eiv_sigma(fit, base, sensors)
     rows = fit.rows
-    halves, halves_c = _split_sigma(*_halves(rows), base.value.size)
-    bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices), base.value.size)
+    halves, halves_c = _split_sigma(*_halves(rows), sensors)
+    bands, bands_c = _split_sigma(*_band_halves(builders, fit.choices), sensors)
     parts = np.vstack([base.sigma, eiv, halves, bands, base.route_sigma,
                        _thrust_row_sigma(fit, rows, base.value)])
     sigma = widened_sigma(parts)

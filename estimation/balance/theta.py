@@ -7,6 +7,15 @@ combined by inverse variance); c_M = (c_M/j_z) j_z; each nuisance quantity from 
 and torque coefficients, combined by inverse variance. The covariance follows by the delta
 method (a numerical Jacobian). The force and torque fits are independent (`stack`).
 
+**The sensors' priors** (`with_nuisance_prior`): a nuisance quantity the vehicle file gives
+a prior σ (an accelerometer's bias, 0.1 m/s² for a calibrated one) is not a free intercept.
+Left free, a bias along the thrust trades with c_T one for one (0.1 m/s² is 1 % of c_T at
+hover), and c_T then rests on the thrust's variations alone, which lagging or slowly
+sampled rotor speeds attenuate (ArduCopter SITL's DataFlash log, motor outputs at 10 Hz:
+c_T −5.0 % with the bias at +0.50 m/s²). The data's estimate is combined with the prior
+on those quantities as two independent Gaussian measurements; θ follows through its
+covariance with them.
+
 **σ** has six parts, added in quadrature (`widened_sigma`, `SIGMA_PARTS`): the Newey–West
 sandwich; errors in the variables (the interval reaches the reverse regression's value,
 σ_eiv = |θ_forward − θ_reverse| / 1.96); the two halves of the flight and the two halves of
@@ -29,7 +38,8 @@ from mavsysid.estimation.results import COMBINATION_NAMES, Z95, DataTheta
 from mavsysid.vehicle.parameters import C_M, PARAMETER_NAMES
 
 __all__ = ["J_Z", "coefficients_from_theta", "errors_in_variables_sigma", "split_widening", "stack",
-           "stacked_covariance", "theta_from_coefficients", "unstack", "widened_sigma"]
+           "stacked_covariance", "theta_from_coefficients", "unstack", "widened_sigma",
+           "with_nuisance_prior"]
 
 
 #: Where j_z sits in θ.
@@ -183,6 +193,44 @@ def theta_from_coefficients(coefficients: np.ndarray, covariance: np.ndarray) ->
         route_sigma[C_M] = abs(full[p]) * spread
     return DataTheta(full[:p], full_cov[:p, :p], full[p:], np.sqrt(np.abs(var[p:])),
                      route_sigma)
+
+
+def with_nuisance_prior(theta: DataTheta, prior_value: np.ndarray, prior_sigma: np.ndarray
+                        ) -> DataTheta:
+    """``theta`` combined with the prior of its nuisance quantities (module docstring).
+
+    With N the nuisance quantities the data excite and whose prior σ is finite and
+    positive, K = Σ[:, N] (Σ[N, N] + P)⁻¹: value + K (prior − value[N]), Σ − K Σ[N, :].
+    θ keeps no prior of its own (its prior is the vehicle file's guess, not a measurement).
+
+    Parameters
+    ----------
+    theta : DataTheta
+        The data's θ and nuisance quantities (6 + E), with their covariance.
+    prior_value, prior_sigma : ndarray, shape (6 + E,)
+        The prior, SI; only entries beyond θ are used.
+
+    Returns
+    -------
+    DataTheta
+        The combination; ``theta`` itself when there is nothing to combine.
+    """
+    value, cov = theta.value, theta.covariance
+    six = len(PARAMETER_NAMES)
+    sigma = np.asarray(prior_sigma, float)
+    var = np.diag(cov)
+    use = np.zeros(value.size, bool)
+    use[six:] = (np.isfinite(sigma[six:]) & (sigma[six:] > 0.0) & np.isfinite(var[six:])
+                 & np.isfinite(value[six:]))
+    n = np.flatnonzero(use)
+    if not n.size:
+        return theta
+    finite = np.where(np.isfinite(cov), cov, 0.0)
+    gain = finite[:, n] @ np.linalg.inv(finite[np.ix_(n, n)] + np.diag(sigma[n] ** 2))
+    new_value = value + gain @ (np.asarray(prior_value, float)[n] - value[n])
+    new_cov = cov - gain @ finite[n, :]
+    return DataTheta(new_value, 0.5 * (new_cov + new_cov.T), theta.combinations,
+                     theta.combination_sigma, theta.route_sigma)
 
 
 def coefficients_from_theta(theta: np.ndarray, nuisance: np.ndarray | None = None

@@ -361,10 +361,7 @@ def read_autopilot_log(read: Callable[[Path, VehicleConfig], ParsedLog], path: P
         (`mavsysid.formats.motor_curve.check_curve_against_rpm`).
     """
     log = read(path, vehicle)
-    commanded = [r for r in log.rotors if all(r is not e for e in log.esc_speeds)]
-    if len(commanded) == 1 and len(log.esc_speeds) == 1:
-        check_curve_against_rpm(commanded[0], log.esc_speeds[0],
-                                f"{path}: {commanded[0].label} against {log.esc_speeds[0].label}")
+    log_rotors, scale_sigma, curve_notes = _curve_fitted(log, vehicle, path)
     notes = list(log.notes)
     pose = None
     if log.pose is not None:
@@ -374,11 +371,34 @@ def read_autopilot_log(read: Callable[[Path, VehicleConfig], ParsedLog], path: P
     elif log.position is not None and log.attitude is not None:
         pose, combined = combine_pose(log.source, log.position, log.attitude)
         notes += combined
-    rotors, ordered = rotors_in_config_order(log.source, log.rotors, vehicle)
+    rotors, ordered = rotors_in_config_order(log.source, log_rotors, vehicle)
     return LogStreams(source=log.source, pose=pose, pose_source=log.pose_source, rotors=rotors,
-                      warnings=(*notes, *log.rotor_notes, *ordered), pose_hint=log.pose_hint,
+                      warnings=(*notes, *log.rotor_notes, *curve_notes, *ordered),
+                      pose_hint=log.pose_hint,
                       control_spans=None if log.modes is None else control_spans(log.modes),
-                      imu=_autopilot_imu(log, vehicle))
+                      imu=_autopilot_imu(log, vehicle), rotor_scale_sigma=scale_sigma)
+
+
+def _curve_fitted(log: ParsedLog, vehicle: VehicleConfig, path: Path
+                  ) -> tuple[tuple[Series, ...], float, list[str]]:
+    """The log's rotor speeds, those through the motor curve rescaled to its own ESC rpm
+    where it has some (`mavsysid.formats.motor_curve.check_curve_against_rpm`); the
+    relative σ of their scale (0: measured); a note of the fit."""
+    commanded = [r for r in log.rotors if all(r is not e for e in log.esc_speeds)]
+    if not commanded:
+        return log.rotors, 0.0, []
+    if len(commanded) != 1 or len(log.esc_speeds) != 1:
+        return log.rotors, vehicle.motor.curve_sigma, []
+    fit = check_curve_against_rpm(commanded[0], log.esc_speeds[0],
+                                  f"{path}: {commanded[0].label} against {log.esc_speeds[0].label}")
+    if fit is None:
+        return log.rotors, vehicle.motor.curve_sigma, []
+    scaled = Series(commanded[0].t, commanded[0].values * fit.factor, commanded[0].label)
+    rotors = tuple(scaled if r is commanded[0] else r for r in log.rotors)
+    note = (f"{path}: the motor curve's scale fitted to the log's own ESC rpm "
+            f"({log.esc_speeds[0].label}, {fit.samples} samples): rotor speeds × "
+            f"{fit.factor:.4f} ± {fit.sigma:.4f} (the file's rotor_speed_max × that)")
+    return rotors, fit.sigma / fit.factor, [note]
 
 
 def _frames_with(count: int) -> str:

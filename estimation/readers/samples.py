@@ -665,6 +665,8 @@ class LogStreams:
         it in (GUIDED, OFFBOARD); None when the log says nothing about modes.
     imu : Imu or None
         The IMU (body FLU), not yet cleaned; None when the log has none.
+    rotor_scale_sigma : float
+        Relative 1σ of the rotor speeds' scale (`mavsysid.estimation.flight.FlightData`).
     """
 
     source: str
@@ -676,6 +678,7 @@ class LogStreams:
     pose_hint: str = ""
     control_spans: tuple[tuple[float, float], ...] | None = None
     imu: Imu | None = None
+    rotor_scale_sigma: float = 0.0
 
 
 def combine_pose(source: str, position: Series, attitude: Series,
@@ -800,7 +803,8 @@ def to_flight_data(streams: LogStreams, vehicle: VehicleConfig,
                       rotor_speeds=speeds, source=source,
                       pose_source=streams.pose_source,
                       truth=streams.truth, warnings=(*notes, *more),
-                      inputs=InputSamples(tuple(columns)), imu=imu)
+                      inputs=InputSamples(tuple(columns)), imu=imu,
+                      rotor_scale_sigma=streams.rotor_scale_sigma)
     return validate_flight(data, vehicle, np.vstack(gaps))
 
 

@@ -9,6 +9,7 @@ import pytest
 from mavsysid.estimation.answer import (
     answer_parameters,
     balance_only_result,
+    with_curve_uncertainty,
 )
 from mavsysid.estimation.results import (
     AT_BOUND,
@@ -226,3 +227,30 @@ def test_a_filter_c_d_it_does_not_determine_still_contradicts_the_bound():
     assert answer.status[1] == NOT_DETERMINED
     assert answer_parameters(_filter(THETA * np.array([1, 0.05, 1, 1, 1, 1]), 0.16),
                              balance, PRIOR).status[1] == AT_BOUND
+
+
+def test_the_motor_curves_uncertainty_widens_c_t_and_c_m_together_and_nothing_else():
+    """Rotor speeds through a curve known to 5 %: c_T (1 %) and c_M (4 %) gain 10 % each,
+    fully correlated; c_D and J keep their σ."""
+    rel = np.array([0.01, 0.05, 0.04, 0.05, 0.05, 0.05])
+    answer = answer_parameters(None, _balance(THETA, rel), PRIOR)
+    widened, notes = with_curve_uncertainty(answer, 0.05, PRIOR)
+    sigma = widened.estimate.sigma
+    np.testing.assert_allclose(sigma[[0, 2]] / THETA[[0, 2]],
+                               np.sqrt(rel[[0, 2]] ** 2 + 0.1**2), rtol=1e-9)
+    np.testing.assert_allclose(sigma[[1, 3, 4, 5]], answer.estimate.sigma[[1, 3, 4, 5]])
+    corr = widened.estimate.covariance[0, 2] / (sigma[0] * sigma[2])
+    assert corr > 0.9
+    assert widened.status == answer.status and len(notes) == 1
+    assert with_curve_uncertainty(answer, 0.0, PRIOR) == (answer, [])
+
+
+def test_a_quantity_the_curve_widens_beyond_the_rule_is_no_longer_determined():
+    """c_M at 9 % from the data, with a curve known to 5 %: 13.5 % > 12.5 %, the prior's."""
+    rel = np.array([0.01, 0.05, 0.09, 0.05, 0.05, 0.05])
+    answer = answer_parameters(None, _balance(THETA, rel), PRIOR)
+    widened, notes = with_curve_uncertainty(answer, 0.05, PRIOR)
+    assert widened.status[2] == NOT_DETERMINED and widened.source[2] == "prior"
+    assert widened.estimate.value[2] == PRIOR.value[2]
+    assert widened.status[0] == DETERMINED
+    assert "c_M then not determined" in notes[0]

@@ -89,3 +89,33 @@ def test_errors_in_variables_sigma_reaches_the_reverse_value():
 def test_determined_means_physical_with_a_narrow_widened_sigma(value, sigma, determined):
     """Determined ⇔ positive value and widened σ ≤ 12.5 % of it."""
     assert parameter_status(np.array([value]), np.array([sigma]))[0] == determined
+
+
+def test_a_sensor_prior_pulls_a_traded_bias_and_theta_follows_through_their_covariance(
+) -> None:
+    from mavsysid.estimation.balance.theta import with_nuisance_prior
+    from mavsysid.estimation.results import DataTheta
+
+    # c_T and an accelerometer bias along the thrust traded one for one: the data alone
+    # put the bias at +0.5 m/s² and c_T 5 % low, with a correlation of −0.95.
+    c_t, bias = 4.58e-5, 0.5
+    sigma = np.array([0.6e-6, 1e-3, 1e-8, 1e-3, 1e-3, 1e-3, 0.17])
+    corr = np.eye(7)
+    corr[0, 6] = corr[6, 0] = -0.95
+    cov = corr * np.outer(sigma, sigma)
+    value = np.array([c_t, 0.02, 7.7e-7, 0.023, 0.023, 0.046, bias])
+    data = DataTheta(value, cov, np.zeros(2), np.zeros(2), np.zeros(7))
+    prior_sigma = np.r_[np.full(6, 1.0), 0.1]  # θ's prior is ignored
+    combined = with_nuisance_prior(data, np.zeros(7), prior_sigma)
+    # The joint Gaussian's conditional: information form on the bias.
+    info = np.linalg.inv(cov)
+    info[6, 6] += 1.0 / 0.1**2
+    expected_cov = np.linalg.inv(info)
+    expected = expected_cov @ (np.linalg.inv(cov) @ value)
+    assert np.allclose(combined.value, expected, rtol=1e-9, atol=0)
+    assert np.allclose(combined.covariance, expected_cov, rtol=1e-6, atol=1e-30)
+    assert combined.value[0] > c_t and combined.value[6] < bias
+    assert np.allclose(combined.value[1:6], value[1:6])  # uncorrelated ones stay
+    # Without a finite prior σ on the bias nothing changes.
+    same = with_nuisance_prior(data, np.zeros(7), np.r_[np.full(6, 1.0), 0.0])
+    assert same is data

@@ -197,6 +197,14 @@ def test_real_px4_log_with_4_hz_esc_status_reads_its_motor_commands() -> None:
     assert rotors.label == "actuator_motors" and rotors.values.shape[1] == 4
     assert [w for w in streams.warnings if "esc_status rpm sampled only every 0.248 s" in w]
     assert rotors.values.max() > 0.5 * quad.limits.rotor_speed_max * np.sqrt(0.5)
+    # Within the tolerance, the curve takes the ESC's scale, and c_T its σ.
+    fitted = [w for w in streams.warnings if "the motor curve's scale fitted" in w]
+    assert len(fitted) == 1, streams.warnings
+    assert 0.0 < streams.rotor_scale_sigma < 0.05
+    off = dataclasses.replace(quad, limits=dataclasses.replace(
+        quad.limits, rotor_speed_max=quad.limits.rotor_speed_max * 0.9))
+    (rescaled,) = READERS[".ulg"](path, off).rotors
+    np.testing.assert_allclose(rescaled.values, rotors.values, rtol=1e-9)
 
 
 # ------------------------------------------------ writing
