@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from mavsysid.formats.motor_curve import (
     check_curve_against_rpm,
-    fit_curve_scale,
     check_pwm_outputs,
+    fit_curve_scale,
     pwm_from_rotor_speed,
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
