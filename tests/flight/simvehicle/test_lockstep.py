@@ -20,8 +20,9 @@ from mavsysid.formats.poselog import read_pose_log
 
 from tests.support.stream_flights import SimProcess, export_excitation, flight_dir, run_stream
 
-#: Busy processes competing for the cores in the loaded flight (more than the 2 cores).
-BUSY = 4
+#: Busy processes competing for the cores in the loaded flight: with the flight's own
+#: two, twice the 2 cores.
+BUSY = 2
 
 
 def _frame(ms: int, unix_us: int | None = None):
