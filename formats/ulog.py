@@ -27,7 +27,10 @@ time) where the topic has it, else ``timestamp``. Frames are NED/FRD.
   (PX4 applies THR_MDL_FAC after it, in the output driver), so n = rotor_speed_max ·
   sqrt(control) — the motor curve with thrust_expo 0; NaN there means a stopped motor
   (n = 0), and a column that is NaN throughout an unused one. Else ``actuator_outputs``
-  ``output[i]`` (taken as PWM in µs) through the vehicle's `[motor]` curve.
+  ``output[i]`` (taken as PWM in µs) through the vehicle's `[motor]` curve. Either is
+  scaled by ``battery_status`` ``voltage_v`` (``voltage_filtered_v`` before PX4 1.14)
+  over the curve's ``[motor] voltage`` where the vehicle file states it
+  (`mavsysid.formats.motor_curve.battery_scale`).
 - Modes: ``vehicle_status`` ``nav_state`` (`NAVIGATION_STATES`), ``arming_state``.
 - IMU (body FRD): ``sensor_combined`` ``gyro_rad[3]`` (rad/s; ``gyro_rad_s`` before PX4
   1.6) at ``timestamp`` and ``accelerometer_m_s2[3]`` (specific force, m/s²: z ≈ −9.81
@@ -66,6 +69,7 @@ from pathlib import Path
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import (
+    battery_scale,
     check_pwm_outputs,
     describe_curve,
     pwm_curve_caveat,
@@ -145,7 +149,7 @@ _STOPPED_CONTROL = 1e-6
 _ODOMETRY = ("vehicle_mocap_odometry", "vehicle_visual_odometry")
 _IMU_TOPICS = ("sensor_combined", "vehicle_angular_velocity", "vehicle_acceleration")
 _TOPICS = [*_ODOMETRY, "vehicle_local_position", "vehicle_attitude", "esc_status",
-           "actuator_motors", "actuator_outputs", *_IMU_TOPICS]
+           "actuator_motors", "actuator_outputs", "battery_status", *_IMU_TOPICS]
 #: accelerometer_timestamp_relative of a sensor_combined sample without accelerometer data
 #: (sensor_combined_s::RELATIVE_TIMESTAMP_INVALID).
 _RELATIVE_INVALID = 0x7FFFFFFF
@@ -439,9 +443,34 @@ def _checked(path: Path, outputs: MotorOutputs, commanded: tuple[Series, str],
     return commanded
 
 
+def _battery(topics: _Instances) -> Series | None:
+    """battery_status voltage_v (voltage_filtered_v before PX4 1.14), V; None without one."""
+    battery = _primary(topics, "battery_status")
+    if battery is None:
+        return None
+    name = next((n for n in ("voltage_v", "voltage_filtered_v") if n in battery), None)
+    if name is None:
+        return None
+    return Series(_time(battery), battery[name].astype(float)[:, None],
+                  f"battery_status {name}")
+
+
+def _on_battery(path: Path, series: Series, battery: Series | None, vehicle: VehicleConfig
+                ) -> tuple[Series, list[str]]:
+    """Commanded rotor speeds scaled by the battery voltage
+    (`mavsysid.formats.motor_curve.battery_scale`), and its note."""
+    scale, note = battery_scale(series.t, battery, vehicle,
+                                f"{path}: {battery.label if battery else 'battery_status'}")
+    if scale is not None:
+        series = Series(series.t, series.values * scale[:, None], series.label)
+    return series, [note] if note else []
+
+
 def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
-            vehicle: VehicleConfig) -> tuple[Series, list[str]]:
-    """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm."""
+            vehicle: VehicleConfig, battery: Series | None = None
+            ) -> tuple[Series, list[str]]:
+    """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm,
+    and what the battery voltage did to commanded ones."""
     commanded = _commanded(outputs, vehicle)
     if esc is not None:
         esc_period = _period(esc.t)
@@ -449,12 +478,14 @@ def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
         if esc_period <= RPM_USABLE_PERIOD or not faster:
             return esc, []
         series, how = _checked(path, outputs, commanded, vehicle)
+        series, said = _on_battery(path, series, battery, vehicle)
         return series, [f"{path}: esc_status rpm sampled only every {esc_period:.3g} s (more "
                         f"than {RPM_USABLE_PERIOD:g} s), {series.label} every "
-                        f"{_period(series.t):.3g} s: rotor speeds are {how}"]
+                        f"{_period(series.t):.3g} s: rotor speeds are {how}", *said]
     if commanded is not None:
         series, how = _checked(path, outputs, commanded, vehicle)
-        return series, [f"{path}: no esc_status rpm; rotor speeds are {how}"]
+        series, said = _on_battery(path, series, battery, vehicle)
+        return series, [f"{path}: no esc_status rpm; rotor speeds are {how}", *said]
     raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no esc_status, "
                          "actuator_motors or actuator_outputs)")
 
@@ -563,7 +594,7 @@ def read_ulog(path: Path, vehicle: VehicleConfig) -> ParsedLog:
     with parsing(path, "a PX4 ULog file with the usual topic fields"):
         pose, position, attitude, pose_source = _pose(topics)
         esc, outputs = _esc(topics), _motor_outputs(topics)
-        rotors, curve = _rotors(path, esc, outputs, vehicle)
+        rotors, curve = _rotors(path, esc, outputs, vehicle, _battery(topics))
         gyro, accel, imu_filter = _imu(topics, parameters)
     return ParsedLog(source=str(path), pose=pose, position=position, attitude=attitude,
                      pose_source=pose_source, pose_hint=_POSE_HINT, rotors=(rotors,),

@@ -178,6 +178,46 @@ def test_multi_instance_topics_use_the_motors_and_the_primary_pose(
     np.testing.assert_allclose(data.rotor_speeds, expected["rotor_speeds"], atol=0.02)
 
 
+def test_commanded_rotor_speeds_follow_the_battery_status_voltage(
+        tmp_path: Path, firefly: VehicleConfig, truth: Truth,
+        ulog_writer: Callable[..., Path]) -> None:
+    """actuator_outputs with battery_status falling 16.8 → 14.0 V: with [motor] voltage
+    16.8 the rotor speeds are the curve's times V/16.8; without it the curve's, and a note
+    says how far the battery fell."""
+    captured: Topics = {}
+
+    def sagging(topics: Topics) -> None:
+        topics["battery_status"] = [
+            {"timestamp": round(ti * 1e6),
+             "voltage_v": 16.8 - 2.8 * float(np.clip((ti - 20.0) / 4.0, 0.0, 1.0))}
+            for ti in np.arange(19.0, 25.0, 0.1)]
+        captured.update(topics)
+
+    path = ulog_writer(tmp_path / "flight.ulg", truth, firefly, rotors="outputs",
+                       duration=4.0, edit=_without("battery_status", sagging))
+    write_ulog(path, {**ULOG_FORMATS, "battery_status": "uint64_t timestamp;float voltage_v;"},
+               captured)
+    plain = load_flight(path, firefly)
+    stated = dataclasses.replace(firefly, motor=dataclasses.replace(firefly.motor,
+                                                                    voltage=16.8))
+    scaled = load_flight(path, stated)
+    volts = 16.8 - 2.8 * np.clip((scaled.t - 20.0) / 4.0, 0.0, 1.0)
+    np.testing.assert_allclose(scaled.rotor_speeds, plain.rotor_speeds * (volts / 16.8)[:, None],
+                               rtol=2e-3)
+    assert [w for w in plain.warnings if "battery fell from 16.80 to 14." in w]
+    assert [w for w in scaled.warnings if "scaled by the battery voltage" in w]
+
+
+def _without(name: str, edit: Callable[[Topics], None]) -> Callable[[Topics], None]:
+    """``edit``, then ``name`` taken out again (the writer's formats do not have it)."""
+
+    def run(topics: Topics) -> None:
+        edit(topics)
+        topics.pop(name)
+
+    return run
+
+
 def test_real_px4_log_with_4_hz_esc_status_reads_its_motor_commands() -> None:
     """pyulog's sample_px4_events.ulg: esc_status at ~4 Hz, actuator_motors at 10 Hz. Through
     quad_x's curve the commands contradict the log's own ESC rpm: refused in one line; with

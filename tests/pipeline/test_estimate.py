@@ -38,7 +38,8 @@ def stub_estimation(monkeypatch: pytest.MonkeyPatch) -> Callable[[np.ndarray], N
     def use(theta: np.ndarray) -> None:
         monkeypatch.setattr(estimate_job, "load_flight",
                             lambda log, config, **kw: SimpleNamespace(
-                                source=str(log), rotor_count=0, duration=0.0, imu=None))
+                                source=str(log), rotor_count=0, duration=0.0, imu=None,
+                                rotor_scale_sigma=0.0))
         monkeypatch.setattr(answer, "check_kinematics", lambda flight: None)
         monkeypatch.setattr(answer, "estimate_parameters",
                             lambda flight, config, settings=None, reference=None:
