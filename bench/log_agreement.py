@@ -34,24 +34,23 @@ def compare(first: Path, second: Path, reference: dict[str, float]) -> list[str]
     """One line per parameter either file determines: both values and their difference."""
     a, b = _determined(first), _determined(second)
     lines = []
+    def cell(p: dict, ref: float) -> str:
+        return (f"{100 * (p['value'] / ref - 1):+.1f} ± {100 * p['sigma'] / ref:.1f} % "
+                f"({p['source']})")
+
     for name in PARAMETER_NAMES:
         if name not in a and name not in b:
             continue
-
-        def cell(p: dict) -> str:
-            ref = reference[name]
-            return (f"{100 * (p['value'] / ref - 1):+.1f} ± {100 * p['sigma'] / ref:.1f} % "
-                    f"({p['source']})")
-
+        ref = reference[name]
         if name in a and name in b:
             z = (a[name]["value"] - b[name]["value"]) / math.hypot(a[name]["sigma"],
                                                                    b[name]["sigma"])
             flag = "" if abs(z) <= AGREEMENT_SIGMAS else "  DISAGREE"
-            lines.append(f"  {name:4s} {cell(a[name]):28s} | {cell(b[name]):28s} | "
+            lines.append(f"  {name:4s} {cell(a[name], ref):28s} | {cell(b[name], ref):28s} | "
                          f"{z:+.1f} σ{flag}")
         else:
             which, p = (first.name, a[name]) if name in a else (second.name, b[name])
-            lines.append(f"  {name:4s} only {which}: {cell(p)}")
+            lines.append(f"  {name:4s} only {which}: {cell(p, ref)}")
     return lines
 
 
