@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from mavsysid.formats.parsed_log import Series
 
 from mavsysid.errors import InputError, LogFormatError
@@ -235,6 +234,8 @@ def parse_plain_rows(text: str, columns: Sequence[int] | None = None) -> np.ndar
     """
     if not text or _PLAIN_TEXT.fullmatch(text) is None:
         return None
+    import pandas as pd  # its import costs the streamer's start a third of a second
+
     try:
         frame = pd.read_csv(io.StringIO(text), header=None, usecols=columns, dtype=np.float64,
                             na_filter=False, quoting=csv.QUOTE_NONE, engine="c")

@@ -28,7 +28,6 @@ from mavsysid.formats.flight_dir import read_meta
 from mavsysid.formats.flight_log import TRUTH_COLUMNS, command_columns
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.vehicle.rotation import quat_to_matrix
-from scipy.signal import butter, lfilter, lfilter_zi
 
 __all__ = ["LoggedFlight", "check_motor_order", "lowpass", "microsecond_stamp", "sample_indices"]
 
@@ -218,6 +217,9 @@ def lowpass(t: np.ndarray, values: np.ndarray, cutoff_hz: float) -> np.ndarray:
     if cutoff_hz <= 0.0 or t.size < 2:
         return np.array(values, dtype=float)
     rate = (t.size - 1) / (t[-1] - t[0])
+    # scipy.signal takes a second to import: the simulator's start should not pay it.
+    from scipy.signal import butter, lfilter, lfilter_zi
+
     b, a = butter(2, cutoff_hz, fs=rate)
     start = lfilter_zi(b, a)[:, None] * np.asarray(values[:1], dtype=float)
     return lfilter(b, a, values, axis=0, zi=start)[0]
