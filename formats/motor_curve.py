@@ -410,10 +410,8 @@ def check_curve_against_rpm(commanded: Series, esc: Series, where: str) -> Curve
 
     Parameters
     ----------
-    commanded : Series
-        Rotor speeds through the motor curve, rad/s, shape (N, k).
-    esc : Series
-        The ESC's rotor speeds, rad/s, shape (M, k'), on the same clock.
+    commanded, esc : Series
+        As `fit_curve_scale` takes them.
     where : str
         The log and the messages, for the message.
 
