@@ -534,7 +534,7 @@ def _filterwith_curve_uncertainty(result: EstimationResult, scale_sigma: float) 
     widened = with_rotor_scale(result.final, scale_sigma, np.ones(result.final.value.size, bool))
     return replace(result, answer=widened, notes=result.notes + (
         f"rotor speeds are motor outputs through the motor curve, known to "
-        f"{100 * scale_sigma:.2g} %: c_T and c_M carry twice that in their σ",))
+        f"{100 * scale_sigma:.2g} %: the σ of c_T and c_M holds twice that",))
 
 
 def _filter_inputs(config: VehicleConfig, settings: EstimatorSettings,
@@ -714,7 +714,7 @@ def with_curve_uncertainty(answer: ParameterAnswer, scale_sigma: float, prior: P
     if not names:
         return answer, []
     note = (f"rotor speeds are motor outputs through the motor curve, known to "
-            f"{100 * scale_sigma:.2g} %: {' and '.join(names)} carry twice that in their σ")
+            f"{100 * scale_sigma:.2g} %: the σ of {' and '.join(names)} holds twice that")
     if lost:
         note += f" ({', '.join(lost)} then not determined)"
     return replace(answer, estimate=ParameterEstimate(value, cov, widened.names),
