@@ -523,18 +523,24 @@ def estimate(flight: FlightData, config: VehicleConfig,
         result = replace(result, notes=result.notes + (
             f"no force and torque balance check: {balance_refusal}",))
     if balance_refusal is not None or balance is None:
-        return _filterwith_curve_uncertainty(result, flight.rotor_scale_sigma)
+        return _filter_with_curve_uncertainty(result, flight.rotor_scale_sigma)
     return _answered(result, None, balance, config, flight, prior)
 
 
-def _filterwith_curve_uncertainty(result: EstimationResult, scale_sigma: float) -> EstimationResult:
+def _filter_with_curve_uncertainty(result: EstimationResult, scale_sigma: float
+                                   ) -> EstimationResult:
     """A filter's answer alone with the motor curve's uncertainty (`with_rotor_scale`)."""
     if scale_sigma <= 0.0:
         return result
-    widened = with_rotor_scale(result.final, scale_sigma, np.ones(result.final.value.size, bool))
-    return replace(result, answer=widened, notes=result.notes + (
-        f"rotor speeds are motor outputs through the motor curve, known to "
-        f"{100 * scale_sigma:.2g} %: the σ of c_T and c_M holds twice that",))
+    everything = np.ones(result.final.value.size, bool)
+    return replace(result, answer=with_rotor_scale(result.final, scale_sigma, everything),
+                   notes=result.notes + (_curve_note(scale_sigma, ["c_T", "c_M"]),))
+
+
+def _curve_note(scale_sigma: float, names: list[str]) -> str:
+    """What the motor curve's uncertainty added, in words."""
+    return (f"rotor speeds are motor outputs through the motor curve, known to "
+            f"{100 * scale_sigma:.2g} %: the σ of {' and '.join(names)} holds twice that")
 
 
 def _filter_inputs(config: VehicleConfig, settings: EstimatorSettings,
@@ -676,12 +682,12 @@ def with_rotor_scale(estimate: ParameterEstimate, scale_sigma: float,
     for j in (C_T, C_M):
         if determined[j]:
             g[j] = -2.0 * float(estimate.value[j])
-    return ParameterEstimate(estimate.value, estimate.covariance + scale_sigma**2 * np.outer(g, g),
-                             estimate.names)
+    widened = estimate.covariance + scale_sigma**2 * np.outer(g, g)
+    return ParameterEstimate(estimate.value, widened, estimate.names)
 
 
-def with_curve_uncertainty(answer: ParameterAnswer, scale_sigma: float, prior: ParameterEstimate
-                  ) -> tuple[ParameterAnswer, list[str]]:
+def with_curve_uncertainty(answer: ParameterAnswer, scale_sigma: float,
+                           prior: ParameterEstimate) -> tuple[ParameterAnswer, list[str]]:
     """The answer with the motor curve's uncertainty (`with_rotor_scale`), and its note.
 
     Parameters
@@ -713,8 +719,7 @@ def with_curve_uncertainty(answer: ParameterAnswer, scale_sigma: float, prior: P
             lost.append(PARAMETER_NAMES[j])
     if not names:
         return answer, []
-    note = (f"rotor speeds are motor outputs through the motor curve, known to "
-            f"{100 * scale_sigma:.2g} %: the σ of {' and '.join(names)} holds twice that")
+    note = _curve_note(scale_sigma, names)
     if lost:
         note += f" ({', '.join(lost)} then not determined)"
     return replace(answer, estimate=ParameterEstimate(value, cov, widened.names),

@@ -36,7 +36,7 @@ from mavsysid.errors import LogFormatError
 
 __all__ = ["CURVE_RPM_TOLERANCE", "VOLTAGE_SAG_NOTE", "CurveScale", "battery_scale",
            "check_curve_against_rpm", "check_pwm_outputs", "commanded_rotor_speeds",
-           "describe_curve", "fit_curve_scale",
+           "describe_curve", "fit_curve_scale", "on_battery",
            "pwm_curve_caveat", "pwm_from_rotor_speed", "rotor_speed_from_pwm",
            "rotor_speed_from_throttle", "throttle_from_pwm", "throttle_from_rotor_speed"]
 
@@ -318,15 +318,37 @@ def commanded_rotor_speeds(log: str, outputs: Series, message: str, battery: Ser
         What they are (`pwm_curve_caveat`) and what the battery did to them.
     """
     check_pwm_outputs(outputs.values, vehicle, f"{log}: {message}")
-    speeds = rotor_speed_from_pwm(outputs.values, vehicle)
-    scale, battery_note = battery_scale(outputs.t, battery, vehicle, f"{log}: {battery_message}")
+    speeds = Series(outputs.t, rotor_speed_from_pwm(outputs.values, vehicle), outputs.label)
+    speeds, battery_notes = on_battery(speeds, battery, vehicle, f"{log}: {battery_message}")
+    return speeds, [f"{log}: no ESC rpm; rotor speeds are motor outputs ({message}) "
+                    f"{pwm_curve_caveat(vehicle)}", *battery_notes]
+
+
+def on_battery(speeds: Series, battery: Series | None, vehicle: VehicleConfig, where: str
+               ) -> tuple[Series, list[str]]:
+    """Commanded rotor speeds times the battery's factor (`battery_scale`), and its note.
+
+    Parameters
+    ----------
+    speeds : Series
+        Rotor speeds through the curve, rad/s, shape (N, k).
+    battery : Series or None
+        The battery voltage, V, on the speeds' clock.
+    vehicle : VehicleConfig
+    where : str
+        The log and the battery's message, for the note.
+
+    Returns
+    -------
+    speeds : Series
+        Scaled where ``[motor] voltage`` is stated and the log has the voltage.
+    notes : list of str
+        What was scaled, or how far the battery fell unscaled.
+    """
+    scale, note = battery_scale(speeds.t, battery, vehicle, where)
     if scale is not None:
-        speeds = speeds * scale[:, None]
-    notes = [f"{log}: no ESC rpm; rotor speeds are motor outputs ({message}) "
-             f"{pwm_curve_caveat(vehicle)}"]
-    if battery_note:
-        notes.append(battery_note)
-    return Series(outputs.t, speeds, outputs.label), notes
+        speeds = Series(speeds.t, speeds.values * scale[:, None], speeds.label)
+    return speeds, [note] if note else []
 
 
 #: The motor curve's rotor speeds may lie this share off a log's own ESC rpm (its median

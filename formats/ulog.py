@@ -30,7 +30,7 @@ time) where the topic has it, else ``timestamp``. Frames are NED/FRD.
   ``output[i]`` (taken as PWM in µs) through the vehicle's `[motor]` curve. Either is
   scaled by ``battery_status`` ``voltage_v`` (``voltage_filtered_v`` before PX4 1.14)
   over the curve's ``[motor] voltage`` where the vehicle file states it
-  (`mavsysid.formats.motor_curve.battery_scale`).
+  (`mavsysid.formats.motor_curve.on_battery`).
 - Modes: ``vehicle_status`` ``nav_state`` (`NAVIGATION_STATES`), ``arming_state``.
 - IMU (body FRD): ``sensor_combined`` ``gyro_rad[3]`` (rad/s; ``gyro_rad_s`` before PX4
   1.6) at ``timestamp`` and ``accelerometer_m_s2[3]`` (specific force, m/s²: z ≈ −9.81
@@ -69,9 +69,9 @@ from pathlib import Path
 import numpy as np
 from mavsysid.formats.bounded_parse import import_parser, parsing
 from mavsysid.formats.motor_curve import (
-    battery_scale,
     check_pwm_outputs,
     describe_curve,
+    on_battery,
     pwm_curve_caveat,
     rotor_speed_from_pwm,
     rotor_speed_from_throttle,
@@ -455,20 +455,8 @@ def _battery(topics: _Instances) -> Series | None:
                   f"battery_status {name}")
 
 
-def _on_battery(path: Path, series: Series, battery: Series | None, vehicle: VehicleConfig
-                ) -> tuple[Series, list[str]]:
-    """Commanded rotor speeds scaled by the battery voltage
-    (`mavsysid.formats.motor_curve.battery_scale`), and its note."""
-    scale, note = battery_scale(series.t, battery, vehicle,
-                                f"{path}: {battery.label if battery else 'battery_status'}")
-    if scale is not None:
-        series = Series(series.t, series.values * scale[:, None], series.label)
-    return series, [note] if note else []
-
-
 def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
-            vehicle: VehicleConfig, battery: Series | None = None
-            ) -> tuple[Series, list[str]]:
+            vehicle: VehicleConfig, battery: Series | None) -> tuple[Series, list[str]]:
     """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm,
     and what the battery voltage did to commanded ones."""
     commanded = _commanded(outputs, vehicle)
@@ -478,13 +466,13 @@ def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
         if esc_period <= RPM_USABLE_PERIOD or not faster:
             return esc, []
         series, how = _checked(path, outputs, commanded, vehicle)
-        series, said = _on_battery(path, series, battery, vehicle)
+        series, said = on_battery(series, battery, vehicle, f"{path}: battery_status")
         return series, [f"{path}: esc_status rpm sampled only every {esc_period:.3g} s (more "
                         f"than {RPM_USABLE_PERIOD:g} s), {series.label} every "
                         f"{_period(series.t):.3g} s: rotor speeds are {how}", *said]
     if commanded is not None:
         series, how = _checked(path, outputs, commanded, vehicle)
-        series, said = _on_battery(path, series, battery, vehicle)
+        series, said = on_battery(series, battery, vehicle, f"{path}: battery_status")
         return series, [f"{path}: no esc_status rpm; rotor speeds are {how}", *said]
     raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no esc_status, "
                          "actuator_motors or actuator_outputs)")
