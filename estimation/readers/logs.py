@@ -562,4 +562,5 @@ def merge_pose(log: LogStreams, pose_path: Path, time_offset: float | None) -> L
     return LogStreams(source=f"{log.source} + pose {label}",
                       pose=Series(t + time_offset, mocap.values, raw.label),
                       pose_source="motion_capture", rotors=log.rotors,
-                      warnings=(*log.warnings, *notes), truth=log.truth, imu=log.imu)
+                      warnings=(*log.warnings, *notes), truth=log.truth, imu=log.imu,
+                      rotor_scale_sigma=log.rotor_scale_sigma)

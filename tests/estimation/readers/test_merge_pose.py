@@ -65,3 +65,19 @@ def test_given_offset_is_used_as_is(tmp_path: Path, firefly: VehicleConfig, trut
     data = load_flight(log, firefly, pose=mocap, time_offset=OFFSET)
     assert any(w.startswith("info:") and w.endswith("(given)") for w in data.warnings)
     assert_matches_truth(data, truth, 0.1, pose_atol=1e-6)
+
+
+def test_commanded_rotor_speeds_keep_the_curves_uncertainty_under_a_merged_pose(
+        tmp_path: Path, firefly: VehicleConfig, truth: Truth,
+        ulog_writer: Callable[..., Path]) -> None:
+    """Motor outputs through the curve, the pose from motion capture: c_T still carries the
+    curve's σ (the merged flight is the log's rotor speeds, not measured ones)."""
+    log = ulog_writer(tmp_path / "flight.ulg", truth, firefly, pose="autopilot",
+                      rotors="outputs")
+    mocap = _write_mocap(tmp_path / "mocap.csv", truth, noisy=False)
+    alone = load_flight(log, firefly)
+    merged = load_flight(log, firefly, pose=mocap, time_offset=OFFSET)
+    assert alone.rotor_scale_sigma == firefly.motor.curve_sigma > 0.0
+    assert merged.rotor_scale_sigma == alone.rotor_scale_sigma
+    measured = ulog_writer(tmp_path / "esc.ulg", truth, firefly, pose="autopilot")
+    assert load_flight(measured, firefly, pose=mocap, time_offset=OFFSET).rotor_scale_sigma == 0.0
