@@ -53,6 +53,7 @@ from mavsysid.estimation.progress import (
 from mavsysid.estimation.readers import READERS, describe_log_kinds, load_flight
 from mavsysid.estimation.report.text import (
     format_table,
+    read_noise_met,
     result_to_json,
     updated_vehicle,
     write_estimate_json,
@@ -68,6 +69,7 @@ from mavsysid.estimation.results import (
     EstimationHistory,
     EstimationResult,
     FittedEffect,
+    NoiseMet,
     ParameterEstimate,
     WrenchBalanceResult,
     convergence_time,
@@ -96,14 +98,15 @@ __all__ = [
     "AT_BOUND", "AXIS_NAMES", "AXIS_UNITS", "CONVERGENCE_TOLERANCE", "DETERMINED", "MAX_JITTER",
     "MIN_DURATION", "NIS_FACTOR", "NOT_DETERMINED", "READERS", "EstimationHistory",
     "EstimationResult", "EstimatorSettings", "FilterEstimator", "FittedEffect", "FlightData",
-    "ParameterEKF", "ParameterEstimate", "SmoothedPose", "SmootherSettings", "StageLog",
+    "NoiseMet", "ParameterEKF", "ParameterEstimate", "SmoothedPose", "SmootherSettings", "StageLog",
     "WrenchBalanceResult", "WrenchBalanceSettings", "acceleration_kernel", "check_kinematics",
     "check_plausible", "check_result", "compare_wrench", "consistent_accelerations",
     "convergence_time",
     "describe_log_kinds", "estimate", "estimate_parameters", "estimate_with_effects",
     "fit_wrench_balance", "format_table", "implausibility", "load_flight",
     "model_accelerations", "nis_level", "noise_gain", "prior_from_config", "progress_wanted",
-    "report_progress", "report_stage", "result_to_json", "smooth_pose", "stage_listener",
+    "read_noise_met", "report_progress", "report_stage", "result_to_json", "smooth_pose",
+    "stage_listener",
     "uniform_step", "updated_vehicle", "vanishing_floor", "vanishing_parameters",
     "write_estimate_json", "write_history_csv", *_LAZY,
 ]

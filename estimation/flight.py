@@ -36,6 +36,7 @@ configured process-noise density step by step (`step_process_noise`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -389,6 +390,14 @@ class FlightData:
     def duration(self) -> float:
         """Time span of the samples, s."""
         return float(self.t[-1] - self.t[0]) if len(self) else 0.0
+
+    @property
+    def pose_rate(self) -> float:
+        """Pose samples per second, Hz: the reciprocal of the median sample interval (NaN
+        with fewer than two samples)."""
+        if len(self) < 2:
+            return math.nan
+        return float(1.0 / np.median(np.diff(np.asarray(self.t, float))))
 
     @property
     def rotor_count(self) -> int:

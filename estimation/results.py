@@ -15,15 +15,14 @@ when its σ is as much narrower than its prior's. The prior itself: `prior_from_
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any, Protocol
 
 import numpy as np
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 from mavsysid.vehicle.model_effects import ModelEffect
-from mavsysid.vehicle.parameters import C_D, quantity_names
-from scipy.signal import butter, sosfiltfilt
+from mavsysid.vehicle.parameters import C_D, MAX_RELATIVE_SIGMA, quantity_names
 
 from mavsysid.errors import InputError
 
@@ -47,6 +46,7 @@ __all__ = [
     "FitChoices",
     "FittedEffect",
     "HoldoutCheck",
+    "NoiseMet",
     "ParameterEstimate",
     "PriorChoices",
     "WrenchBalanceResult",
@@ -243,6 +243,46 @@ class EstimationHistory:
 
 
 @dataclass(frozen=True)
+class NoiseMet:
+    """The noise the filter met on a flight: what a plan for the next flight of the vehicle
+    must expect of the estimator (``plan --noise-from``).
+
+    Attributes
+    ----------
+    position_sigma : float
+        Pose position σ the filter used, m.
+    attitude_sigma : float
+        Pose attitude σ the filter used, rad.
+    pose_rate : float
+        Pose samples per second it read, Hz.
+    force_density : float
+        White-noise density of the unmodelled force at the level fitted to the flight
+        (the configured one without refinement), N·√s.
+    moment_density : float
+        The same for the moment, N·m·√s.
+    """
+
+    position_sigma: float
+    attitude_sigma: float
+    pose_rate: float
+    force_density: float
+    moment_density: float
+
+    def applied_to(self, config: VehicleConfig) -> VehicleConfig:
+        """``config`` whose noise is this: pose σ and process-noise densities.
+
+        Parameters
+        ----------
+        config : VehicleConfig
+            The vehicle; its θ, geometry and limits are kept.
+        """
+        noise = replace(config.noise, position_sigma=self.position_sigma,
+                        attitude_sigma=self.attitude_sigma,
+                        force_density=self.force_density, moment_density=self.moment_density)
+        return replace(config, noise=noise)
+
+
+@dataclass(frozen=True)
 class EstimationResult:
     """Everything `estimate` reports.
 
@@ -299,6 +339,8 @@ class EstimationResult:
     filter_refusal : str or None
         Why the filter and batch could not answer (then ``filtered`` is the balance's θ and
         ``history`` is empty).
+    noise_met : NoiseMet or None
+        The noise the filter met on this flight; None where no filter ran.
     """
 
     prior: ParameterEstimate
@@ -320,6 +362,7 @@ class EstimationResult:
     mismatch: tuple[str, ...] = ()
     balance: Any = None
     filter_refusal: str | None = None
+    noise_met: NoiseMet | None = None
 
     @property
     def final(self) -> ParameterEstimate:
@@ -327,10 +370,6 @@ class EstimationResult:
         if self.answer is not None:
             return self.answer
         return self.refined if self.refined is not None else self.filtered
-
-
-#: Largest widened σ / |θ| of a determined parameter (module docstring).
-MAX_RELATIVE_SIGMA = 0.125
 
 
 #: The parts of σ, in the order of `DataTheta.parts`.
@@ -759,6 +798,8 @@ class Band:
         dt : float
             Sample interval, s.
         """
+        from scipy.signal import sosfiltfilt  # slow to import: only where filtered
+
         sos = _sos(self.low, self.high, dt)
         shape = x.shape
         flat = np.asarray(x, float).reshape(shape[0], -1)
@@ -771,6 +812,8 @@ class Band:
 
 @lru_cache(maxsize=64)
 def _sos(low: float, high: float, dt: float) -> np.ndarray:
+    from scipy.signal import butter
+
     nyquist = 0.5 / dt
     high = min(high, 0.95 * nyquist)
     if low > 0:

@@ -12,6 +12,8 @@ A plan robust to the prior (docs/evaluation.md):
    when ``estimate`` refuses it (the model cannot follow the opening: a diverged filter,
    a force balance that contradicts θ̂), the rest is planned from the belief the opening
    was planned from (`belief_after_opening`): as gentle as the opening, which flew;
+   otherwise the rest is planned for the noise the opening's filter met (its pose σ and
+   rate, the unmodelled force and moment it fitted: `mavsysid.pipeline.plan.for_noise_met`);
 3. plan the **rest** of the budget with θ̂ as the config's θ and Σ relative to θ̂
    (Σ_ij / (θ̂_i θ̂_j)) as ``PlannerSettings.prior_covariance``, starting at the hover where
    the opening ended;
@@ -34,8 +36,9 @@ from mavsysid.estimation import (
     load_flight,
 )
 from mavsysid.flight.offline.simulator import Simulator
+from mavsysid.pipeline.plan import for_noise_met
 from mavsysid.pipeline.replanned_stream import (
-    belief_after_opening,
+    opening_belief,
     prior_estimate,
     relative_covariance,
 )
@@ -181,12 +184,13 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     opening = plan_most_confident(prior, opening_settings(settings, prior, opening_budget)).result
     simulator.run(opening.trajectory, directory)
     # The estimate the stream's continuation would use (pipeline.replanned_stream).
-    posterior, refusal = belief_after_opening(
-        lambda: estimate(load_flight(directory / "pose.csv", prior), prior).final,
+    posterior, noise, refusal = opening_belief(
+        lambda: estimate(load_flight(directory / "pose.csv", prior), prior),
         prior_estimate(prior, settings))
-    later = rest_settings(settings, posterior, opening.trajectory)
     config = prior.with_parameters(posterior.value)
-    confident = plan_most_confident(config, later)
+    model, later = for_noise_met(config, rest_settings(settings, posterior, opening.trajectory),
+                                 noise)
+    confident = plan_most_confident(model, later)
     rest, later = confident.result, replace(later, rotor_confidence=confident.rotor_confidence)
     return ReplannedFlight(concatenate(opening.trajectory, rest.trajectory), opening, rest,
                            posterior, config, later, refusal)

@@ -23,15 +23,17 @@ from pathlib import Path
 
 from mavsysid.estimation import (
     EstimatorSettings,
+    NoiseMet,
     write_estimate_json,
 )
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.pipeline.estimate import EstimateRun, run_estimate
-from mavsysid.pipeline.plan import read_autopilot, run_plan
+from mavsysid.pipeline.plan import for_noise_met, read_autopilot, run_plan
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
 from mavsysid.planner.plan_file import write_trajectory
 from mavsysid.planner.plan_result import PlanResult
 from mavsysid.planner.settings import PlannerSettings
+from mavsysid.vehicle.config import load_vehicle
 
 from mavsysid.errors import JobFailedError
 
@@ -71,7 +73,8 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
                              estimator: EstimatorSettings | None = None,
                              say: Callable[[str], None] | None = None,
                              progress: bool = True,
-                             autopilot_model: bool = False) -> ExperimentOutcome:
+                             autopilot_model: bool = False,
+                             noise: NoiseMet | None = None) -> ExperimentOutcome:
     """Plan within the vehicle's limits, fly it on ``stream.connect``, estimate θ from its log.
 
     Parameters
@@ -93,6 +96,9 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
     autopilot_model : bool
         Also read the autopilot's loop parameters and plan on the flight it is predicted
         to fly (`PlannerSettings.autopilot`); else the setpoints count as flown exactly.
+    noise : NoiseMet, optional
+        Plan for the noise the estimator met on an earlier flight of the vehicle
+        (`mavsysid.pipeline.plan.for_noise_met`); the estimate itself uses the vehicle file.
 
     Returns
     -------
@@ -113,8 +119,9 @@ def run_autopilot_experiment(vehicle: str | Path, planner: PlannerSettings,
                               say, loop=autopilot_model)
     source = envelope.source
     say(f"planning within the limits of {source}")
-    plan = run_plan(vehicle, replace(planner, autopilot_limits=envelope.limits,
-                                     autopilot=envelope.loop), progress=progress)
+    model, planner = for_noise_met(load_vehicle(vehicle), planner, noise)
+    plan = run_plan(model, replace(planner, autopilot_limits=envelope.limits,
+                                   autopilot=envelope.loop), progress=progress)
     if plan.shortfall:
         say(f"warning: {plan.shortfall}")
     stream.log_dir.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,8 @@ the autopilot limits it plans within, from a parameter dump or read from the veh
 `preview_plan` is the look before a flight that ``mavsysid plan`` prints: the plan's peaks
 (speed, tilt, body rate, thrust) and the rotor saturation predicted by flying it on the
 offline simulator with the vehicle file's nominal θ. `with_margins` holds part of a
-vehicle's body-rate, yaw-acceleration and thrust envelope back from the planner.
+vehicle's body-rate, yaw-acceleration and thrust envelope back from the planner;
+`for_noise_met` sets its model to the noise the estimator met on a flight of the vehicle.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mavsysid.planner.plan_request import check_request
@@ -29,9 +31,12 @@ from mavsysid.vehicle.trajectory import Trajectory
 
 from mavsysid.errors import InputError, JobFailedError
 
+if TYPE_CHECKING:
+    from mavsysid.estimation.results import NoiseMet
+
 __all__ = ["SATURATION_WARNING", "AutopilotEnvelope", "PlanPreview", "ProgressCallback",
-           "autopilot_limits", "preview_plan", "progress_bar", "read_autopilot", "run_plan",
-           "with_margins"]
+           "autopilot_limits", "describe_noise", "for_noise_met", "preview_plan", "progress_bar",
+           "read_autopilot", "run_plan", "with_margins"]
 
 #: Predicted rotor saturation (share of control ticks) above which `plan` warns: beyond it
 #: the autopilot has no room to correct, and a vehicle whose θ differs saturates more.
@@ -238,6 +243,51 @@ def run_plan(
         p = last[0]
         raise JobFailedError(f"no feasible trajectory found in {p.elapsed:.1f} s "
                              f"({p.vertices} vertices, {p.edges} edges): {text}") from None
+
+
+def for_noise_met(config: VehicleConfig, settings: PlannerSettings, met: NoiseMet | None
+                  ) -> tuple[VehicleConfig, PlannerSettings]:
+    """The planner's model and settings for the estimator that will answer.
+
+    The planner predicts θ's covariance with the filter's own recursion; by default at the
+    vehicle file's noise (its ``[noise]`` pose σ and process-noise densities) and a pose at
+    `PlannerSettings.measurement_rate`. A flight of the vehicle tells what the filter
+    actually met: the pose σ it used, the pose's rate and the unmodelled force and moment
+    it fitted (`NoiseMet`, written by ``estimate`` as ``noise_met``). Planned at that noise,
+    the predicted σ is the one ``estimate`` reports on a like flight, and the plan weighs
+    what the estimator can resolve.
+
+    Parameters
+    ----------
+    config : VehicleConfig
+        The planner's vehicle.
+    settings : PlannerSettings
+    met : NoiseMet or None
+        The noise met on a flight of this vehicle; None leaves both unchanged.
+
+    Returns
+    -------
+    config : VehicleConfig
+        With ``met``'s pose σ and densities as its noise.
+    settings : PlannerSettings
+        With ``met``'s pose rate as the measurement rate.
+    """
+    if met is None:
+        return config, settings
+    return met.applied_to(config), replace(settings, measurement_rate=met.pose_rate)
+
+
+def describe_noise(met: NoiseMet) -> str:
+    """``met`` in words, one line (without the source).
+
+    Parameters
+    ----------
+    met : NoiseMet
+        The noise the estimator met on a flight.
+    """
+    return (f"pose σ {1000 * met.position_sigma:.3g} mm, {np.degrees(met.attitude_sigma):.3g}° "
+            f"at {met.pose_rate:.3g} Hz; unmodelled force {met.force_density:.3g} N·√s, "
+            f"moment {met.moment_density:.3g} N·m·√s")
 
 
 def with_margins(config: VehicleConfig, body_rate: float = 0.0,

@@ -14,8 +14,10 @@ opening's end:
    instead, whose reader turns SERVO_OUTPUT_RAW into rotor speeds through the vehicle's
    motor curve (`mavsysid.formats.tlog`), windowed from the same start (pose.csv and the
    tlog's pose share the vehicle's clock) (`opening_log`); a refused estimate leaves the
-   prior belief (`belief_after_opening`);
-2. plans the rest of the budget for ``config.with_parameters(θ̂)`` from the hover where the
+   prior belief (`belief_after_opening`); an accepted one also tells the noise its filter
+   met (pose σ and rate, the unmodelled force and moment fitted: `opening_belief`);
+2. plans the rest of the budget for ``config.with_parameters(θ̂)`` at that noise
+   (`mavsysid.pipeline.plan.for_noise_met`) from the hover where the
    opening ended (pulled in to the rotor clearance from the box's walls, as a plan's start
    must be, when the opening ended closer: `rest_start`; the streamer flies there first),
    with the posterior as the planner's prior: ``prior_covariance`` = Σ
@@ -38,13 +40,15 @@ import math
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from mavsysid.estimation import (
+    EstimationResult,
     EstimatorSettings,
+    NoiseMet,
     ParameterEstimate,
     estimate,
     load_flight,
@@ -53,6 +57,7 @@ from mavsysid.flight.ground.continuation import Continuation, FlightSoFar, NextS
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.formats.poselog import read_pose_log
 from mavsysid.formats.trajectory_file import read_trajectory
+from mavsysid.pipeline.plan import describe_noise, for_noise_met
 from mavsysid.pipeline.stream import StreamOutcome, run_stream
 from mavsysid.planner.plan_request import rotor_clearance
 from mavsysid.planner.robust_plan import plan_most_confident
@@ -65,6 +70,7 @@ __all__ = [
     "FEEDBACK_HEADROOM",
     "ReplanSettings",
     "belief_after_opening",
+    "opening_belief",
     "opening_log",
     "prior_estimate",
     "relative_covariance",
@@ -264,13 +270,44 @@ def rest_start(hover: tuple[float, ...], box: tuple[float, ...], config: Vehicle
     return (*(float(v) for v in position), float(hover[3]))
 
 
-def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> ParameterEstimate:
-    """θ̂ and Σ from the flight so far (the ``estimate`` pipeline, from the opening's start)."""
+def _estimate(so_far: FlightSoFar, settings: EstimatorSettings | None) -> EstimationResult:
+    """The estimate of the flight so far (the ``estimate`` pipeline, from the opening's
+    start)."""
     with tempfile.TemporaryDirectory(prefix="mavsysid-replan-") as tmp:
         log = opening_log(so_far, Path(tmp))
         flight = load_flight(log, so_far.config, start=so_far.window_start)
         source = so_far.pose if log.suffix == ".csv" else Path(so_far.directory) / log.name
-        return estimate(replace(flight, source=str(source)), so_far.config, settings).final
+        return estimate(replace(flight, source=str(source)), so_far.config, settings)
+
+
+def opening_belief(result: Callable[[], EstimationResult], prior: ParameterEstimate
+                   ) -> tuple[ParameterEstimate, NoiseMet | None, str | None]:
+    """`belief_after_opening` with the noise the opening's filter met.
+
+    Parameters
+    ----------
+    result : callable
+        Returns the opening's estimate, or raises `JobFailedError` to refuse.
+    prior : ParameterEstimate
+        The belief the opening was planned from.
+
+    Returns
+    -------
+    belief : ParameterEstimate
+    noise : NoiseMet or None
+        What the opening's filter met (None when refused or when no filter ran): the rest
+        is planned for it (`mavsysid.pipeline.plan.for_noise_met`).
+    refusal : str or None
+    """
+    met: list[NoiseMet | None] = [None]
+
+    def final() -> ParameterEstimate:
+        done = result()
+        met[0] = done.noise_met
+        return done.final
+
+    belief, refusal = belief_after_opening(final, prior)
+    return belief, (met[0] if refusal is None else None), refusal
 
 
 def replanning_continuation(settings: ReplanSettings,
@@ -294,7 +331,7 @@ def replanning_continuation(settings: ReplanSettings,
         if rest < settings.min_rest or so_far.segments > settings.rounds:
             return None
         began = time.monotonic()
-        estimate, refusal = belief_after_opening(
+        estimate, noise, refusal = opening_belief(
             lambda: _estimate(so_far, settings.estimator),
             prior_estimate(so_far.config, settings.planner))
         estimated = time.monotonic()
@@ -314,7 +351,11 @@ def replanning_continuation(settings: ReplanSettings,
                           prior_covariance=rel,
                           autopilot_limits=(so_far.autopilot_limits
                                             or settings.planner.autopilot_limits))
-        confident = plan_most_confident(so_far.config.with_parameters(estimate.value), planner)
+        if noise is not None:
+            say(f"the rest is planned for the noise the opening met: {describe_noise(noise)}")
+        model, planner = for_noise_met(so_far.config.with_parameters(estimate.value), planner,
+                                       noise)
+        confident = plan_most_confident(model, planner)
         plan, planner = confident.result, replace(
             planner, rotor_confidence=confident.rotor_confidence)
         planned = time.monotonic()
@@ -324,7 +365,8 @@ def replanning_continuation(settings: ReplanSettings,
         record: dict[str, Any] = {
             "estimate": {"theta": estimate.value.tolist(), "sigma": estimate.sigma.tolist(),
                          "covariance": estimate.covariance.tolist(),
-                         "from_flown_s": so_far.flown, "refused": refusal},
+                         "from_flown_s": so_far.flown, "refused": refusal,
+                         "noise_met": None if noise is None else asdict(noise)},
             "estimation_s": estimated - began, "planning_s": planned - estimated,
             "planner": {"budget": rest, "max_samples": planner.max_samples,
                         "planning_time": (planner.planning_time if math.isfinite(

@@ -29,6 +29,7 @@ __all__ = [
     "C_M",
     "C_T",
     "INERTIA",
+    "MAX_RELATIVE_SIGMA",
     "PAPER_THETA",
     "PARAMETER_NAMES",
     "PARAMETER_UNITS",
@@ -36,6 +37,11 @@ __all__ = [
     "QuantityTerm",
     "quantity_names",
 ]
+
+#: Largest σ / |θ| of a parameter of θ a flight determines: its 95 % interval about ±25 %,
+#: a fourfold narrowing of the tool's default prior. The estimate's answer
+#: (`mavsysid.estimation.results.parameter_status`) and the plan's expectation both use it.
+MAX_RELATIVE_SIGMA = 0.125
 
 
 class QuantityTerm:

@@ -46,6 +46,7 @@ from mavsysid.estimation.results import (
     PRIOR_RELATIVE_SIGMA,
     EstimationResult,
     FittedEffect,
+    NoiseMet,
     ParameterEstimate,
     convergence_time,
     prior_from_config,
@@ -260,9 +261,10 @@ def estimate_with_effects(
                                               state_sigma, ee, notes, settings.restart_diverged)
     state_sigma = flight_initial_state_sigma(flight, sigma)
     log_likelihood, refined = run.log_likelihood, None
+    densities = (config.noise.force_density, config.noise.moment_density)
     if settings.refine:
-        refined, log_likelihood = _refine(terms, run, fit, config, (prior, start), sigma,
-                                          state_sigma, notes)
+        refined, log_likelihood, densities = _refine(terms, run, fit, config, (prior, start),
+                                                     sigma, state_sigma, notes)
     increment = None if fit is None else fit.theta_covariance_increment()
     filtered, refined = (_with_increment(e, increment) for e in (run.estimate, refined))
     widening = None
@@ -282,6 +284,7 @@ def estimate_with_effects(
         log_likelihood=log_likelihood,
         equation_error=None if ee is None or effects else ee,
         mismatch_widening=widening,
+        noise_met=NoiseMet(sigma[0], sigma[1], flight.pose_rate, *densities),
     )
 
 
@@ -337,15 +340,15 @@ def _refine(
     terms: ModelTerms, unit_run: FilterRun, fit: EffectFit | None, config: VehicleConfig,
     priors: tuple[ParameterEstimate, ParameterEstimate], sigma: tuple[float, float],
     state_sigma: tuple[float, float, float, float], notes: list[str],
-) -> tuple[ParameterEstimate, float]:
+) -> tuple[ParameterEstimate, float, tuple[float, float]]:
     """Step 2: the process-noise level (the effect fit's, or fitted now) and the batch MAP.
 
     ``priors`` is (the MAP prior, the filter's start); ``unit_run`` the filter run on
     ``terms`` from that start at the configured noise (the noise fit's first point).
     Appends its notes to ``notes``;
-    returns the refined θ and the log-likelihood of the filter run at the fitted noise
-    level. A noise level at the upper edge of its search range is refused
-    (`JobFailedError`).
+    returns the refined θ, the log-likelihood of the filter run at the fitted noise
+    level and that level's force and moment densities (N·√s, N·m·√s). A noise level at
+    the upper edge of its search range is refused (`JobFailedError`).
     """
     prior, start_prior = priors
     if fit is not None:
@@ -377,7 +380,7 @@ def _refine(
         # filter's and replace it.
         notes.append("no batch refinement: it reads the pose alone, the filter read the IMU "
                      "too; the estimate is the filter's at the fitted process noise")
-        return start.estimate, start.log_likelihood
+        return start.estimate, start.log_likelihood, (nz.force_density, nz.moment_density)
     report_stage("batch refinement")
     flight, states, wrench = terms_r.flight, start.states, terms_r.wrench
     if len(flight.segment_starts) > 1:
@@ -393,7 +396,7 @@ def _refine(
                    ParameterEKF(noise_cfg, prior, sigma).model, prior, sigma, wrench=wrench)
     notes.append(f"batch refinement: {batch.iterations} iterations, cost "
                  f"{batch.cost_initial:.4g} → {batch.cost_final:.4g}")
-    return batch.estimate, start.log_likelihood
+    return batch.estimate, start.log_likelihood, (nz.force_density, nz.moment_density)
 
 
 def _closing_notes(flight: FlightData, sigma: tuple[float, float],

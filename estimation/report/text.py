@@ -13,6 +13,7 @@ numbers exactly.
 from __future__ import annotations
 
 import importlib.metadata
+import json
 import math
 import os
 from dataclasses import replace
@@ -25,13 +26,17 @@ from mavsysid.estimation.results import (
     CONVERGENCE_TOLERANCE,
     EstimationHistory,
     EstimationResult,
+    NoiseMet,
     ParameterEstimate,
 )
 from mavsysid.formats.flight_dir import write_json_atomic
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleConfig
 
-__all__ = ["HISTORY_COLUMNS", "format_table", "history_frame", "result_to_json",
-           "software_version", "updated_vehicle", "write_estimate_json", "write_history_csv"]
+from mavsysid.errors import InputError
+
+__all__ = ["HISTORY_COLUMNS", "format_table", "history_frame", "read_noise_met",
+           "result_to_json", "software_version", "updated_vehicle", "write_estimate_json",
+           "write_history_csv"]
 
 
 _POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
@@ -309,9 +314,11 @@ def result_to_json(
         in the order of ``parameter_names``: θ, then any nuisance quantities, which
         ``nuisance`` holds as `_nuisance_block` says),
         ``parameter_names``, ``log``, ``vehicle``, ``pose_source``,
-        ``measurement_sigma`` (``position_m``, ``attitude_rad``), ``notes`` and
-        ``software`` (``name``, ``version``). With the per-parameter answer
-        (`mavsysid.estimation.answer`), each entry of ``parameters`` adds
+        ``measurement_sigma`` (``position_m``, ``attitude_rad``), ``noise_met`` (what the
+        filter met: ``position_m``, ``attitude_rad``, ``pose_rate_hz``,
+        ``force_density``, ``moment_density``; None where no filter ran: what ``plan
+        --noise-from`` reads), ``notes`` and ``software`` (``name``, ``version``). With
+        the per-parameter answer (`mavsysid.estimation.answer`), each entry of ``parameters`` adds
         ``status`` ("determined", "not determined by this flight", "at the bound") and
         ``source`` ("filter", "balance", "prior"); ``balance`` is the force and torque
         balance (`WrenchBalanceResult.as_dict`) or None, ``holdout`` its held-out check
@@ -350,9 +357,22 @@ def result_to_json(
         "pose_source": result.pose_source,
         "measurement_sigma": {"position_m": _number(position_sigma),
                               "attitude_rad": _number(attitude_sigma)},
+        "noise_met": _noise_met(result),
         "notes": list(result.notes),
         "software": {"name": "mavsysid", "version": software_version()},
     }
+
+
+def _noise_met(result: EstimationResult) -> dict | None:
+    """The noise the filter met on the flight, or None where no filter ran."""
+    met = result.noise_met
+    if met is None or result.filter_refusal is not None:
+        return None
+    return {"position_m": _number(met.position_sigma),
+            "attitude_rad": _number(met.attitude_sigma),
+            "pose_rate_hz": _number(met.pose_rate),
+            "force_density": _number(met.force_density),
+            "moment_density": _number(met.moment_density)}
 
 
 def write_estimate_json(
@@ -363,6 +383,49 @@ def write_estimate_json(
     A reader sees the previous file or the complete new one, never a partial write.
     """
     write_json_atomic(path, result_to_json(result, config, log_path))
+
+
+_NOISE_MET_KEYS = ("position_m", "attitude_rad", "pose_rate_hz", "force_density",
+                   "moment_density")
+
+
+def read_noise_met(path: str | Path) -> NoiseMet:
+    """The noise the filter met on a flight, from its ``estimate.json``.
+
+    Parameters
+    ----------
+    path : str or Path
+        An ``estimate.json`` written by `write_estimate_json`, or the flight directory
+        holding one (``mavsysid experiment`` writes it there).
+
+    Raises
+    ------
+    InputError
+        No such file, not an estimate, or one without the noise (written before the filter
+        recorded it, or one whose filter could not follow the flight): one line.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "estimate.json"
+    hint = f"run `mavsysid estimate LOG -o {path}` on the flight first"
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such estimate; {hint}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise InputError(f"{path}: not a readable estimate.json ({type(error).__name__})") \
+            from None
+    met = document.get("noise_met") if isinstance(document, dict) else None
+    if not isinstance(met, dict):
+        raise InputError(f"{path}: holds no noise_met (its filter did not follow the flight, "
+                         f"or an older mavsysid wrote it); {hint}")
+    values = [met.get(key) for key in _NOISE_MET_KEYS]
+    bad = [k for k, v in zip(_NOISE_MET_KEYS, values, strict=True)
+           if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0
+           or (v == 0 and k in ("position_m", "attitude_rad", "pose_rate_hz"))]
+    if bad:
+        raise InputError(f"{path}: noise_met.{bad[0]}: a positive number, got {met.get(bad[0])!r}")
+    return NoiseMet(*(float(v) for v in values))
 
 
 def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleConfig:

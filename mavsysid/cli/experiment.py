@@ -20,6 +20,7 @@ from pathlib import Path
 from mavsysid.cli.options import (
     LINK_TIMEOUTS,
     add_link_arguments,
+    add_noise_argument,
     allow_negative_values,
     parse_numbers,
     require_imbalance,
@@ -31,6 +32,7 @@ from mavsysid.errors import InputError
 from mavsysid.estimation import (
     EstimatorSettings,
     format_table,
+    read_noise_met,
 )
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
@@ -80,6 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "parameters and plan on the flight its closed loop is predicted to "
                         "fly from the setpoints (default: the setpoints count as flown "
                         "exactly)")
+    add_noise_argument(parser)
     add_link_arguments(parser)
     parser.add_argument("--prior-sigma", type=float,
                         default=EstimatorSettings.prior_relative_sigma, metavar="REL",
@@ -175,9 +178,10 @@ def main(args: argparse.Namespace) -> int:
         if verbose or text.startswith("warning:"):
             print(f"mavsysid experiment: {text}", file=sys.stderr, flush=True)
 
+    noise = None if args.noise_from is None else read_noise_met(args.noise_from)
     outcome = run_autopilot_experiment(
         args.vehicle, planner, stream, EstimatorSettings(prior_relative_sigma=args.prior_sigma),
-        say, progress=verbose, autopilot_model=args.autopilot_model)
+        say, progress=verbose, autopilot_model=args.autopilot_model, noise=noise)
     if args.report is not None and outcome.estimate is not None:
         from mavsysid.estimation import write_estimate_report  # matplotlib: slow
 

@@ -11,9 +11,20 @@ from pathlib import Path
 from mavsysid.errors import InputError
 from mavsysid.planner.settings import PlannerSettings
 
-__all__ = ["DEFAULT_BOX", "LINK_TIMEOUTS", "OUTPUT_OPTION", "add_link_arguments",
-           "add_log_arguments", "add_output_folder", "add_window_arguments",
-           "allow_negative_values", "parse_numbers", "require_imbalance", "require_positive"]
+__all__ = [
+    "DEFAULT_BOX",
+    "LINK_TIMEOUTS",
+    "OUTPUT_OPTION",
+    "add_link_arguments",
+    "add_log_arguments",
+    "add_noise_argument",
+    "add_output_folder",
+    "add_window_arguments",
+    "allow_negative_values",
+    "parse_numbers",
+    "require_imbalance",
+    "require_positive",
+]
 
 #: The one name of the output-folder option of every command that writes a folder.
 OUTPUT_OPTION = "--log-dir"
@@ -40,6 +51,21 @@ def add_log_arguments(parser: argparse.ArgumentParser, kinds: str) -> None:
 #: The positive options of `add_link_arguments` (argparse destinations).
 LINK_TIMEOUTS = ("speedup", "heartbeat_timeout", "prearm_timeout", "position_timeout",
                  "max_tracking_error")
+
+
+def add_noise_argument(parser: argparse.ArgumentParser) -> None:
+    """``--noise-from``, shared by ``plan`` and ``experiment``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The subcommand's parser; the option is added to it in place.
+    """
+    parser.add_argument("--noise-from", type=Path, metavar="FLIGHT",
+                        help="plan for the noise the estimator met on an earlier flight of "
+                        "this vehicle: its estimate.json, or the flight directory holding "
+                        "one (pose σ and rate, fitted unmodelled force and moment; default: "
+                        "the vehicle file's [noise] and a 100 Hz pose)")
 
 
 def add_link_arguments(parser: argparse.ArgumentParser) -> None:

@@ -17,12 +17,19 @@ from pathlib import Path
 
 import numpy as np
 
-from mavsysid.cli.options import DEFAULT_BOX, allow_negative_values, parse_numbers
+from mavsysid.cli.options import (
+    DEFAULT_BOX,
+    add_noise_argument,
+    allow_negative_values,
+    parse_numbers,
+)
 from mavsysid.errors import InputError
 from mavsysid.formats.setpoints_csv import write_setpoints_csv
 from mavsysid.pipeline.plan import (
     SATURATION_WARNING,
     PlanPreview,
+    describe_noise,
+    for_noise_met,
     preview_plan,
     read_autopilot,
     run_plan,
@@ -32,6 +39,7 @@ from mavsysid.planner.plan_file import write_trajectory
 from mavsysid.planner.plan_result import BUSY_CORE_SHARE, PlanResult
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, load_vehicle
+from mavsysid.vehicle.parameters import MAX_RELATIVE_SIGMA
 
 __all__ = ["DEFAULT_ROTOR_HEADROOM", "add_arguments", "format_preview", "format_summary", "main",
            "next_step", "saturation_warning"]
@@ -60,12 +68,13 @@ def format_summary(result: PlanResult, written: dict[str, Path], verbosity: int 
         f"  predicted  D-opt {result.predicted_dopt:.4g} (det Σθ^(1/6), SI)",
     ]
     final = np.sqrt(np.clip(np.diag(np.asarray(result.predicted_covariance)), 0.0, None))
-    rows = [["parameter", "unit", "nominal", "prior σ", "final σ", "σ/|θ| %"]]
+    rows = [["parameter", "unit", "nominal", "prior σ", "final σ", "σ/|θ| %", "expected"]]
     for j, name in enumerate(PARAMETER_NAMES):
         nominal = abs(float(config.theta[j]))
         rows.append([name, PARAMETER_UNITS[name], f"{config.theta[j]:.3e}",
                      f"{s.prior_relative_sigma * nominal:.2e}", f"{final[j]:.2e}",
-                     f"{100.0 * final[j] / nominal:.3g}" if nominal else "n/a"])
+                     f"{100.0 * final[j] / nominal:.3g}" if nominal else "n/a",
+                     _expected(final[j], nominal)])
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines += ["    " + "  ".join(c.ljust(w) if i < 2 else c.rjust(w)
                                  for i, (c, w) in enumerate(zip(r, widths, strict=True)))
@@ -152,6 +161,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--signing-key", type=Path, metavar="FILE",
                         help="MAVLink 2 signing for --connect LINK: a file holding the "
                         "passphrase")
+    add_noise_argument(parser)
     parser.add_argument("--random", action="store_true",
                         help="the paper's random baseline instead of the informative planner")
     parser.add_argument("-o", "--output", type=Path, default=Path("trajectory.json"),
@@ -161,6 +171,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "at 100 Hz")
     parser.add_argument("--rrd", type=Path, metavar="FILE",
                         help="also write a Rerun recording of the plan")
+
+
+def _expected(sigma: float, nominal: float) -> str:
+    """What ``estimate`` is predicted to say of a parameter: determined where its σ is
+    within `MAX_RELATIVE_SIGMA` of its value (``estimate``'s rule)."""
+    if not nominal:
+        return "n/a"
+    return "determined" if sigma <= MAX_RELATIVE_SIGMA * nominal else "not determined"
 
 
 def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSettings:
@@ -223,6 +241,13 @@ def main(args: argparse.Namespace) -> int:
             raise InputError(f"{path}: is a directory; expected a file name to write")
     config = with_margins(load_vehicle(args.vehicle), args.body_rate_margin,
                           args.yaw_acceleration_margin, args.thrust_margin)
+    if args.noise_from is not None:
+        from mavsysid.estimation import read_noise_met  # the estimator loads slowly
+
+        met = read_noise_met(args.noise_from)
+        config, settings = for_noise_met(config, settings, met)
+        say(f"planning for the noise the estimator met on {args.noise_from}: "
+            f"{describe_noise(met)}")
     result = run_plan(config, settings, random=args.random, progress=args.verbosity >= 0,
                       say=say)
     if result.shortfall:  # even with -q: the flight is not the one asked for

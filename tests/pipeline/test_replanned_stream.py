@@ -6,11 +6,12 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from mavsysid.estimation.readers import load_flight
-from mavsysid.estimation.results import ParameterEstimate
+from mavsysid.estimation.results import NoiseMet, ParameterEstimate
 from mavsysid.flight.ground.continuation import FlightSoFar
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.loopback_ports import free_udp_port
@@ -23,6 +24,7 @@ from mavsysid.formats.trajectory_file import trajectory_file_for, write_trajecto
 from mavsysid.pipeline.replanned_stream import (
     ReplanSettings,
     belief_after_opening,
+    opening_belief,
     opening_log,
     prior_estimate,
     relative_covariance,
@@ -246,3 +248,17 @@ def test_default_prior_estimate_is_the_settings_relative_sigma():
     est = prior_estimate(config, PlannerSettings(prior_relative_sigma=0.3))
     np.testing.assert_allclose(est.relative_sigma, 0.3, rtol=1e-12)
     assert np.count_nonzero(est.covariance - np.diag(np.diag(est.covariance))) == 0
+
+
+def test_the_opening_belief_carries_the_noise_its_filter_met():
+    """An accepted opening gives its final estimate and its noise; a refused one neither."""
+    estimate = _random_estimate(np.random.default_rng(5))
+    prior = _random_estimate(np.random.default_rng(6))
+    met = NoiseMet(0.05, 0.02, 50.0, 0.3, 0.004)
+    result = SimpleNamespace(final=estimate, noise_met=met)
+    assert opening_belief(lambda: result, prior) == (estimate, met, None)
+
+    def refused():
+        raise JobFailedError("the filter diverged")
+
+    assert opening_belief(refused, prior) == (prior, None, "the filter diverged")
