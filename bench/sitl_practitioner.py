@@ -19,7 +19,8 @@ smaller is better), and per parameter the error against the SITL reference
 (docs/vehicles/sitl_quad.md) with the status ``estimate`` gives it.
 
     nice python bench/sitl_practitioner.py --kinds planned practitioner --seeds 1 2 3 \\
-        --work DIR [--budget 20] [--samples 200] [--refine-steps 300]
+        --work DIR [--budget 20] [--samples 200] [--refine-steps 300 | --time 30]
+        [--noise-from FLIGHT] [--autopilot-model]
     python bench/sitl_practitioner.py --report DIR      # the table of what DIR holds
 """
 
@@ -51,12 +52,15 @@ def fly_planned(connect: str, seed: int, args: argparse.Namespace, logs: Path) -
     """``mavsysid experiment`` on the vehicle at ``connect``; its whole output."""
     from mavsysid.planner.settings import PlannerSettings
 
+    planning = (["--time", f"{args.time:g}"] if args.time else
+                ["--samples", str(args.samples), "--refine-steps", str(args.refine_steps)])
+    extra = (["--noise-from", str(args.noise_from)] if args.noise_from else []) + (
+        ["--autopilot-model"] if args.autopilot_model else [])
     done = subprocess.run(
         [sys.executable, "-m", "mavsysid", "experiment", "--connect", connect,
-         "--vehicle", "sitl_quad", "--budget", f"{args.budget:g}", "--samples",
-         str(args.samples), "--refine-steps", str(args.refine_steps), "--seed", str(seed),
-         "--box", box_text(PlannerSettings.box), "--prearm-timeout", "300",
-         "--log-dir", str(logs)], capture_output=True, text=True, check=False)
+         "--vehicle", "sitl_quad", "--budget", f"{args.budget:g}", *planning, *extra,
+         "--seed", str(seed), "--box", box_text(PlannerSettings.box), "--prearm-timeout",
+         "300", "--log-dir", str(logs)], capture_output=True, text=True, check=False)
     return f"exit {done.returncode}\n{done.stdout}{done.stderr}"
 
 
@@ -143,6 +147,14 @@ def main() -> None:
     parser.add_argument("--budget", type=float, default=20.0)
     parser.add_argument("--samples", type=int, default=200)
     parser.add_argument("--refine-steps", type=int, default=300)
+    parser.add_argument("--time", type=float,
+                        help="plan for this wall time instead of --samples/--refine-steps "
+                        "(the planner's default is 30 s)")
+    parser.add_argument("--noise-from", type=Path, metavar="FLIGHT",
+                        help="planned: plan for the noise the estimator met on FLIGHT "
+                        "(`experiment --noise-from`)")
+    parser.add_argument("--autopilot-model", action="store_true",
+                        help="planned: plan on the flight SITL's loop is predicted to fly")
     parser.add_argument("--work", type=Path, help="where the flights go")
     parser.add_argument("--report", type=Path, help="only tabulate the flights in this folder")
     args = parser.parse_args()
