@@ -9,8 +9,9 @@ the vehicle file's θ and prior σ, for three noise models:
 
 * ``file``: the vehicle file's ``[noise]`` and a 100 Hz pose (what ``plan`` assumes by
   default);
-* ``other``: the noise the estimator met on *another* of the flights given (the next one,
-  cyclically): what ``plan --noise-from`` on an earlier flight of the vehicle gives;
+* ``others``: the noise the estimator met on the *other* flights given (the median of each
+  quantity, `NoiseMet.median`): what ``plan --noise-from`` on earlier flights of the
+  vehicle gives;
 * ``own``: the noise met on this flight itself (in-sample: the best the noise model can do).
 
 Reported per flight and model: reached σ / predicted σ per parameter, where the reached σ is
@@ -33,7 +34,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-MODELS = ("file", "other", "own")
+MODELS = ("file", "others", "own")
 
 
 def predicted(config, trajectory, loop, met) -> np.ndarray:
@@ -58,7 +59,7 @@ def reached(flight: Path) -> tuple[np.ndarray, list[str], list[str]]:
 
 def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]:
     """One row per flight: reached/predicted per model, expectations and statuses."""
-    from mavsysid.estimation import read_noise_met
+    from mavsysid.estimation import NoiseMet, read_noise_met
     from mavsysid.formats.parameter_file import read_parameter_file
     from mavsysid.formats.trajectory_file import read_trajectory
     from mavsysid.vehicle.autopilot_loop import AutopilotLoop
@@ -75,8 +76,8 @@ def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]
         sigma, status, source = reached(flight)
         row = {"flight": str(flight), "status": status, "source": source,
                "reached_rel": (sigma / config.theta).tolist()}
-        for model, met in zip(MODELS, (None, mets[(i + 1) % len(flights)], mets[i]),
-                              strict=True):
+        others = NoiseMet.median(mets[:i] + mets[i + 1:]) if len(mets) > 1 else None
+        for model, met in zip(MODELS, (None, others, mets[i]), strict=True):
             pred = predicted(config, trajectory, loop, met)
             row[model] = {"ratio": (sigma / pred).tolist(),
                           "predicted_rel": (pred / config.theta).tolist(),
@@ -98,7 +99,7 @@ def print_row(row: dict) -> None:
     for model in MODELS:
         cells = "  ".join(f"{n} {r:6.2f}{'' if e else '~'}" for n, r, e in zip(
             PARAMETER_NAMES, row[model]["ratio"], row[model]["expected"], strict=True))
-        print(f"  {model:5s} reached/pred  {cells}")
+        print(f"  {model:6s} reached/pred  {cells}")
     print("  (* not determined: the prior's σ; ~ the plan expected it not determined)",
           flush=True)
 

@@ -54,7 +54,7 @@ def fly_planned(connect: str, seed: int, args: argparse.Namespace, logs: Path) -
 
     planning = (["--time", f"{args.time:g}"] if args.time else
                 ["--samples", str(args.samples), "--refine-steps", str(args.refine_steps)])
-    extra = (["--noise-from", str(args.noise_from)] if args.noise_from else []) + (
+    extra = (["--noise-from", *map(str, args.noise_from)] if args.noise_from else []) + (
         ["--autopilot-model"] if args.autopilot_model else [])
     done = subprocess.run(
         [sys.executable, "-m", "mavsysid", "experiment", "--connect", connect,
@@ -150,7 +150,7 @@ def main() -> None:
     parser.add_argument("--time", type=float,
                         help="plan for this wall time instead of --samples/--refine-steps "
                         "(the planner's default is 30 s)")
-    parser.add_argument("--noise-from", type=Path, metavar="FLIGHT",
+    parser.add_argument("--noise-from", type=Path, nargs="+", metavar="FLIGHT",
                         help="planned: plan for the noise the estimator met on FLIGHT "
                         "(`experiment --noise-from`)")
     parser.add_argument("--autopilot-model", action="store_true",

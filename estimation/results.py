@@ -15,7 +15,8 @@ when its σ is as much narrower than its prior's. The prior itself: `prior_from_
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import astuple, dataclass, replace
 from functools import lru_cache
 from typing import Any, Protocol
 
@@ -267,6 +268,21 @@ class NoiseMet:
     pose_rate: float
     force_density: float
     moment_density: float
+
+    @classmethod
+    def median(cls, mets: Sequence[NoiseMet]) -> NoiseMet:
+        """Each quantity's median over several flights' noise: the level a next flight meets
+        (the fitted level varies from flight to flight, even on one trajectory).
+
+        Parameters
+        ----------
+        mets : sequence of NoiseMet
+            At least one.
+        """
+        if not mets:
+            raise ValueError("no noise to take the median of")
+        values = np.median([astuple(m) for m in mets], axis=0)
+        return cls(*(float(v) for v in values))
 
     def applied_to(self, config: VehicleConfig) -> VehicleConfig:
         """``config`` whose noise is this: pose σ and process-noise densities.

@@ -61,11 +61,12 @@ def add_noise_argument(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The subcommand's parser; the option is added to it in place.
     """
-    parser.add_argument("--noise-from", type=Path, metavar="FLIGHT",
-                        help="plan for the noise the estimator met on an earlier flight of "
-                        "this vehicle: its estimate.json, or the flight directory holding "
-                        "one (pose σ and rate, fitted unmodelled force and moment; default: "
-                        "the vehicle file's [noise] and a 100 Hz pose)")
+    parser.add_argument("--noise-from", type=Path, nargs="+", metavar="FLIGHT",
+                        help="plan for the noise the estimator met on earlier flights of "
+                        "this vehicle: each an estimate.json, or the flight directory "
+                        "holding one (pose σ and rate, fitted unmodelled force and moment; "
+                        "the median over several; default: the vehicle file's [noise] and "
+                        "a 100 Hz pose)")
 
 
 def add_link_arguments(parser: argparse.ArgumentParser) -> None:

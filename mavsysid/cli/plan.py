@@ -242,12 +242,13 @@ def main(args: argparse.Namespace) -> int:
     config = with_margins(load_vehicle(args.vehicle), args.body_rate_margin,
                           args.yaw_acceleration_margin, args.thrust_margin)
     if args.noise_from is not None:
-        from mavsysid.estimation import read_noise_met  # the estimator loads slowly
+        from mavsysid.estimation import NoiseMet, read_noise_met  # loads slowly
 
-        met = read_noise_met(args.noise_from)
+        met = NoiseMet.median([read_noise_met(path) for path in args.noise_from])
         config, settings = for_noise_met(config, settings, met)
-        say(f"planning for the noise the estimator met on {args.noise_from}: "
-            f"{describe_noise(met)}")
+        where = ", ".join(str(p) for p in args.noise_from)
+        say(f"planning for the noise the estimator met on {where}"
+            f"{' (median)' if len(args.noise_from) > 1 else ''}: {describe_noise(met)}")
     result = run_plan(config, settings, random=args.random, progress=args.verbosity >= 0,
                       say=say)
     if result.shortfall:  # even with -q: the flight is not the one asked for

@@ -183,24 +183,30 @@ def test_real_plan_is_deterministic(tmp_path):
 
 def test_noise_from_plans_at_the_noise_the_estimator_met(tmp_path, capsys, fake_planner,
                                                           monkeypatch):
-    """--noise-from: the planner's model carries the flight's pose σ and densities, its
-    measurement rate the pose's rate; the summary says what each σ is expected to give."""
+    """--noise-from: the planner's model carries the flights' pose σ and densities (the
+    median over several), its measurement rate the pose's rate; the summary says what each
+    σ is expected to give."""
     met = {"position_m": 0.05, "attitude_rad": 0.0175, "pose_rate_hz": 30.0,
            "force_density": 0.3, "moment_density": 0.004}
     (tmp_path / "estimate.json").write_text(json.dumps({"noise_met": met}))
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"noise_met": {**met, "force_density": 0.5}}))
+    third = tmp_path / "third.json"
+    third.write_text(json.dumps({"noise_met": {**met, "force_density": 0.2}}))
     rrbt = sys.modules["mavsysid.planner.rrbt"]
     configs = []
     made = rrbt.plan
     monkeypatch.setattr(rrbt, "plan", lambda config, *a, **k: configs.append(config)
                         or made(config, *a, **k))
     out = tmp_path / "t.json"
-    assert main(["plan", "--noise-from", str(tmp_path), "--samples", "40", "-o", str(out)]) == 0
+    assert main(["plan", "--noise-from", str(tmp_path), str(other), str(third), "--samples",
+                 "40", "-o", str(out)]) == 0
     captured = capsys.readouterr()
     (noise,) = (c.noise for c in configs)
     assert (noise.position_sigma, noise.attitude_sigma) == (0.05, 0.0175)
     assert (noise.force_density, noise.moment_density) == (0.3, 0.004)
     assert fake_planner[0][1].measurement_rate == 30.0
-    assert "planning for the noise the estimator met" in captured.err
+    assert "planning for the noise the estimator met" in captured.err and "(median)" in captured.err
     assert "expected" in captured.out and "determined" in captured.out
 
 

@@ -113,3 +113,12 @@ def test_an_unusable_estimate_is_refused_in_one_line(tmp_path, content, fragment
         read_noise_met(tmp_path)
     message = str(refused.value)
     assert fragment in message and str(path) in message and "\n" not in message
+
+
+def test_the_median_noise_of_several_flights_is_each_quantitys_median():
+    mets = [NoiseMet(0.05, 0.02, 50.0, 0.3, 0.003), NoiseMet(0.04, 0.03, 30.0, 0.5, 0.002),
+            NoiseMet(0.06, 0.01, 40.0, 0.2, 0.004)]
+    assert NoiseMet.median(mets) == NoiseMet(0.05, 0.02, 40.0, 0.3, 0.003)
+    assert NoiseMet.median(mets[:1]) == mets[0]
+    with pytest.raises(ValueError):
+        NoiseMet.median([])
