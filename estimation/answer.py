@@ -634,9 +634,11 @@ def _answered(result: EstimationResult | None, filter_refusal: str | None,
     if result is None:
         notes.append(f"the filter and batch could not follow this flight ({filter_refusal}); "
                      "the answer is the force and torque balance's")
-        result = balance_only_result(
-            balance, prior, (config.noise.position_sigma, config.noise.attitude_sigma),
-            flight.pose_source, flight.true_theta, tuple(flight.warnings))
+        # The σ the refused filter used (an autopilot's pose: the larger assumed one).
+        sigma = (refused.measurement_sigma if refused is not None
+                 else (config.noise.position_sigma, config.noise.attitude_sigma))
+        result = balance_only_result(balance, prior, sigma, flight.pose_source,
+                                     flight.true_theta, tuple(flight.warnings))
     result = replace(result, prior=prior)
     if mismatch:
         notes.append("the filter and the force and torque balance disagree on "

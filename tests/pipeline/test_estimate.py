@@ -4,14 +4,16 @@ before anything is written, and answers per parameter from the balance and the f
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
 import mavsysid.estimation.answer as answer
 import numpy as np
 import pytest
+from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.report.text import result_to_json
-from mavsysid.estimation.results import Z95
+from mavsysid.estimation.results import Z95, ParameterEstimate
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
 from mavsysid.pipeline import estimate as estimate_job
@@ -136,3 +138,20 @@ def test_filter_and_balance_agree_on_a_clean_flight(simulated_log: Path) -> None
     final = result.final.theta
     assert determined[0]
     assert np.all(np.abs(final.value - truth)[determined] <= Z95 * final.sigma[determined])
+
+
+def test_a_refused_filters_measurement_sigma_is_the_one_reported(simulated_log: Path) -> None:
+    """Where the filter ran and was refused (a negative c_T here), the answer names the
+    pose σ that filter used, not the vehicle file's."""
+    def refused_filter(flight, config, settings=None, reference=None):
+        result = estimate_parameters(flight, config, settings, reference)
+        final = result.final
+        value = final.value.copy()
+        value[0] = -value[0]
+        return replace(result, refined=None, measurement_sigma=(0.05, 0.02),
+                       filtered=ParameterEstimate(value, final.covariance, final.names))
+
+    run = estimate_job.run_estimate(simulated_log, simulated_log.parent / "prior.toml",
+                                    filter_estimate=refused_filter)
+    assert run.result.filter_refusal is not None
+    assert run.result.measurement_sigma == (0.05, 0.02)
