@@ -57,9 +57,21 @@ def reached(flight: Path) -> tuple[np.ndarray, list[str], list[str]]:
             [answer[n]["source"] for n in PARAMETER_NAMES])
 
 
+def noise_of(flight: Path):
+    """The noise the filter met on ``flight``, or None where its filter was refused."""
+    from mavsysid.estimation import read_noise_met
+
+    from mavsysid.errors import InputError
+
+    try:
+        return read_noise_met(flight)
+    except InputError:
+        return None
+
+
 def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]:
     """One row per flight: reached/predicted per model, expectations and statuses."""
-    from mavsysid.estimation import NoiseMet, read_noise_met
+    from mavsysid.estimation import NoiseMet
     from mavsysid.formats.parameter_file import read_parameter_file
     from mavsysid.formats.trajectory_file import read_trajectory
     from mavsysid.vehicle.autopilot_loop import AutopilotLoop
@@ -69,15 +81,19 @@ def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]
     config = load_vehicle(vehicle)
     loop = (None if loop_file is None else
             AutopilotLoop.from_parameters("ardupilot", read_parameter_file(loop_file)))
-    mets = [read_noise_met(f) for f in flights]
+    mets = [noise_of(f) for f in flights]
     rows = []
     for i, flight in enumerate(flights):
         trajectory = read_trajectory(flight / "trajectory.json").trajectory
         sigma, status, source = reached(flight)
         row = {"flight": str(flight), "status": status, "source": source,
                "reached_rel": (sigma / config.theta).tolist()}
-        others = NoiseMet.median(mets[:i] + mets[i + 1:]) if len(mets) > 1 else None
+        known = [m for j, m in enumerate(mets) if j != i and m is not None]
+        others = NoiseMet.median(known) if known else None
         for model, met in zip(MODELS, (None, others, mets[i]), strict=True):
+            if model != "file" and met is None:
+                row[model] = None  # no filter ran on the flight(s): no noise met
+                continue
             pred = predicted(config, trajectory, loop, met)
             row[model] = {"ratio": (sigma / pred).tolist(),
                           "predicted_rel": (pred / config.theta).tolist(),
@@ -97,6 +113,9 @@ def print_row(row: dict) -> None:
         f"{n} {100 * r:6.2f}{'' if s == 'determined' else '*'}"
         for n, r, s in zip(PARAMETER_NAMES, row["reached_rel"], row["status"], strict=True)))
     for model in MODELS:
+        if row[model] is None:
+            print(f"  {model:6s} no noise met (the filter was refused)")
+            continue
         cells = "  ".join(f"{n} {r:6.2f}{'' if e else '~'}" for n, r, e in zip(
             PARAMETER_NAMES, row[model]["ratio"], row[model]["expected"], strict=True))
         print(f"  {model:6s} reached/pred  {cells}")

@@ -109,7 +109,8 @@ def flight_row(logs: Path) -> dict | None:
     if not flights or not (flights[0] / "estimate.json").is_file():
         return None
     answer = json.loads((flights[0] / "estimate.json").read_text())
-    covariance = np.asarray(answer["covariance"], dtype=float)
+    six = len(PARAMETER_NAMES)  # θ's block: nuisance quantities follow it
+    covariance = np.asarray(answer["covariance"], dtype=float)[:six, :six]
     sign, logdet = np.linalg.slogdet(covariance)
     row = {"duration": json.loads((flights[0] / "trajectory.json").read_text())["duration"],
            "dopt": float(np.exp(logdet / 6)) if sign > 0 else float("nan"), "params": {}}
