@@ -10,7 +10,8 @@ gyroscopic term, as SITL integrates ω̇ = τ / J per axis), and estimated as ``
 estimate`` does (`mavsysid.pipeline.estimate.run_estimate` on the flight's ``pose.csv``).
 Reported: D-opt det(Σθ)^(1/6) of the answer (a parameter not determined at its prior σ)
 and of the filter's run at the configured noise (what the plan predicts), the process-noise
-level the estimate fitted to the flight (× the configured densities),
+level the estimate fitted to the flight (× the configured densities), the RMS rate of
+change of the rotor speeds each flight asks for,
 and per parameter the error, "!" where the truth lies outside value ± 1.96 σ, and "—"
 where it is not determined.
 
@@ -43,6 +44,16 @@ class WithoutGyroscopic(TruthEffect):
     def wrench(self, t, x, n):
         w = np.asarray(x[10:13], dtype=float)
         return np.zeros(3), np.cross(w, self.inertia * w)
+
+
+def rotor_rate_rms(trajectory, config) -> float:
+    """RMS rate of change of the rotor speeds the trajectory asks for (flatness), rad/s²."""
+    from mavsysid.vehicle.flatness import flat_to_state
+
+    t = np.arange(0.0, trajectory.duration, 0.002)
+    n = np.sqrt(np.clip(flat_to_state(trajectory.flat_outputs(t), config)
+                        .rotor_speeds_squared, 0.0, None))
+    return float(np.sqrt(np.mean(np.gradient(n, t, axis=0) ** 2)))
 
 
 def fly_and_estimate(trajectory, config, world: str, seed: int, directory: Path) -> dict:
@@ -92,6 +103,9 @@ def main() -> None:
                                    refine_steps=100_000 if args.time else 300)
         flights = {"planned": plan(config, settings).trajectory,
                    "practitioner": practitioner_excitation(config, settings).trajectory}
+        for kind, trajectory in flights.items():
+            rate = rotor_rate_rms(trajectory, config)
+            print(f"seed {seed} {kind:12s} rotor-speed rate {rate:.1f} rad/s² RMS", flush=True)
         for world in ("full", "no-gyro"):
             for kind, trajectory in flights.items():
                 with tempfile.TemporaryDirectory() as tmp:
