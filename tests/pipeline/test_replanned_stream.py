@@ -75,6 +75,10 @@ def test_opening_then_replanned_rest_in_one_flight(tmp_path):
     theta = np.array(rest["estimate"]["theta"])
     sigma = np.array(rest["estimate"]["sigma"])
     assert np.all(np.isfinite(theta)) and np.all(sigma < 0.5 * theta)  # narrower than the prior
+    met = rest["estimate"]["noise_met"]  # the rest was planned for the opening's noise
+    assert met["pose_rate"] == pytest.approx(read_meta(
+        outcome.directory / "meta.json")["stream"]["telemetry_rate_hz"], rel=0.2), met
+    assert any("planned for the noise the opening met" in line for line in said), said
     end = excitation_trajectory(OPENING).flat_outputs(np.array([OPENING.duration]))
     assert rest["planner"]["start"][:3] == pytest.approx(end.position[0].tolist(), abs=1e-9)
     log = read_pose_log(outcome.directory / "pose.csv", 6)
