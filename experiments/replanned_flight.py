@@ -13,7 +13,9 @@ A plan robust to the prior (docs/evaluation.md):
    a force balance that contradicts θ̂), the rest is planned from the belief the opening
    was planned from (`belief_after_opening`): as gentle as the opening, which flew;
    otherwise the rest is planned for the noise the opening's filter met (its pose σ and
-   rate, the unmodelled force and moment it fitted: `mavsysid.pipeline.plan.for_noise_met`);
+   rate, the unmodelled force and moment it fitted: `mavsysid.pipeline.plan.for_noise_met`),
+   a parameter answered at or below 0 at the prior's value and σ
+   (`mavsysid.pipeline.replanned_stream.positive_belief`);
 3. plan the **rest** of the budget with θ̂ as the config's θ and Σ relative to θ̂
    (Σ_ij / (θ̂_i θ̂_j)) as ``PlannerSettings.prior_covariance``, starting at the hover where
    the opening ended;
@@ -39,6 +41,7 @@ from mavsysid.flight.offline.simulator import Simulator
 from mavsysid.pipeline.plan import for_noise_met
 from mavsysid.pipeline.replanned_stream import (
     opening_belief,
+    positive_belief,
     prior_estimate,
     relative_covariance,
 )
@@ -184,9 +187,10 @@ def replan_flight(prior: VehicleConfig, settings: PlannerSettings, simulator: Si
     opening = plan_most_confident(prior, opening_settings(settings, prior, opening_budget)).result
     simulator.run(opening.trajectory, directory)
     # The estimate the stream's continuation would use (pipeline.replanned_stream).
+    before = prior_estimate(prior, settings)
     posterior, noise, refusal = opening_belief(
-        lambda: estimate(load_flight(directory / "pose.csv", prior), prior),
-        prior_estimate(prior, settings))
+        lambda: estimate(load_flight(directory / "pose.csv", prior), prior), before)
+    posterior, _ = positive_belief(posterior, before)
     config = prior.with_parameters(posterior.value)
     model, later = for_noise_met(config, rest_settings(settings, posterior, opening.trajectory),
                                  noise)

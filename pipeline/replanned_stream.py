@@ -20,7 +20,8 @@ opening's end:
    (`mavsysid.pipeline.plan.for_noise_met`) from the hover where the
    opening ended (pulled in to the rotor clearance from the box's walls, as a plan's start
    must be, when the opening ended closer: `rest_start`; the streamer flies there first),
-   with the posterior as the planner's prior: ``prior_covariance`` = Σ
+   with the posterior as the planner's prior (a parameter answered at or below 0, c_D at
+   its bound, keeps the prior's value and σ: `positive_belief`): ``prior_covariance`` = Σ
    relative to θ̂ (Σ_jk / (θ̂_j θ̂_k)), which also sets the chance-constrained rotor
    check's spread, at the most confident rotor check that admits a flight
    (`plan_most_confident`; the z used goes into meta.json);
@@ -72,6 +73,7 @@ __all__ = [
     "belief_after_opening",
     "opening_belief",
     "opening_log",
+    "positive_belief",
     "prior_estimate",
     "relative_covariance",
     "replanning_continuation",
@@ -304,10 +306,39 @@ def opening_belief(result: Callable[[], EstimationResult], prior: ParameterEstim
     def final() -> ParameterEstimate:
         done = result()
         met[0] = done.noise_met
-        return done.final
+        return done.final.theta
 
     belief, refusal = belief_after_opening(final, prior)
     return belief, (met[0] if refusal is None else None), refusal
+
+
+def positive_belief(belief: ParameterEstimate, prior: ParameterEstimate
+                    ) -> tuple[ParameterEstimate, tuple[str, ...]]:
+    """``belief`` with the prior's value and σ (no cross terms) for each parameter whose
+    value is not positive, and their names.
+
+    The planner's model needs a positive θ and its belief is relative to it; a parameter
+    the opening answered at 0 (c_D at its bound) or below is planned for as before the
+    opening.
+
+    Parameters
+    ----------
+    belief : ParameterEstimate
+        The opening's θ belief, SI.
+    prior : ParameterEstimate
+        The belief the opening was planned from (`prior_estimate`), same quantities.
+    """
+    value = np.asarray(belief.value, dtype=float).copy()
+    bad = ~(np.isfinite(value) & (value > 0.0))
+    if not bad.any():
+        return belief, ()
+    covariance = np.asarray(belief.covariance, dtype=float).copy()
+    for j in np.flatnonzero(bad):
+        value[j] = prior.value[j]
+        covariance[j, :] = covariance[:, j] = 0.0
+        covariance[j, j] = prior.covariance[j, j]
+    return (ParameterEstimate(value, covariance, belief.names),
+            tuple(belief.names[j] for j in np.flatnonzero(bad)))
 
 
 def replanning_continuation(settings: ReplanSettings,
@@ -331,9 +362,13 @@ def replanning_continuation(settings: ReplanSettings,
         if rest < settings.min_rest or so_far.segments > settings.rounds:
             return None
         began = time.monotonic()
+        prior = prior_estimate(so_far.config, settings.planner)
         estimate, noise, refusal = opening_belief(
-            lambda: _estimate(so_far, settings.estimator),
-            prior_estimate(so_far.config, settings.planner))
+            lambda: _estimate(so_far, settings.estimator), prior)
+        estimate, kept = positive_belief(estimate, prior)
+        if kept:
+            say(f"the opening answered {', '.join(kept)} at or below 0: the rest is planned "
+                "with their prior value and σ")
         estimated = time.monotonic()
         if refusal is None:
             say("estimate after {:.1f} s: σ/θ {}".format(

@@ -26,6 +26,7 @@ from mavsysid.pipeline.replanned_stream import (
     belief_after_opening,
     opening_belief,
     opening_log,
+    positive_belief,
     prior_estimate,
     relative_covariance,
     rest_start,
@@ -255,14 +256,33 @@ def test_default_prior_estimate_is_the_settings_relative_sigma():
 
 
 def test_the_opening_belief_carries_the_noise_its_filter_met():
-    """An accepted opening gives its final estimate and its noise; a refused one neither."""
+    """An accepted opening gives its final θ and its noise; a refused one neither."""
     estimate = _random_estimate(np.random.default_rng(5))
     prior = _random_estimate(np.random.default_rng(6))
     met = NoiseMet(0.05, 0.02, 50.0, 0.3, 0.004)
-    result = SimpleNamespace(final=estimate, noise_met=met)
+    result = SimpleNamespace(final=SimpleNamespace(theta=estimate), noise_met=met)
     assert opening_belief(lambda: result, prior) == (estimate, met, None)
 
     def refused():
         raise JobFailedError("the filter diverged")
 
     assert opening_belief(refused, prior) == (prior, None, "the filter diverged")
+
+
+def test_a_parameter_answered_at_zero_keeps_the_prior_for_the_rest():
+    """c_D at its bound (0) takes the prior's value and σ, without cross terms; the rest of
+    the belief is unchanged and a positive belief passes as it is."""
+    estimate = _random_estimate(np.random.default_rng(7))
+    prior = _random_estimate(np.random.default_rng(8))
+    value = estimate.value.copy()
+    value[1] = 0.0
+    belief, kept = positive_belief(ParameterEstimate(value, estimate.covariance), prior)
+    assert kept == ("c_D",)
+    assert belief.value[1] == prior.value[1]
+    assert belief.covariance[1, 1] == prior.covariance[1, 1]
+    assert np.count_nonzero(belief.covariance[1, :]) == 1
+    others = [0, 2, 3, 4, 5]
+    np.testing.assert_array_equal(belief.covariance[np.ix_(others, others)],
+                                  estimate.covariance[np.ix_(others, others)])
+    relative_covariance(belief)  # the planner can take it
+    assert positive_belief(estimate, prior) == (estimate, ())
