@@ -16,7 +16,9 @@ the vehicle file's θ and prior σ, for three noise models:
 
 Reported per flight and model: reached σ / predicted σ per parameter, where the reached σ is
 the answer's (the prior's, 50 %, for a parameter not determined), and the plan's
-expectation (determined when predicted σ ≤ 12.5 % of θ) against ``estimate``'s status.
+expectation (determined when predicted σ ≤ 12.5 % of θ and, for *others*, not set aside on
+at least half of the other flights, as ``plan --noise-from`` prints it) against
+``estimate``'s status, counted over the flights.
 
     python bench/predicted_vs_reached.py FLIGHT_DIR... --vehicle sitl_quad \\
         [--loop bench/sitl_loop.parm] [--json OUT]
@@ -71,17 +73,22 @@ def noise_of(flight: Path):
 
 def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]:
     """One row per flight: reached/predicted per model, expectations and statuses."""
-    from mavsysid.estimation import NoiseMet
+    from mavsysid.estimation import NoiseMet, read_set_aside
     from mavsysid.formats.parameter_file import read_parameter_file
     from mavsysid.formats.trajectory_file import read_trajectory
     from mavsysid.vehicle.autopilot_loop import AutopilotLoop
-    from mavsysid.vehicle.config import load_vehicle
+    from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
     from mavsysid.vehicle.parameters import MAX_RELATIVE_SIGMA
 
     config = load_vehicle(vehicle)
     loop = (None if loop_file is None else
             AutopilotLoop.from_parameters("ardupilot", read_parameter_file(loop_file)))
     mets = [noise_of(f) for f in flights]
+    asides = [read_set_aside(f) for f in flights]
+    # What `plan --noise-from` on the other flights expects set aside: on half of them.
+    set_aside = [tuple(n for n in PARAMETER_NAMES if 2 * sum(
+        n in a for j, a in enumerate(asides) if j != i) >= len(flights) - 1 > 0)
+        for i in range(len(flights))]
     rows = []
     for i, flight in enumerate(flights):
         trajectory = read_trajectory(flight / "trajectory.json").trajectory
@@ -95,10 +102,12 @@ def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]
                 row[model] = None  # no filter ran on the flight(s): no noise met
                 continue
             pred = predicted(config, trajectory, loop, met)
+            aside = set_aside[i] if model == "others" else ()
             row[model] = {"ratio": (sigma / pred).tolist(),
                           "predicted_rel": (pred / config.theta).tolist(),
-                          "expected": [bool(p <= MAX_RELATIVE_SIGMA * t)
-                                       for p, t in zip(pred, config.theta, strict=True)]}
+                          "expected": [bool(p <= MAX_RELATIVE_SIGMA * t) and n not in aside
+                                       for n, p, t in zip(PARAMETER_NAMES, pred, config.theta,
+                                                          strict=True)]}
         rows.append(row)
         print_row(row)
     return rows
@@ -131,6 +140,12 @@ def main() -> None:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     rows = run(args.flights, args.vehicle, args.loop)
+    for model in MODELS:
+        pairs = [(e, s == "determined") for r in rows if r[model] is not None
+                 for e, s in zip(r[model]["expected"], r["status"], strict=True)]
+        agree = sum(e == s for e, s in pairs)
+        print(f"{model:6s} expected status = estimate's on {agree} of {len(pairs)} "
+              "parameter-flights")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 

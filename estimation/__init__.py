@@ -54,6 +54,7 @@ from mavsysid.estimation.readers import READERS, describe_log_kinds, load_flight
 from mavsysid.estimation.report.text import (
     format_table,
     read_noise_met,
+    read_set_aside,
     result_to_json,
     updated_vehicle,
     write_estimate_json,
@@ -105,8 +106,8 @@ __all__ = [
     "describe_log_kinds", "estimate", "estimate_parameters", "estimate_with_effects",
     "fit_wrench_balance", "format_table", "implausibility", "load_flight",
     "model_accelerations", "nis_level", "noise_gain", "prior_from_config", "progress_wanted",
-    "read_noise_met", "report_progress", "report_stage", "result_to_json", "smooth_pose",
-    "stage_listener",
+    "read_noise_met", "read_set_aside", "report_progress", "report_stage", "result_to_json",
+    "smooth_pose", "stage_listener",
     "uniform_step", "updated_vehicle", "vanishing_floor", "vanishing_parameters",
     "write_estimate_json", "write_history_csv", *_LAZY,
 ]

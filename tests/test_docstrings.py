@@ -53,7 +53,6 @@ NOT_YET_DOCUMENTED: frozenset[str] = frozenset({
     "mavsysid.cli.options.allow_negative_values",
     "mavsysid.cli.options.parse_numbers",
     "mavsysid.cli.plan.add_arguments",
-    "mavsysid.cli.plan.format_summary",
     "mavsysid.cli.plan.main",
     "mavsysid.cli.sim.add_arguments",
     "mavsysid.cli.sim.main",

@@ -24,6 +24,8 @@ import numpy as np
 import pandas as pd
 from mavsysid.estimation.results import (
     CONVERGENCE_TOLERANCE,
+    DETERMINED,
+    MAX_RELATIVE_SIGMA,
     EstimationHistory,
     EstimationResult,
     NoiseMet,
@@ -35,8 +37,8 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleCon
 from mavsysid.errors import InputError
 
 __all__ = ["HISTORY_COLUMNS", "format_table", "history_frame", "read_noise_met",
-           "result_to_json", "software_version", "updated_vehicle", "write_estimate_json",
-           "write_history_csv"]
+           "read_set_aside", "result_to_json", "software_version", "updated_vehicle",
+           "write_estimate_json", "write_history_csv"]
 
 
 _POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
@@ -389,6 +391,23 @@ _NOISE_MET_KEYS = ("position_m", "attitude_rad", "pose_rate_hz", "force_density"
                    "moment_density")
 
 
+def _estimate_document(path: str | Path) -> tuple[Path, dict, str]:
+    """An ``estimate.json`` (or the flight directory holding one) as read: its path, its
+    document and the hint that says how to make one; `InputError` in one line."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "estimate.json"
+    hint = f"run `mavsysid estimate LOG -o {path}` on the flight first"
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such estimate; {hint}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise InputError(f"{path}: not a readable estimate.json ({type(error).__name__})") \
+            from None
+    return path, (document if isinstance(document, dict) else {}), hint
+
+
 def read_noise_met(path: str | Path) -> NoiseMet:
     """The noise the filter met on a flight, from its ``estimate.json``.
 
@@ -404,18 +423,8 @@ def read_noise_met(path: str | Path) -> NoiseMet:
         No such file, not an estimate, or one without the noise (written before the filter
         recorded it, or one whose filter could not follow the flight): one line.
     """
-    path = Path(path)
-    if path.is_dir():
-        path = path / "estimate.json"
-    hint = f"run `mavsysid estimate LOG -o {path}` on the flight first"
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such estimate; {hint}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputError(f"{path}: not a readable estimate.json ({type(error).__name__})") \
-            from None
-    met = document.get("noise_met") if isinstance(document, dict) else None
+    path, document, hint = _estimate_document(path)
+    met = document.get("noise_met")
     if not isinstance(met, dict):
         raise InputError(f"{path}: holds no noise_met (its filter did not follow the flight, "
                          f"or an older mavsysid wrote it); {hint}")
@@ -426,6 +435,35 @@ def read_noise_met(path: str | Path) -> NoiseMet:
     if bad:
         raise InputError(f"{path}: noise_met.{bad[0]}: a positive number, got {met.get(bad[0])!r}")
     return NoiseMet(*(float(v) for v in values))
+
+
+def read_set_aside(path: str | Path) -> tuple[str, ...]:
+    """The parameters of θ a flight's filter resolved (σ within `MAX_RELATIVE_SIGMA` of its
+    value) that its answer nonetheless did not determine: set aside for a disagreement
+    with the force and torque balance, a model mismatch a like flight meets again.
+
+    Parameters
+    ----------
+    path : str or Path
+        An ``estimate.json``, or the flight directory holding one.
+
+    Raises
+    ------
+    InputError
+        No such file or not an estimate: one line.
+    """
+    _, document, _ = _estimate_document(path)
+    answer, filtered = document.get("parameters"), document.get("filter")
+    if not isinstance(answer, dict) or not isinstance(filtered, dict):
+        return ()
+    out = []
+    for name in PARAMETER_NAMES:
+        status = (answer.get(name) or {}).get("status")
+        resolved = (filtered.get(name) or {}).get("relative_sigma")
+        if (status not in (None, DETERMINED) and isinstance(resolved, (int, float))
+                and resolved <= MAX_RELATIVE_SIGMA):
+            out.append(name)
+    return tuple(out)
 
 
 def updated_vehicle(config: VehicleConfig, result: EstimationResult) -> VehicleConfig:

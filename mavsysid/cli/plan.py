@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -52,8 +53,21 @@ _DEFAULT_TIME = 30.0
 _KIND_LABELS = {"dopt": "information-gathering planner", "random": "random baseline"}
 
 
-def format_summary(result: PlanResult, written: dict[str, Path], verbosity: int = 0) -> str:
-    """The text printed after planning (``verbosity`` < 0: only the trajectory file)."""
+def format_summary(result: PlanResult, written: dict[str, Path], verbosity: int = 0,
+                   set_aside: tuple[str, ...] = ()) -> str:
+    """The text printed after planning (``verbosity`` < 0: only the trajectory file).
+
+    Parameters
+    ----------
+    result : PlanResult
+    written : dict of str to Path
+        What was written, by kind ("trajectory", "setpoints", "recording").
+    verbosity : int
+        -1 quiet, 0 default, more with ``-v``.
+    set_aside : tuple of str
+        Parameters the earlier flights' estimates set aside though their filters resolved
+        them (`mavsysid.estimation.read_set_aside`): expected so again.
+    """
     if verbosity < 0:
         return str(written["trajectory"])
     s, stats, config = result.settings, result.stats, result.config
@@ -74,11 +88,16 @@ def format_summary(result: PlanResult, written: dict[str, Path], verbosity: int 
         rows.append([name, PARAMETER_UNITS[name], f"{config.theta[j]:.3e}",
                      f"{s.prior_relative_sigma * nominal:.2e}", f"{final[j]:.2e}",
                      f"{100.0 * final[j] / nominal:.3g}" if nominal else "n/a",
-                     _expected(final[j], nominal)])
+                     _expected(final[j], nominal, name in set_aside)])
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines += ["    " + "  ".join(c.ljust(w) if i < 2 else c.rjust(w)
                                  for i, (c, w) in enumerate(zip(r, widths, strict=True)))
               for r in rows]
+    if set_aside:
+        lines += [f"  set aside  {', '.join(set_aside)}: resolved by the filter on the "
+                  "--noise-from flights but set aside by their estimates",
+                  "             (filter and force-torque balance disagreed: a model mismatch "
+                  "`mavsysid diagnose` names); expect the same here"]
     first = stats.time_to_first_solution
     busy = ""
     if stats.elapsed > 0.0 and 0.0 < stats.cpu_time < BUSY_CORE_SHARE * stats.elapsed:
@@ -173,12 +192,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write a Rerun recording of the plan")
 
 
-def _expected(sigma: float, nominal: float) -> str:
+def _expected(sigma: float, nominal: float, set_aside: bool = False) -> str:
     """What ``estimate`` is predicted to say of a parameter: determined where its σ is
-    within `MAX_RELATIVE_SIGMA` of its value (``estimate``'s rule)."""
+    within `MAX_RELATIVE_SIGMA` of its value (``estimate``'s rule), unless earlier
+    flights' estimates set it aside for a model mismatch."""
     if not nominal:
         return "n/a"
-    return "determined" if sigma <= MAX_RELATIVE_SIGMA * nominal else "not determined"
+    if sigma > MAX_RELATIVE_SIGMA * nominal:
+        return "not determined"
+    return "set aside before" if set_aside else "determined"
+
+
+def _set_aside_on_most(flights: list[Path]) -> tuple[str, ...]:
+    """The parameters set aside (`read_set_aside`) on at least half of ``flights``."""
+    from mavsysid.estimation import read_set_aside  # loads slowly
+
+    counts = Counter(name for path in flights for name in read_set_aside(path))
+    return tuple(n for n in PARAMETER_NAMES if 2 * counts[n] >= len(flights) and counts[n])
 
 
 def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSettings:
@@ -234,6 +264,7 @@ def main(args: argparse.Namespace) -> int:
             print(f"mavsysid plan: {text}", file=sys.stderr, flush=True)
 
     settings = _settings(args, say)
+    set_aside: tuple[str, ...] = ()
     outputs = {"trajectory": args.output, "setpoints": args.csv, "recording": args.rrd}
     written = {k: Path(v) for k, v in outputs.items() if v is not None}
     for path in written.values():
@@ -245,6 +276,7 @@ def main(args: argparse.Namespace) -> int:
         from mavsysid.estimation import NoiseMet, read_noise_met  # loads slowly
 
         met = NoiseMet.median([read_noise_met(path) for path in args.noise_from])
+        set_aside = _set_aside_on_most(args.noise_from)
         config, settings = for_noise_met(config, settings, met)
         where = ", ".join(str(p) for p in args.noise_from)
         say(f"planning for the noise the estimator met on {where}"
@@ -260,7 +292,7 @@ def main(args: argparse.Namespace) -> int:
         from mavsysid.planner.recording import write_plan_rrd  # rerun loads slowly
 
         write_plan_rrd(args.rrd, result)
-    print(format_summary(result, written, args.verbosity))
+    print(format_summary(result, written, args.verbosity, set_aside))
     if not args.no_preview:
         if args.verbosity >= 0:
             print("mavsysid plan: flying the plan on the offline simulator (nominal "

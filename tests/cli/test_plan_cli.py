@@ -215,3 +215,27 @@ def test_noise_from_without_an_estimate_exits_2_before_planning(tmp_path, capsys
     err = capsys.readouterr().err
     assert "no such estimate" in err and len(err.strip().splitlines()) == 1
     assert not fake_planner
+
+
+def test_noise_from_flights_that_set_parameters_aside_expects_it_again(tmp_path, capsys,
+                                                                      fake_planner):
+    """Parameters set aside on most --noise-from flights are expected set aside again."""
+    met = {"position_m": 0.05, "attitude_rad": 0.0175, "pose_rate_hz": 50.0,
+           "force_density": 0.3, "moment_density": 0.004}
+    resolved = {n: {"relative_sigma": 0.01} for n in PARAMETER_NAMES}
+    aside = {n: {"status": "not determined by this flight" if n in ("c_M", "j_z")
+                 else "determined"} for n in PARAMETER_NAMES}
+    flights = []
+    for i in range(3):
+        document = {"noise_met": met, "filter": resolved,
+                    "parameters": aside if i < 2 else {}}
+        flights.append(tmp_path / f"e{i}.json")
+        flights[-1].write_text(json.dumps(document))
+    out = tmp_path / "t.json"
+    assert main(["plan", "--noise-from", *map(str, flights), "--samples", "40", "-o",
+                 str(out)]) == 0
+    text = capsys.readouterr().out
+    rows = {line.split()[0]: line for line in text.splitlines() if line.startswith("    ")}
+    assert rows["c_M"].endswith("set aside before") and rows["j_z"].endswith("set aside before")
+    assert rows["c_T"].endswith("determined") and "set aside" not in rows["c_T"]
+    assert "set aside  c_M, j_z:" in text

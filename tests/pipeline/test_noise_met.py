@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mavsysid.estimation import NoiseMet, read_noise_met, write_estimate_json
+from mavsysid.estimation import NoiseMet, read_noise_met, read_set_aside, write_estimate_json
 from mavsysid.estimation.filter.estimator import estimate_parameters
 from mavsysid.estimation.readers import load_flight
 from mavsysid.experiments.data_efficiency import belief_history
@@ -122,3 +122,21 @@ def test_the_median_noise_of_several_flights_is_each_quantitys_median():
     assert NoiseMet.median(mets[:1]) == mets[0]
     with pytest.raises(ValueError):
         NoiseMet.median([])
+
+
+def test_set_aside_are_the_parameters_the_filter_resolved_and_the_answer_did_not(tmp_path):
+    """Filter σ within 12.5 % and the answer not determined: set aside; a parameter the
+    filter did not resolve, or one the answer determined, is not."""
+    def entry(rel, status=None):
+        return {"relative_sigma": rel, **({"status": status} if status else {})}
+
+    statuses = ["determined", "not determined by this flight", "not determined by this flight",
+                "determined", "not determined by this flight", "at the bound"]
+    filter_rel = [0.001, 0.05, 0.40, 0.02, 0.125, 0.03]
+    names = ("c_T", "c_D", "c_M", "j_x", "j_y", "j_z")
+    document = {"parameters": {n: entry(0.1, s) for n, s in zip(names, statuses, strict=True)},
+                "filter": {n: entry(r) for n, r in zip(names, filter_rel, strict=True)}}
+    (tmp_path / "estimate.json").write_text(json.dumps(document))
+    assert read_set_aside(tmp_path) == ("c_D", "j_y", "j_z")
+    (tmp_path / "estimate.json").write_text(json.dumps({**document, "filter": None}))
+    assert read_set_aside(tmp_path) == ()
