@@ -73,7 +73,7 @@ def noise_of(flight: Path):
 
 def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]:
     """One row per flight: reached/predicted per model, expectations and statuses."""
-    from mavsysid.estimation import NoiseMet, read_set_aside
+    from mavsysid.estimation import noise_from_flights
     from mavsysid.formats.parameter_file import read_parameter_file
     from mavsysid.formats.trajectory_file import read_trajectory
     from mavsysid.vehicle.autopilot_loop import AutopilotLoop
@@ -84,25 +84,21 @@ def run(flights: list[Path], vehicle: str, loop_file: Path | None) -> list[dict]
     loop = (None if loop_file is None else
             AutopilotLoop.from_parameters("ardupilot", read_parameter_file(loop_file)))
     mets = [noise_of(f) for f in flights]
-    asides = [read_set_aside(f) for f in flights]
-    # What `plan --noise-from` on the other flights expects set aside: on half of them.
-    set_aside = [tuple(n for n in PARAMETER_NAMES if 2 * sum(
-        n in a for j, a in enumerate(asides) if j != i) >= len(flights) - 1 > 0)
-        for i in range(len(flights))]
     rows = []
     for i, flight in enumerate(flights):
         trajectory = read_trajectory(flight / "trajectory.json").trajectory
         sigma, status, source = reached(flight)
         row = {"flight": str(flight), "status": status, "source": source,
                "reached_rel": (sigma / config.theta).tolist()}
-        known = [m for j, m in enumerate(mets) if j != i and m is not None]
-        others = NoiseMet.median(known) if known else None
+        # What `plan --noise-from` on the other flights (those whose filter ran) gives.
+        known = [f for j, f in enumerate(flights) if j != i and mets[j] is not None]
+        others, set_aside = noise_from_flights(known) if known else (None, ())
         for model, met in zip(MODELS, (None, others, mets[i]), strict=True):
             if model != "file" and met is None:
                 row[model] = None  # no filter ran on the flight(s): no noise met
                 continue
             pred = predicted(config, trajectory, loop, met)
-            aside = set_aside[i] if model == "others" else ()
+            aside = set_aside if model == "others" else ()
             row[model] = {"ratio": (sigma / pred).tolist(),
                           "predicted_rel": (pred / config.theta).tolist(),
                           "expected": [bool(p <= MAX_RELATIVE_SIGMA * t) and n not in aside

@@ -53,6 +53,7 @@ from mavsysid.estimation.progress import (
 from mavsysid.estimation.readers import READERS, describe_log_kinds, load_flight
 from mavsysid.estimation.report.text import (
     format_table,
+    noise_from_flights,
     read_noise_met,
     read_set_aside,
     result_to_json,
@@ -105,7 +106,8 @@ __all__ = [
     "convergence_time",
     "describe_log_kinds", "estimate", "estimate_parameters", "estimate_with_effects",
     "fit_wrench_balance", "format_table", "implausibility", "load_flight",
-    "model_accelerations", "nis_level", "noise_gain", "prior_from_config", "progress_wanted",
+    "model_accelerations", "nis_level", "noise_from_flights", "noise_gain", "prior_from_config",
+    "progress_wanted",
     "read_noise_met", "read_set_aside", "report_progress", "report_stage", "result_to_json",
     "smooth_pose", "stage_listener",
     "uniform_step", "updated_vehicle", "vanishing_floor", "vanishing_parameters",

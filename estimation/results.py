@@ -355,8 +355,12 @@ class EstimationResult:
     filter_refusal : str or None
         Why the filter and batch could not answer (then ``filtered`` is the balance's θ and
         ``history`` is empty).
-    noise_met : NoiseMet or None
-        The noise the filter met on this flight; None where no filter ran.
+    process_noise : tuple of 2 float or None
+        The force (N·√s) and moment (N·m·√s) white-noise densities the filter ran at (the
+        level fitted to the flight, or the configured one without refinement); None where
+        no filter ran.
+    pose_rate : float
+        Pose samples per second the filter read, Hz (NaN where unknown).
     """
 
     prior: ParameterEstimate
@@ -378,7 +382,16 @@ class EstimationResult:
     mismatch: tuple[str, ...] = ()
     balance: Any = None
     filter_refusal: str | None = None
-    noise_met: NoiseMet | None = None
+    process_noise: tuple[float, float] | None = None
+    pose_rate: float = math.nan
+
+    @property
+    def noise_met(self) -> NoiseMet | None:
+        """The noise the filter met on this flight (pose σ and rate, the densities it ran
+        at); None where no filter ran or its result was refused."""
+        if self.process_noise is None or self.filter_refusal is not None:
+            return None
+        return NoiseMet(*self.measurement_sigma, self.pose_rate, *self.process_noise)
 
     @property
     def final(self) -> ParameterEstimate:

@@ -455,6 +455,16 @@ def _battery(topics: _Instances) -> Series | None:
                   f"battery_status {name}")
 
 
+def _on_battery(path: Path, outputs: MotorOutputs, commanded: tuple[Series, str],
+                vehicle: VehicleConfig, battery: Series | None
+                ) -> tuple[Series, str, list[str]]:
+    """The commanded speeds checked (`_checked`) and scaled by the battery (`on_battery`):
+    speeds, what they are, and the battery's notes."""
+    series, how = _checked(path, outputs, commanded, vehicle)
+    series, said = on_battery(series, battery, vehicle, f"{path}: battery_status")
+    return series, how, said
+
+
 def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
             vehicle: VehicleConfig, battery: Series | None) -> tuple[Series, list[str]]:
     """Rotor speeds, rad/s, the most informative input; a warning when not measured rpm,
@@ -465,14 +475,12 @@ def _rotors(path: Path, esc: Series | None, outputs: MotorOutputs | None,
         faster = commanded is not None and 2.0 * _period(commanded[0].t) <= esc_period
         if esc_period <= RPM_USABLE_PERIOD or not faster:
             return esc, []
-        series, how = _checked(path, outputs, commanded, vehicle)
-        series, said = on_battery(series, battery, vehicle, f"{path}: battery_status")
+        series, how, said = _on_battery(path, outputs, commanded, vehicle, battery)
         return series, [f"{path}: esc_status rpm sampled only every {esc_period:.3g} s (more "
                         f"than {RPM_USABLE_PERIOD:g} s), {series.label} every "
                         f"{_period(series.t):.3g} s: rotor speeds are {how}", *said]
     if commanded is not None:
-        series, how = _checked(path, outputs, commanded, vehicle)
-        series, said = on_battery(series, battery, vehicle, f"{path}: battery_status")
+        series, how, said = _on_battery(path, outputs, commanded, vehicle, battery)
         return series, [f"{path}: no esc_status rpm; rotor speeds are {how}", *said]
     raise LogFormatError(f"{path}: no rotor speeds or motor outputs in {path} (no esc_status, "
                          "actuator_motors or actuator_outputs)")

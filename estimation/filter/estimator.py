@@ -46,7 +46,6 @@ from mavsysid.estimation.results import (
     PRIOR_RELATIVE_SIGMA,
     EstimationResult,
     FittedEffect,
-    NoiseMet,
     ParameterEstimate,
     convergence_time,
     prior_from_config,
@@ -284,7 +283,7 @@ def estimate_with_effects(
         log_likelihood=log_likelihood,
         equation_error=None if ee is None or effects else ee,
         mismatch_widening=widening,
-        noise_met=NoiseMet(sigma[0], sigma[1], flight.pose_rate, *densities),
+        process_noise=densities, pose_rate=flight.pose_rate,
     )
 
 

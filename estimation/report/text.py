@@ -16,6 +16,8 @@ import importlib.metadata
 import json
 import math
 import os
+from collections import Counter
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -36,9 +38,9 @@ from mavsysid.vehicle.config import PARAMETER_NAMES, PARAMETER_UNITS, VehicleCon
 
 from mavsysid.errors import InputError
 
-__all__ = ["HISTORY_COLUMNS", "format_table", "history_frame", "read_noise_met",
-           "read_set_aside", "result_to_json", "software_version", "updated_vehicle",
-           "write_estimate_json", "write_history_csv"]
+__all__ = ["HISTORY_COLUMNS", "format_table", "history_frame", "noise_from_flights",
+           "read_noise_met", "read_set_aside", "result_to_json", "software_version",
+           "updated_vehicle", "write_estimate_json", "write_history_csv"]
 
 
 _POSE_SOURCE_LABELS = {"motion_capture": "motion capture", "autopilot": "autopilot"}
@@ -368,7 +370,7 @@ def result_to_json(
 def _noise_met(result: EstimationResult) -> dict | None:
     """The noise the filter met on the flight, or None where no filter ran."""
     met = result.noise_met
-    if met is None or result.filter_refusal is not None:
+    if met is None:
         return None
     return {"position_m": _number(met.position_sigma),
             "attitude_rad": _number(met.attitude_sigma),
@@ -435,6 +437,26 @@ def read_noise_met(path: str | Path) -> NoiseMet:
     if bad:
         raise InputError(f"{path}: noise_met.{bad[0]}: a positive number, got {met.get(bad[0])!r}")
     return NoiseMet(*(float(v) for v in values))
+
+
+def noise_from_flights(paths: Sequence[str | Path]) -> tuple[NoiseMet, tuple[str, ...]]:
+    """What earlier flights of a vehicle tell a plan: the noise their filters met (each
+    quantity's median, `NoiseMet.median`) and the parameters set aside on at least half
+    of them (`read_set_aside`), in θ's order.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        At least one ``estimate.json`` or flight directory holding one.
+
+    Raises
+    ------
+    InputError
+        One of them unusable (`read_noise_met`): one line.
+    """
+    met = NoiseMet.median([read_noise_met(path) for path in paths])
+    counts = Counter(name for path in paths for name in read_set_aside(path))
+    return met, tuple(n for n in PARAMETER_NAMES if counts[n] and 2 * counts[n] >= len(paths))
 
 
 def read_set_aside(path: str | Path) -> tuple[str, ...]:

@@ -31,9 +31,8 @@ from mavsysid.cli.stream import format_summary as flight_summary
 from mavsysid.errors import InputError
 from mavsysid.estimation import (
     EstimatorSettings,
-    NoiseMet,
     format_table,
-    read_noise_met,
+    noise_from_flights,
 )
 from mavsysid.flight.ground.stream_session import StreamSettings
 from mavsysid.flight.mavlink_setup import signing_key_from_file
@@ -179,8 +178,7 @@ def main(args: argparse.Namespace) -> int:
         if verbose or text.startswith("warning:"):
             print(f"mavsysid experiment: {text}", file=sys.stderr, flush=True)
 
-    noise = (None if args.noise_from is None
-             else NoiseMet.median([read_noise_met(path) for path in args.noise_from]))
+    noise = None if args.noise_from is None else noise_from_flights(args.noise_from)[0]
     outcome = run_autopilot_experiment(
         args.vehicle, planner, stream, EstimatorSettings(prior_relative_sigma=args.prior_sigma),
         say, progress=verbose, autopilot_model=args.autopilot_model, noise=noise)

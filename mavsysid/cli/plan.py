@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -203,14 +202,6 @@ def _expected(sigma: float, nominal: float, set_aside: bool = False) -> str:
     return "set aside before" if set_aside else "determined"
 
 
-def _set_aside_on_most(flights: list[Path]) -> tuple[str, ...]:
-    """The parameters set aside (`read_set_aside`) on at least half of ``flights``."""
-    from mavsysid.estimation import read_set_aside  # loads slowly
-
-    counts = Counter(name for path in flights for name in read_set_aside(path))
-    return tuple(n for n in PARAMETER_NAMES if 2 * counts[n] >= len(flights) and counts[n])
-
-
 def _settings(args: argparse.Namespace, say: Callable[[str], None]) -> PlannerSettings:
     """PlannerSettings from the command line (checked by `run_plan`)."""
     names = "x_min,y_min,z_min,x_max,y_max,z_max"
@@ -273,10 +264,9 @@ def main(args: argparse.Namespace) -> int:
     config = with_margins(load_vehicle(args.vehicle), args.body_rate_margin,
                           args.yaw_acceleration_margin, args.thrust_margin)
     if args.noise_from is not None:
-        from mavsysid.estimation import NoiseMet, read_noise_met  # loads slowly
+        from mavsysid.estimation import noise_from_flights  # the estimator loads slowly
 
-        met = NoiseMet.median([read_noise_met(path) for path in args.noise_from])
-        set_aside = _set_aside_on_most(args.noise_from)
+        met, set_aside = noise_from_flights(args.noise_from)
         config, settings = for_noise_met(config, settings, met)
         where = ", ".join(str(p) for p in args.noise_from)
         say(f"planning for the noise the estimator met on {where}"

@@ -44,12 +44,13 @@ def noisy_flight(tmp_path_factory):
 
 
 def test_the_estimate_records_the_noise_its_filter_met(noisy_flight):
-    """Pose σ as used, the log's rate and the fitted densities (one scale, near the world's)."""
+    """The log's rate and the fitted densities (one scale, near the world's); nothing from
+    a refused filter."""
     cfg, _, _, result = noisy_flight
     met = result.noise_met
     assert met is not None
     assert met.pose_rate == pytest.approx(POSE_RATE, rel=1e-6)
-    assert (met.position_sigma, met.attitude_sigma) == result.measurement_sigma
+    assert replace(result, filter_refusal="refused").noise_met is None
     force = met.force_density / cfg.noise.force_density
     assert force == pytest.approx(met.moment_density / cfg.noise.moment_density, rel=1e-9)
     assert WORLD_NOISE / 1.6 < force < WORLD_NOISE * 1.6
