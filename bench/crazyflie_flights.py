@@ -251,7 +251,7 @@ def run_tool(pose: Path, vehicle: Path, reference: np.ndarray) -> dict:
                       for c in ("c_M/j_z", "J_r/j_z")],
         combination_sigma=[(combos.get(c) or {}).get("sigma") or np.nan
                            for c in ("c_M/j_z", "J_r/j_z")],
-        holdout=doc.get("holdout"))
+        holdout=doc.get("holdout"), noise_met=doc.get("noise_met"))
     return out
 
 
