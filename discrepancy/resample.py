@@ -171,9 +171,20 @@ def resample_flight(flight: FlightData) -> tuple[FlightData, Resampling]:
                                     for i in range(speeds.shape[1])])
     bridged = intervals[~is_gap] / step
     spread = (float(bridged.min()), float(bridged.max())) if bridged.size else (1.0, 1.0)
-    resampled = FlightData(grid, position, quaternion, rotor_speeds, flight.source,
-                           flight.pose_source, flight.truth, flight.warnings)
+    resampled = _on_grid(flight, grid, position, quaternion, rotor_speeds)
     return resampled, Resampling(step, valid, gaps, INTERPOLATION_SUPPORT, spread)
+
+
+def _on_grid(flight: FlightData, t: np.ndarray, position: np.ndarray, quaternion: np.ndarray,
+            rotor_speeds: np.ndarray) -> FlightData:
+    """The flight with its samples replaced by ones on a uniform grid.
+
+    What the grid does not touch is kept: the logged rotor-speed samples, the IMU at its
+    own rates, the rotor speeds' scale uncertainty, the reader's notes. The grid is one
+    segment: its gaps are `Resampling.valid`'s, not the reader's segments.
+    """
+    return replace(flight, t=t, position=position, quaternion=quaternion,
+                   rotor_speeds=rotor_speeds, segment_starts=(0,))
 
 
 def _position_on_grid(t: np.ndarray, position: np.ndarray, grid: np.ndarray,
@@ -232,7 +243,7 @@ def average_blocks(flight: FlightData, resampling: Resampling,
     q = mean(continuous_sign(flight.quaternion))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     valid = resampling.valid[:n * m].reshape(n, m).all(axis=1)
-    averaged = FlightData(mean(flight.t), mean(flight.position), q, mean(flight.rotor_speeds),
-                          flight.source, flight.pose_source, flight.truth, flight.warnings)
+    averaged = _on_grid(flight, mean(flight.t), mean(flight.position), q,
+                       mean(flight.rotor_speeds))
     return averaged, replace(resampling, dt=resampling.dt * m, valid=valid,
                              support=min(resampling.support, 2), averaged=m)

@@ -7,6 +7,7 @@ sample times and dropped samples (single, bursts, and one gap too long to bridge
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +16,11 @@ from mavsysid.discrepancy.diagnosis import diagnose_flight
 from mavsysid.discrepancy.resample import (
     INTERPOLATION_SUPPORT,
     MAX_INTERPOLATED,
+    average_blocks,
     resample_flight,
 )
 from mavsysid.discrepancy.residuals import ResidualProblem, SmootherSettings
-from mavsysid.estimation.flight import FlightData
+from mavsysid.estimation.flight import FlightData, Imu, ImuSeries
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.excitation import ExcitationSpec, excitation_trajectory
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
@@ -73,6 +75,23 @@ def test_jittered_log_is_interpolated_onto_the_median_grid():
     assert np.max(angle) < 5e-5  # rad (noise: 1.7e-3)
     np.testing.assert_allclose(uniform.rotor_speeds, truth.rotor_speeds, rtol=1e-9)
     assert resampling.block(61) == 61 + INTERPOLATION_SUPPORT - 1
+
+
+def test_the_grid_keeps_what_it_does_not_resample():
+    """The IMU at its own rate, the logged rotor-speed samples, the rotor scale's σ and the
+    reader's notes come through resampling and averaging unchanged."""
+    rng = np.random.default_rng(3)
+    t = np.sort(_jittered_times(rng, 10.0, 0.002, 0.2))
+    flight = _motion(t)
+    gyro = ImuSeries(np.arange(0.0, 10.0, 0.001), np.zeros((10000, 3)), 0.0, "gyro")
+    logged = replace(flight, imu=Imu(gyro, None), rotor_scale_sigma=0.04,
+                     warnings=("3 NaN rows dropped",), segment_starts=(0, 2000))
+    resampled, resampling = resample_flight(logged)
+    averaged, _ = average_blocks(resampled, resampling)
+    for grid in (resampled, averaged):
+        assert grid.imu is logged.imu and grid.rotor_scale_sigma == 0.04
+        assert grid.warnings == logged.warnings and grid.segment_starts == (0,)
+    assert len(averaged) < len(resampled)
 
 
 def test_long_gaps_and_reader_segments_are_not_bridged():
