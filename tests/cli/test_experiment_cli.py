@@ -69,12 +69,13 @@ def test_experiment_against_the_sim_keeps_everything_in_one_directory(tmp_path: 
     flight directory; either way the plan and the recorded flight are kept together."""
     port = free_tcp_port()
     logs = tmp_path / "logs"
+    # Lock-stepped, so the flight is the same on a busy machine and takes less wall time.
     with SimProcess(tmp_path / "sim", "--connect", f"tcpin:127.0.0.1:{port}", "--vehicle",
-                    "quad_x", lockstep=False) as sim:
+                    "quad_x", "--speedup", "8") as sim:
         sim.wait_ready(timeout=90.0)
         code = main(["experiment", "--connect", f"tcp:127.0.0.1:{port}", "--vehicle",
                      "quad_x", "--budget", "10", "--samples", "80", "--refine-steps", "100",
-                     "--seed", "1", "--log-dir", str(logs)])
+                     "--seed", "1", "--speedup", "8", "--lockstep", "--log-dir", str(logs)])
     out, err = capsys.readouterr()
     (flight,) = [p for p in logs.iterdir() if p.is_dir()]
     for name in ("trajectory.json", "flight.tlog", "pose.csv", "meta.json"):
