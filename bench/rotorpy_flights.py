@@ -200,7 +200,9 @@ class TruthRecord:
     accel: np.ndarray
 
 
-def _params_for(base: dict[str, Any], flown: str) -> dict[str, Any]:
+def params_for(base: dict[str, Any], flown: str) -> dict[str, Any]:
+    """RotorPy's parameters for a flight of kind ``flown``: its parasitic drag, translational
+    lift, flapping and motor noise off, the hidden body drag on where ``flown`` has it."""
     params = copy.deepcopy(base)
     params.update(c_Dx=0.0, c_Dy=0.0, c_Dz=0.0, k_h=0.0, k_flap=0.0, motor_noise_std=0.0)
     if flown == "body_drag":
@@ -216,13 +218,19 @@ def _flat(trajectory: Any, t: float) -> dict[str, Any]:
             "yaw_dot": float(f.yaw_rate[0]), "yaw_ddot": float(f.yaw_acceleration[0])}
 
 
-def fly(rp: dict[str, Any], params: dict[str, Any], flown: str, duration: float
-        ) -> TruthRecord:
-    """Fly RotorPy's vehicle and controller along the excitation figure, sampled at `RATE_HZ`."""
-    trajectory = excitation_trajectory(ExcitationSpec(duration=duration))
+def fly(rp: dict[str, Any], params: dict[str, Any], flown: str, duration: float,
+        trajectory: Any = None) -> TruthRecord:
+    """Fly RotorPy's vehicle and controller along ``trajectory`` (a mavsysid `Trajectory`;
+    None: the excitation figure ``duration`` s long), sampled at `RATE_HZ`, from hover at
+    its start."""
+    if trajectory is None:
+        trajectory = excitation_trajectory(ExcitationSpec(duration=duration))
+    duration = float(trajectory.duration)
     start = _flat(trajectory, 0.0)
     n_h = hover_speed(params)
-    state = {"x": np.array(start["x"], float), "v": np.zeros(3), "q": np.array([0, 0, 0, 1.0]),
+    yaw = start["yaw"]
+    state = {"x": np.array(start["x"], float), "v": np.zeros(3),
+             "q": np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]),
              "w": np.zeros(3), "wind": np.zeros(3), "rotor_speeds": np.full(4, n_h)}
     vehicle = rp["Multirotor"](params, initial_state=copy.deepcopy(state))
     controller = rp["SE3Control"](params)
@@ -331,7 +339,7 @@ def fly_all(out: Path, variants: tuple[str, ...], duration: float, seed: int,
     rp = import_rotorpy()
     base = rp["params"]
     rng = np.random.default_rng(seed)
-    reference = reference_theta(_params_for(base, "clean"))
+    reference = reference_theta(params_for(base, "clean"))
     prior = reference * (1.0 + rng.uniform(-prior_error, prior_error, 6))
     records: dict[str, TruthRecord] = {}
     dirs = {}
@@ -339,7 +347,7 @@ def fly_all(out: Path, variants: tuple[str, ...], duration: float, seed: int,
         directory = out / f"{variant}-{seed}"
         dirs[variant] = directory
         flown = _FLOWN[variant]
-        params = _params_for(base, flown)
+        params = params_for(base, flown)
         if not (directory / "pose.csv").is_file():
             if flown not in records:
                 print(f"flying RotorPy: {flown} ({duration:g} s)", file=sys.stderr,
