@@ -63,6 +63,7 @@ from mavsysid.experiments.experiment import (
 from mavsysid.experiments.replanned_flight import OPENING_BUDGET, replan_flight
 from mavsysid.flight.offline.effects import hidden_effect
 from mavsysid.flight.offline.simulator import SimulationSettings, Simulator
+from mavsysid.pipeline.replanned_stream import FEEDBACK_HEADROOM
 from mavsysid.planner.rrbt import plan
 from mavsysid.planner.settings import PlannerSettings
 from mavsysid.vehicle.config import VehicleConfig, load_vehicle
@@ -91,9 +92,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--max-passes", type=int, default=10,
                         help="most back-to-back repetitions of a baseline for data efficiency")
     parser.add_argument("--jobs", type=int, default=1, help="seeds run in parallel")
-    parser.add_argument("--rotor-headroom", type=float, default=0.1,
+    parser.add_argument("--rotor-headroom", type=float, default=FEEDBACK_HEADROOM,
                         help="rotor n² fraction every planner kind leaves free at each end, "
-                        "for the controller's feedback on a vehicle with motor lag")
+                        "for the controller's feedback on a vehicle with motor lag (default: "
+                        "the re-planned rest's, as `stream --replan-budget` flies it)")
     parser.add_argument("--mismatch", action="store_true",
                         help="hide linear rotor drag and motor lag in the truth")
     parser.add_argument("--estimator", choices=("filter", *ESTIMATORS), default="filter",
