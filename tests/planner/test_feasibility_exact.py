@@ -32,15 +32,21 @@ def random_segment(rng: np.random.Generator) -> Segment:
 
 
 def dense_lp_feasible(segment: Segment, cfg: VehicleConfig) -> bool:
-    """Every 1 ms sample's wrench reachable by some n² in the rotor box (one block LP)."""
+    """Every 1 ms sample's wrench reachable by some n² in the rotor box: one block LP, or
+    for a square allocation (a quad) the one n² = A⁻¹ w checked against the box, to the
+    LP's tolerance (1e-7 of the range)."""
     t = np.append(np.arange(0.0, segment.duration, 1e-3), segment.duration)
     state = flat_to_state(segment.flat_outputs(t), cfg)
     wrench = np.column_stack([state.thrust, state.torque])
     if not np.all(np.isfinite(wrench)):
         return False
-    lim = cfg.limits
-    return wrench_reachable_lp(allocation_matrix(cfg), lim.rotor_speed_min**2,
-                               lim.rotor_speed_max**2, wrench)
+    lo, hi = cfg.limits.rotor_speed_min**2, cfg.limits.rotor_speed_max**2
+    A = allocation_matrix(cfg)
+    if A.shape[0] == A.shape[1]:
+        n2 = np.linalg.solve(A, wrench.T)
+        tolerance = 1e-7 * (hi - lo)
+        return bool(np.all((n2 >= lo - tolerance) & (n2 <= hi + tolerance)))
+    return wrench_reachable_lp(A, lo, hi, wrench)
 
 
 @pytest.mark.slow
