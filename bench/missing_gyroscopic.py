@@ -68,13 +68,12 @@ def fly_and_estimate(trajectory, config, world: str, seed: int, directory: Path)
     result = run_estimate(directory / "pose.csv", config.name).result
     six = len(PARAMETER_NAMES)
     final = result.final
-    sign, logdet = np.linalg.slogdet(final.covariance[:six, :six])
     error = 100 * (final.value[:six] / config.theta - 1)
     covered = np.abs(final.value[:six] - config.theta) <= 1.96 * final.sigma[:six]
-    _, filter_logdet = np.linalg.slogdet(result.filtered.covariance[:six, :six])
     met = result.noise_met
-    return {"dopt": float(np.exp(logdet / 6)) if sign > 0 else float("nan"),
-            "filter_dopt": float(np.exp(filter_logdet / 6)),
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dopt, filter_dopt = final.d_optimality, result.filtered.d_optimality
+    return {"dopt": dopt if np.isfinite(dopt) else float("nan"), "filter_dopt": filter_dopt,
             "noise_scale": (float("nan") if met is None
                             else met.force_density / config.noise.force_density),
             "error": error.tolist(), "status": list(result.status[:six]),

@@ -45,6 +45,7 @@ from bench.rotorpy_flights import (  # noqa: E402
     reference_theta,
     vehicle_toml,
 )
+from bench.sitl_practitioner import scored_answer  # noqa: E402
 
 KINDS = ("planned", "practitioner")
 #: A Crazyflie arena: 3 × 3 × 1.5 m of flight volume.
@@ -92,7 +93,10 @@ def fly_and_estimate(kind: str, work: Path, seed: int, budget: float) -> dict:
     log = directory / "pose.csv"
     with PoseLogWriter(log, n.shape[1], overwrite=True, imu=True) as writer:
         writer.write_rows(record.t, p, q, n, gyro=gyro, accel=accel)
-    saturated = float(np.mean(np.any(record.commands >= params["rotor_speed_max"], axis=1)))
+    # A tick saturates where a rotor's command was clipped at either limit (as `fly` clips).
+    clipped = ((record.commands <= params["rotor_speed_min"])
+               | (record.commands >= params["rotor_speed_max"]))
+    saturated = float(np.mean(np.any(clipped, axis=1)))
     (directory / "flight.json").write_text(json.dumps(
         {"duration": float(trajectory.duration), "saturated": saturated}))
     try:
@@ -106,8 +110,6 @@ def fly_and_estimate(kind: str, work: Path, seed: int, budget: float) -> dict:
 
 def row(directory: Path) -> dict:
     """D-opt and per-parameter answer of the flight in ``directory`` (refusal: none)."""
-    from mavsysid.vehicle.config import PARAMETER_NAMES
-
     reference = json.loads((directory.parent / "reference.json").read_text())["theta"]
     flight = json.loads((directory / "flight.json").read_text())
     out = {"kind": directory.name, "seed": directory.parent.name, **flight}
@@ -115,17 +117,7 @@ def row(directory: Path) -> dict:
         out["refused"] = (directory / "refused.txt").read_text()
         return out
     answer = json.loads((directory / "estimate.json").read_text())
-    six = len(PARAMETER_NAMES)  # θ's block: nuisance quantities follow it
-    sign, logdet = np.linalg.slogdet(np.asarray(answer["covariance"], float)[:six, :six])
-    out["dopt"] = float(np.exp(logdet / six)) if sign > 0 else float("nan")
-    out["params"] = {}
-    for i, name in enumerate(PARAMETER_NAMES):
-        entry = answer["parameters"][name]
-        out["params"][name] = {
-            "error": entry["value"] / reference[i] - 1.0,
-            "covered": abs(entry["value"] - reference[i]) <= 1.96 * entry["sigma"],
-            "status": entry.get("status")}
-    return out
+    return {**out, **scored_answer(answer, np.asarray(reference, dtype=float))}
 
 
 def prepare(work: Path, seed: int) -> None:
@@ -157,8 +149,8 @@ def report(work: Path) -> None:
         if "refused" in r:
             print(f"{seed:6s} {kind:12s} {r['duration']:5.1f} refused: {r['refused']}")
             continue
-        cells = [f"{100 * c['error']:+7.2f}% {'in ' if c['covered'] else 'OUT'} "
-                 f"{(c['status'] or '')[:5]:5s}" for c in r["params"].values()]
+        cells = [f"{error:+7.2f}% {'in ' if covered else 'OUT'} {(status or '')[:5]:5s}"
+                 for error, covered, status in r["params"].values()]
         print(f"{seed:6s} {kind:12s} {r['duration']:5.1f} {100 * r['saturated']:4.1f}% "
               f"{r['dopt']:9.3g}  " + "  ".join(cells))
     for seed in sorted({s for s, _ in rows}):
@@ -166,7 +158,7 @@ def report(work: Path) -> None:
         if not planned or not practitioner or "dopt" not in planned or "dopt" not in practitioner:
             continue
         worse = [n for n in PARAMETER_NAMES
-                 if abs(planned["params"][n]["error"]) > abs(practitioner["params"][n]["error"])]
+                 if abs(planned["params"][n][0]) > abs(practitioner["params"][n][0])]
         print(f"{seed}: practitioner / planned D-opt {practitioner['dopt'] / planned['dopt']:.2f};"
               f" planned error larger on: {', '.join(worse) or 'none'}")
 

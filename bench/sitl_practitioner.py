@@ -100,26 +100,35 @@ def fly_practitioner(connect: str, args: argparse.Namespace, logs: Path) -> str:
     return "\n".join(out)
 
 
+def scored_answer(answer: dict, reference: np.ndarray) -> dict:
+    """An ``estimate.json`` document scored against the reference θ: ``dopt``, det(Σθ)^(1/6)
+    of its θ block (`ParameterEstimate.d_optimality`; NaN where not positive definite), and
+    per parameter ``(error %, reference within value ± 1.96 σ, status)``."""
+    from mavsysid.estimation import ParameterEstimate
+    from mavsysid.vehicle.config import PARAMETER_NAMES
+
+    entries = [answer["parameters"][name] for name in PARAMETER_NAMES]
+    six = len(PARAMETER_NAMES)  # θ's block: nuisance quantities follow it
+    theta = ParameterEstimate(np.array([e["value"] for e in entries], dtype=float),
+                              np.asarray(answer["covariance"], dtype=float)[:six, :six])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dopt = theta.d_optimality
+    return {"dopt": dopt if np.isfinite(dopt) else float("nan"), "params": {
+        name: (100 * (e["value"] / reference[i] - 1),
+               bool(abs(e["value"] - reference[i]) <= 1.96 * e["sigma"]), e.get("status"))
+        for i, (name, e) in enumerate(zip(PARAMETER_NAMES, entries, strict=True))}}
+
+
 def flight_row(logs: Path) -> dict | None:
     """Duration, D-opt and per-parameter answer of the flight in ``logs``, or None."""
-    from mavsysid.vehicle.config import PARAMETER_NAMES, load_vehicle
+    from mavsysid.vehicle.config import load_vehicle
 
-    reference = load_vehicle("sitl_quad").theta
     flights = [p for p in logs.iterdir() if p.is_dir()] if logs.is_dir() else []
     if not flights or not (flights[0] / "estimate.json").is_file():
         return None
     answer = json.loads((flights[0] / "estimate.json").read_text())
-    six = len(PARAMETER_NAMES)  # θ's block: nuisance quantities follow it
-    covariance = np.asarray(answer["covariance"], dtype=float)[:six, :six]
-    sign, logdet = np.linalg.slogdet(covariance)
-    row = {"duration": json.loads((flights[0] / "trajectory.json").read_text())["duration"],
-           "dopt": float(np.exp(logdet / 6)) if sign > 0 else float("nan"), "params": {}}
-    for i, name in enumerate(PARAMETER_NAMES):
-        entry = answer["parameters"][name]
-        row["params"][name] = (100 * (entry["value"] / reference[i] - 1),
-                               abs(entry["value"] - reference[i]) <= 1.96 * entry["sigma"],
-                               entry.get("status"))
-    return row
+    return {"duration": json.loads((flights[0] / "trajectory.json").read_text())["duration"],
+            **scored_answer(answer, load_vehicle("sitl_quad").theta)}
 
 
 def report(work: Path) -> None:
