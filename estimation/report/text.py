@@ -425,7 +425,11 @@ def read_noise_met(path: str | Path) -> NoiseMet:
         No such file, not an estimate, or one without the noise (written before the filter
         recorded it, or one whose filter could not follow the flight): one line.
     """
-    path, document, hint = _estimate_document(path)
+    return _noise_in(*_estimate_document(path))
+
+
+def _noise_in(path: Path, document: dict, hint: str) -> NoiseMet:
+    """`read_noise_met` of a document already read."""
     met = document.get("noise_met")
     if not isinstance(met, dict):
         raise InputError(f"{path}: holds no noise_met (its filter did not follow the flight, "
@@ -454,8 +458,9 @@ def noise_from_flights(paths: Sequence[str | Path]) -> tuple[NoiseMet, tuple[str
     InputError
         One of them unusable (`read_noise_met`): one line.
     """
-    met = NoiseMet.median([read_noise_met(path) for path in paths])
-    counts = Counter(name for path in paths for name in read_set_aside(path))
+    documents = [_estimate_document(path) for path in paths]
+    met = NoiseMet.median([_noise_in(*read) for read in documents])
+    counts = Counter(name for _, document, _ in documents for name in _set_aside_in(document))
     return met, tuple(n for n in PARAMETER_NAMES if counts[n] and 2 * counts[n] >= len(paths))
 
 
@@ -474,7 +479,11 @@ def read_set_aside(path: str | Path) -> tuple[str, ...]:
     InputError
         No such file or not an estimate: one line.
     """
-    _, document, _ = _estimate_document(path)
+    return _set_aside_in(_estimate_document(path)[1])
+
+
+def _set_aside_in(document: dict) -> tuple[str, ...]:
+    """`read_set_aside` of a document already read."""
     answer, filtered = document.get("parameters"), document.get("filter")
     if not isinstance(answer, dict) or not isinstance(filtered, dict):
         return ()
